@@ -1,0 +1,51 @@
+"""shadeform: recover 3D shape from photographs by shading.
+
+One photo of a matte object under one light -> normals -> depth -> triangle mesh -> export::
+
+    import shadeform
+    image = shadeform.load_image("photo.png")
+    rec = shadeform.reconstruct(image)
+    shadeform.export(shadeform.to_mesh(rec, step=2), "model.wrl")
+
+Conventions (frames, units, file formats) are on one page: ``docs/conventions.md``.
+Submodules are imported lazily so that ``import shadeform`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it
+_EXPORTS = {
+    "InputError": "shadeform.errors",
+    "load_image": "shadeform.io.images",
+    "load_mask": "shadeform.io.images",
+    "save_normal_map": "shadeform.io.maps",
+    "load_normal_map": "shadeform.io.maps",
+    "save_depth": "shadeform.io.maps",
+    "load_depth": "shadeform.io.maps",
+    "export": "shadeform.io.exporters",
+    "available_formats": "shadeform.io.exporters",
+    "reconstruct": "shadeform.pipeline",
+    "Reconstruction": "shadeform.reconstruction",
+    "to_mesh": "shadeform.mesh",
+    "Mesh": "shadeform.mesh",
+    "parse_regions": "shadeform.regions",
+}
+_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integrate", "io", "mesh"}
+
+__all__ = sorted([*_EXPORTS, *_SUBMODULES])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    if name in _SUBMODULES:
+        return importlib.import_module(f"shadeform.{name}")
+    raise AttributeError(f"module 'shadeform' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

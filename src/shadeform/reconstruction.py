@@ -1,0 +1,42 @@
+"""The result of one reconstruction: a small frozen dataclass of arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """Shape recovered from one image.
+
+    Attributes
+    ----------
+    normals : (H, W, 3) float64
+        Unit normals in the camera frame (``docs/conventions.md``), NaN outside ``mask``.
+    depth : (H, W) float64
+        Height z in pixel units (larger = nearer the viewer), NaN outside ``mask``;
+        z = 0 at the main reference pixel.
+    mask : (H, W) bool
+        Object pixels.
+    light : (3,) float64
+        Unit vector toward the light.
+    albedo : float or (H, W) float64
+        ``k * albedo`` of the image model ``I = k * albedo * max(0, N . L)``.
+    info : dict
+        What ran: method, integrator, references, iterations, timings in seconds per stage.
+    """
+
+    normals: np.ndarray
+    depth: np.ndarray
+    mask: np.ndarray
+    light: np.ndarray
+    albedo: float | np.ndarray
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image shape ``(H, W)``."""
+        return self.mask.shape
