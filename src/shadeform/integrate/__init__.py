@@ -1,0 +1,62 @@
+"""Depth from normals: ``integrate(normals, mask, method=...)``.
+
+Methods
+-------
+paths
+    The 2002 report's method: average of many integration paths from a reference pixel
+    (:mod:`shadeform.integrate.paths`).
+poisson
+    Masked least squares, solved by multigrid-preconditioned conjugate gradients
+    (:mod:`shadeform.integrate.poisson`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shadeform.errors import InputError
+
+METHODS = ("paths", "poisson")
+
+
+def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
+              origin: tuple[int, int] | None = None) -> np.ndarray:
+    """Depth (height) from a normal field over a mask, orthographic camera.
+
+    Parameters
+    ----------
+    normals : (H, W, 3) float
+        Unit normals in the camera frame (``docs/conventions.md``), finite on the mask.
+    mask : (H, W) bool
+    method : {"paths", "poisson"}
+    origin : (int, int), optional
+        (row, col) where ``z = 0``. Required connectivity for "paths": only the mask's part holding
+        the origin is integrated. Default: the most frontal normal's pixel.
+
+    Returns
+    -------
+    depth : (H, W) float64
+        Height in pixel units (larger = nearer the viewer), NaN outside the mask.
+    """
+    normals = np.asarray(normals, dtype=np.float64)
+    mask = np.asarray(mask, dtype=bool)
+    if normals.ndim != 3 or normals.shape[2] != 3 or normals.shape[:2] != mask.shape:
+        raise InputError(f"normals must be (H, W, 3) and mask (H, W), got {normals.shape} and {mask.shape}")
+    if not mask.any():
+        raise InputError("mask is empty; it must mark the object's pixels")
+    if not np.isfinite(normals[mask]).all():
+        raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
+    if origin is None:
+        origin = np.unravel_index(np.argmax(np.where(mask, normals[..., 2], -np.inf)), mask.shape)
+    origin = (int(origin[0]), int(origin[1]))
+    if not (0 <= origin[0] < mask.shape[0] and 0 <= origin[1] < mask.shape[1]) or not mask[origin]:
+        raise InputError(f"origin (row {origin[0]}, col {origin[1]}) is not on the mask")
+    if method == "paths":
+        from shadeform.integrate.paths import integrate_paths
+
+        return integrate_paths(normals, mask, origin=origin)
+    if method == "poisson":
+        from shadeform.integrate.poisson import integrate_poisson
+
+        return integrate_poisson(normals, mask, origin=origin)
+    raise InputError(f"unknown integration method {method!r}; choose one of: {', '.join(METHODS)}")

@@ -1,0 +1,114 @@
+"""Atomic file writes: a temporary file in the target's folder, then one rename.
+
+A reader (or a crash) never sees a half-written file, and a failed write never clobbers an
+existing good file (``docs/conventions.md``, "Errors").
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO
+
+from shadeform.errors import InputError
+
+__all__ = ["atomic_write"]
+
+
+def _read_umask() -> int:
+    # os.umask can only be read by setting it; do it once, at import, while nothing else runs.
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
+
+
+@contextmanager
+def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[IO]:
+    """Open a file for writing so that it appears at ``path`` only once complete.
+
+    The data goes to a hidden temporary file ``.<name>.<random>.tmp`` in the same folder (so the
+    final rename stays on one file system); on leaving the ``with`` block it is flushed,
+    fsynced and moved onto ``path`` with :func:`os.replace`. If the block raises, the temporary
+    file is deleted and the exception propagates: ``path`` keeps its old content, if any.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to create or replace.
+    mode : {"wb", "w"}, keyword-only
+        Binary (default) or text. Text is UTF-8 with ``"\\n"`` line endings on every platform.
+
+    Yields
+    ------
+    file object
+        The open temporary file; write to it, do not close it.
+
+    Raises
+    ------
+    InputError
+        If the parent folder does not exist or ``path`` is a folder.
+
+    Notes
+    -----
+    The new file gets the permissions of the file it replaces, or ``0o666`` minus the umask for
+    a new file (a bare temporary file would be private, ``0o600``).
+
+    Examples
+    --------
+    >>> with atomic_write(tmp_path / "out.txt", mode="w") as f:  # doctest: +SKIP
+    ...     f.write("hello\\n")
+    """
+    if mode not in ("wb", "w"):
+        raise ValueError(f"atomic_write mode must be 'wb' or 'w', got {mode!r}")
+    path = Path(path)
+    parent = path.parent
+    if not parent.is_dir():
+        raise InputError(f"output folder '{parent}' does not exist; create it first")
+    if path.is_dir():
+        raise InputError(f"output path '{path}' is a folder; give a file name instead")
+
+    if path.exists():
+        permissions = stat.S_IMODE(path.stat().st_mode)
+    else:
+        permissions = 0o666 & ~_UMASK
+    text_options = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
+
+    tmp = tempfile.NamedTemporaryFile(
+        mode=mode,
+        delete=False,
+        dir=parent,
+        prefix=f".{path.name}.",
+        suffix=".tmp",
+        **text_options,
+    )
+    tmp_path = Path(tmp.name)
+    try:
+        with tmp:
+            yield tmp
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.chmod(tmp_path, permissions)
+        os.replace(tmp_path, path)
+    except BaseException:
+        # BaseException too: a KeyboardInterrupt mid-write must not leave the temporary behind.
+        tmp_path.unlink(missing_ok=True)
+        raise
+    _fsync_folder(parent)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make the rename itself durable (POSIX only; Windows cannot open folders)."""
+    if os.name != "posix":
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

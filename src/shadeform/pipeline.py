@@ -1,0 +1,277 @@
+"""``reconstruct()``: one call from a shading image to normals and depth.
+
+load -> (mask, filter) -> light -> normals -> depth, each stage a pure function; this module only
+checks the user's input once, at the boundary, and wires the stages together.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import ndimage as ndi
+
+from shadeform.errors import InputError
+from shadeform.light import as_light
+from shadeform.preprocess import apply_filter, object_mask, parse_filter
+from shadeform.reconstruction import Reconstruction
+from shadeform.regions import Region, concave_masks, parse_regions
+from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
+
+METHODS = ("propagation",)
+INTEGRATORS = ("paths", "poisson")
+
+#: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
+MIN_SIDE = 3
+#: An object with at least this fraction of its pixels at the white level carries no shading.
+SATURATED_FRACTION = 0.9
+
+
+def reconstruct(
+    image: np.ndarray,
+    *,
+    light: Sequence[float] = (0.0, 0.0, 1.0),
+    method: str = "propagation",
+    mask: np.ndarray | None = None,
+    filter: str | None = None,
+    references: Sequence | None = None,
+    concave: Any = None,
+    integrator: str = "paths",
+    refine: int = 3,
+) -> Reconstruction:
+    """Recover normals and depth from one shading image.
+
+    The 2002 ModelBuilder pipeline (``DESIGN.md``): object mask, optional filter, reference
+    normal(s), normal field by convexity-guided propagation from each reference, depth by
+    averaging integration paths, several references combined by the report's eq. 7.
+
+    Parameters
+    ----------
+    image : (H, W) float array
+        One channel, values >= 0 (e.g. from :func:`shadeform.load_image`); integer arrays are
+        scaled by their type's maximum.
+    light : (3,) float
+        Direction toward the light in the camera frame (``docs/conventions.md``).
+    method : {"propagation"}
+        Normal-field solver.
+    mask : (H, W) bool, optional
+        Object pixels; by default found automatically (dark background).
+    filter : str, optional
+        ``"none"``, ``"gaussian:SIGMA"``, ``"mean:R"``, ``"median:R"`` or ``"minimum:R"``.
+    references : sequence, optional
+        Reference pixels as ``(row, col)`` or ``(row, col, (nx, ny, nz))``. By default the
+        brightest object pixel (the one deepest inside the object among equals), whose normal is
+        the light. The first is the main reference: ``z = 0`` there. Every connected part of the
+        mask without a reference gets its own automatic one.
+    concave : regions, optional
+        Concave regions: a dict or JSON string in the format of ``docs/conventions.md``, a path to
+        such a file, or a sequence of :class:`shadeform.regions.Region`.
+    integrator : {"paths", "poisson"}
+        Depth from normals: the report's path averaging, or masked least squares.
+    refine : int
+        Iterations of the integrability refinement of the propagated field
+        (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
+        field exactly.
+
+    Returns
+    -------
+    Reconstruction
+        ``normals`` (H, W, 3), ``depth`` (H, W) (NaN outside the mask), ``mask``, ``light``,
+        ``albedo`` (``k * albedo`` of the image model) and ``info``.
+
+    Raises
+    ------
+    InputError
+        For every user mistake: wrong shapes, NaN, an empty, black or saturated object, a
+        reference off the object, malformed regions, unknown method names.
+
+    Examples
+    --------
+    >>> from shadeform import synth, metrics
+    >>> scene = synth.scene("sphere", size=64)
+    >>> rec = reconstruct(scene.image, mask=scene.mask)
+    >>> bool(metrics.angular_error(rec.normals, scene.normals) < 3)
+    True
+    """
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = timings.get(stage, 0.0) + now - clock
+        clock = now
+
+    image = _check_image(image)
+    light = as_light(light)
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
+    if integrator not in INTEGRATORS:
+        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
+    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
+        raise InputError(f"refine must be a whole number of iterations >= 0, got {refine!r}")
+
+    mask = object_mask(image) if mask is None else _check_mask(mask, image.shape)
+    _check_shading(image, mask)
+    lap("mask")
+    shading = apply_filter(image, mask, parse_filter(filter)) if filter else image
+    lap("filter")
+    concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
+    labels, n_parts = ndi.label(mask)
+    refs = _references(references, shading, mask, labels, n_parts)
+    k = _brightness_scale(shading, mask, refs[0], light)
+    cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
+    lap("references")
+
+    normals_sum = np.zeros(image.shape + (3,))
+    depth_sum = np.zeros(image.shape)
+    depth_count = np.zeros(image.shape)
+    for part in range(1, n_parts + 1):
+        part_refs = [ref for ref in refs if labels[ref[0]] == part]
+        part_mask = labels == part
+        depth_main = None
+        for (r, c), ref_normal in part_refs:
+            field = propagate_normals(shading, part_mask, light=light, reference=(r, c),
+                                      reference_normal=ref_normal, k=k,
+                                      concave_x=concave_x, concave_y=concave_y)
+            lap("normals")
+            if refine:
+                field = refine_by_integrability(field, cos_theta, part_mask, light=light,
+                                                iterations=int(refine))
+                lap("refine")
+            depth = _integrate(field, part_mask, (r, c), integrator)
+            lap("depth")
+            # eq. 7: reference J's depths, moved into the main reference's frame by Z_MJ, the
+            # main reference's depth at J's origin
+            if depth_main is None:
+                depth_main = depth
+            depth_sum[part_mask] += depth[part_mask] + depth_main[r, c]
+            depth_count[part_mask] += 1
+            normals_sum[part_mask] += field[part_mask]
+
+    normals = normals_sum / np.linalg.norm(normals_sum, axis=-1, keepdims=True).clip(1e-300)
+    normals[~mask] = np.nan
+    depth = np.where(mask, depth_sum / np.maximum(depth_count, 1), np.nan)
+    lap("combine")
+    info = {
+        "method": method,
+        "integrator": integrator,
+        "refine": int(refine),
+        "filter": parse_filter(filter).kind if filter else "none",
+        "references": [(int(r), int(c)) for (r, c), _ in refs],
+        "parts": int(n_parts),
+        "k": float(k),
+        "timings": timings,
+    }
+    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
+
+
+def _integrate(normals, mask, origin, integrator):
+    from shadeform.integrate import integrate
+
+    return integrate(normals, mask, method=integrator, origin=origin)
+
+
+def _check_image(image) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise InputError(f"image must be a numpy array, got {type(image).__name__}; load it with shadeform.load_image")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[..., 0]
+    if image.ndim != 2:
+        raise InputError(
+            f"image must be one channel (H, W), got shape {image.shape}; "
+            "pick a channel with shadeform.load_image(path, channel='luma')"
+        )
+    if min(image.shape) < MIN_SIDE:
+        raise InputError(f"image is {image.shape[1]}x{image.shape[0]} pixels; it needs at least "
+                         f"{MIN_SIDE}x{MIN_SIDE}")
+    if np.issubdtype(image.dtype, np.integer):
+        image = image / np.iinfo(image.dtype).max
+    elif image.dtype == bool or not np.issubdtype(image.dtype, np.floating):
+        raise InputError(f"image must hold numbers, got dtype {image.dtype}")
+    image = image.astype(np.float64)
+    if not np.isfinite(image).all():
+        raise InputError("image contains NaN or infinite values; replace them (e.g. by 0) or mask them out")
+    if image.min() < 0:
+        raise InputError("image has negative values; intensities must be >= 0")
+    return image
+
+
+def _check_mask(mask, shape) -> np.ndarray:
+    mask = np.asarray(mask)
+    if mask.shape != shape:
+        raise InputError(f"mask has shape {mask.shape} but the image has {shape}; give a mask of the image's size")
+    mask = mask.astype(bool)
+    if not mask.any():
+        raise InputError("mask is empty; it must mark the object's pixels")
+    return mask
+
+
+def _check_shading(image, mask) -> None:
+    values = image[mask]
+    top = values.max()
+    if top <= 0:
+        raise InputError("the object is black: there is no shading to work with; check the exposure or the mask")
+    at_top = np.count_nonzero(values >= top * (1 - 1e-6)) / values.size
+    if top >= 0.999 and at_top >= SATURATED_FRACTION:
+        raise InputError(
+            f"the image is saturated: {at_top:.0%} of the object is at the white level, so there is "
+            "no shading to work with; use a shorter exposure"
+        )
+
+
+def _as_regions(concave) -> tuple[Region, ...]:
+    if concave is None:
+        return ()
+    if isinstance(concave, (dict, str, Path)):
+        return parse_regions(concave)
+    regions = tuple(concave)
+    if not all(isinstance(region, Region) for region in regions):
+        raise InputError("concave must be a regions dict, JSON text, a .json path or a sequence of Region")
+    return regions
+
+
+def _references(references, image, mask, labels, n_parts):
+    """User references checked, plus the brightest pixel of every part left without one."""
+    refs = []
+    for item in references or ():
+        try:
+            r, c = int(item[0]), int(item[1])
+            normal = None if len(item) < 3 or item[2] is None else np.asarray(item[2], dtype=np.float64)
+        except (TypeError, ValueError, IndexError):
+            raise InputError(f"reference {item!r} must be (row, col) or (row, col, (nx, ny, nz))") from None
+        if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
+            raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+        if normal is not None:
+            length = np.linalg.norm(normal)
+            if normal.shape != (3,) or not np.isfinite(normal).all() or length == 0:
+                raise InputError(f"reference normal {item[2]!r} must be three finite numbers, not all zero")
+            normal = normal / length
+        refs.append(((r, c), normal))
+    covered = {labels[r, c] for (r, c), _ in refs}
+    # among equally bright pixels prefer the one deepest inside its part: a flat top's centre
+    inside = ndi.distance_transform_edt(mask)
+    for part in range(1, n_parts + 1):
+        if part in covered:
+            continue
+        in_part = labels == part
+        top = image[in_part].max()
+        score = np.where(in_part & (image >= top * (1 - 1e-9)), inside, -1.0)
+        r, c = np.unravel_index(np.argmax(score), score.shape)
+        refs.append(((int(r), int(c)), None))
+    return refs
+
+
+def _brightness_scale(image, mask, main_ref, light) -> float:
+    """``k * albedo``: from the main reference when its normal is given, else the brightest pixel."""
+    (r, c), normal = main_ref
+    if normal is not None:
+        facing = float(normal @ light)
+        if facing <= 0 or image[r, c] <= 0:
+            raise InputError(f"reference (row {r}, col {c}) is in shadow or its normal faces away from the light; "
+                             "pick a lit reference")
+        return float(image[r, c] / facing)
+    return float(image[mask].max())

@@ -1,0 +1,229 @@
+"""Concave regions: where the user says the surface curves away from the viewer.
+
+The 2002 method assumes a convex surface; inside a user-drawn polygon the convexity choice is
+flipped for one image axis or both. The file format (``docs/conventions.md``) is JSON with
+coordinates in pixels of the input image, ``x`` = column and ``y`` = row::
+
+    {"regions": [{"polygon": [[x, y], [x, y], [x, y]], "axis": "x" | "y" | "both"}]}
+
+``axis`` names the image direction in which the surface is concave: a bowl is ``"both"``, a
+horizontal trough is ``"y"``.
+"""
+
+from __future__ import annotations
+
+import json
+import numbers
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from skimage.draw import polygon2mask
+
+from shadeform.errors import InputError
+
+AXES = ("x", "y", "both")
+
+_FORMAT = '{"regions": [{"polygon": [[x, y], ...], "axis": "x" | "y" | "both"}]}'
+
+
+@dataclass(frozen=True, eq=False)
+class Region:
+    """One concave region.
+
+    Attributes
+    ----------
+    polygon : (N, 2) float64
+        Vertices ``(x, y)`` = (column, row) in pixels of the input image, N >= 3, read-only.
+    axis : {"x", "y", "both"}
+        Image direction(s) in which the surface is concave inside the polygon.
+    """
+
+    polygon: np.ndarray
+    axis: str
+
+    def __post_init__(self):
+        polygon = np.array(self.polygon, dtype=np.float64)
+        if polygon.ndim != 2 or polygon.shape[1] != 2 or polygon.shape[0] < 3:
+            raise InputError(f"polygon must have shape (N, 2) with N >= 3, got {polygon.shape}")
+        if not np.isfinite(polygon).all():
+            raise InputError("polygon coordinates must be finite numbers")
+        if self.axis not in AXES:
+            raise InputError(f"axis must be 'x', 'y' or 'both', got {self.axis!r}")
+        polygon.flags.writeable = False
+        object.__setattr__(self, "polygon", polygon)
+
+
+def parse_regions(source) -> tuple[Region, ...]:
+    """Read concave regions from parsed JSON, a JSON string or a ``.json`` file.
+
+    Parameters
+    ----------
+    source : dict, str or pathlib.Path
+        The document already parsed, its text, or the path of a file holding it. A ``str`` is
+        always JSON text; pass a :class:`pathlib.Path` to read a file.
+
+    Returns
+    -------
+    tuple of Region
+        In file order; empty if the list is empty.
+
+    Raises
+    ------
+    InputError
+        A missing or unreadable file, invalid JSON (with line and column), or a document not
+        of the form in ``docs/conventions.md``; the message names the region (counted from 1)
+        and the point at fault.
+
+    Examples
+    --------
+    >>> (r,) = parse_regions('{"regions": [{"polygon": [[0, 0], [9, 0], [9, 9]], "axis": "x"}]}')
+    >>> r.axis, r.polygon.shape
+    ('x', (3, 2))
+    """
+    where = "regions JSON"
+    if isinstance(source, Path):
+        where = f"regions file {str(source)!r}"
+        try:
+            text = source.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise InputError(f"{where} not found; check the path") from None
+        except IsADirectoryError:
+            raise InputError(f"{where} is a folder; pass the .json file inside it") from None
+        except UnicodeDecodeError:
+            raise InputError(f"{where} is not UTF-8 text; save it as UTF-8 JSON") from None
+        except OSError as err:
+            raise InputError(f"cannot read {where}: {err.strerror}") from None
+        document = _loads(text, where)
+    elif isinstance(source, str):
+        where = "regions text"
+        if not source.lstrip().startswith(("{", "[")):
+            where += " (a str is JSON text; pass a pathlib.Path to read a file)"
+        document = _loads(source, where)
+    elif isinstance(source, dict):
+        document = source
+    else:
+        raise InputError(
+            f"regions must be a dict, a JSON string or a pathlib.Path, got {type(source).__name__}"
+        )
+
+    if not isinstance(document, dict):
+        raise InputError(f"{where} must be an object, got {_kind(document)}; expected {_FORMAT}")
+    if "regions" not in document:
+        raise InputError(f"{where} has no 'regions' key; expected {_FORMAT}")
+    entries = document["regions"]
+    if not isinstance(entries, list):
+        raise InputError(f"'regions' in {where} must be a list, got {_kind(entries)}")
+    return tuple(_region(entry, i) for i, entry in enumerate(entries, start=1))
+
+
+def regions_to_json(regions) -> dict:
+    """The JSON document of ``regions``; ``parse_regions`` reads it back unchanged.
+
+    Parameters
+    ----------
+    regions : iterable of Region
+
+    Returns
+    -------
+    dict
+        ``{"regions": [{"polygon": [[x, y], ...], "axis": ...}, ...]}`` with float
+        coordinates, ready for :func:`json.dumps`.
+    """
+    return {
+        "regions": [
+            {"polygon": [[float(x), float(y)] for x, y in r.polygon], "axis": r.axis}
+            for r in regions
+        ]
+    }
+
+
+def concave_masks(regions, shape) -> tuple[np.ndarray, np.ndarray]:
+    """Rasterise concave regions into one mask per image axis.
+
+    A pixel belongs to a polygon when its centre ``(x = column, y = row)`` lies inside it or on
+    its boundary. Parts of polygons outside the image are clipped.
+
+    Parameters
+    ----------
+    regions : iterable of Region
+        From :func:`parse_regions`.
+    shape : tuple of int
+        Image shape; ``(H, W)`` or ``(H, W, C)``, only the first two are used.
+
+    Returns
+    -------
+    concave_x : (H, W) bool
+        Pixels in a region with axis ``"x"`` or ``"both"``.
+    concave_y : (H, W) bool
+        Pixels in a region with axis ``"y"`` or ``"both"``.
+    """
+    if len(shape) < 2 or any(not isinstance(n, numbers.Integral) or n < 1 for n in shape[:2]):
+        raise InputError(f"shape must start with two positive integers (H, W), got {shape!r}")
+    height, width = int(shape[0]), int(shape[1])
+    concave_x = np.zeros((height, width), dtype=bool)
+    concave_y = np.zeros((height, width), dtype=bool)
+    for region in regions:
+        # polygon2mask takes (row, column) vertices.
+        inside = polygon2mask((height, width), region.polygon[:, ::-1])
+        if region.axis in ("x", "both"):
+            concave_x |= inside
+        if region.axis in ("y", "both"):
+            concave_y |= inside
+    return concave_x, concave_y
+
+
+def _loads(text: str, where: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise InputError(
+            f"{where} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
+        ) from None
+
+
+def _region(entry, index: int) -> Region:
+    """Validate one entry of the ``regions`` list, naming it in every message."""
+    at = f"in region {index}"
+    if not isinstance(entry, dict):
+        raise InputError(f"each region must be an object with 'polygon' and 'axis'; {at}")
+    if "polygon" not in entry:
+        raise InputError(f"missing 'polygon' {at}; give a list of [x, y] points")
+    if "axis" not in entry:
+        raise InputError(f"missing 'axis' {at}; use 'x', 'y' or 'both'")
+    axis = entry["axis"]
+    if not isinstance(axis, str) or axis not in AXES:
+        raise InputError(f"axis must be 'x', 'y' or 'both', got {axis!r} {at}")
+    points = entry["polygon"]
+    if not isinstance(points, (list, tuple)):
+        raise InputError(f"'polygon' must be a list of [x, y] points, got {_kind(points)} {at}")
+    if len(points) < 3:
+        raise InputError(f"polygon needs at least 3 points, got {len(points)} {at}")
+    vertices = np.empty((len(points), 2), dtype=np.float64)
+    for k, point in enumerate(points, start=1):
+        if not isinstance(point, (list, tuple)) or len(point) != 2:
+            raise InputError(f"point {k} must be [x, y], got {_short(point)} {at}")
+        for j, value in enumerate(point):
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise InputError(f"point {k} has a non-numeric coordinate {_short(value)} {at}")
+            try:
+                vertices[k - 1, j] = value
+            except OverflowError:
+                vertices[k - 1, j] = np.inf
+            if not np.isfinite(vertices[k - 1, j]):
+                raise InputError(f"point {k} has a non-finite coordinate {_short(value)} {at}")
+    return Region(polygon=vertices, axis=axis)
+
+
+def _kind(value) -> str:
+    names = {dict: "an object", list: "a list", str: "a string", type(None): "null"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _short(value) -> str:
+    """A short JSON-like rendering of a bad value for a one-line message."""
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
