@@ -26,6 +26,7 @@ from shadeform.mesh import Mesh, to_mesh
 from shadeform.reconstruction import Reconstruction
 
 JS = Path(__file__).resolve().parent / "js"
+IVINFO_MISSING = "ivinfo/ivcat not installed (Debian package inventor-clients)"
 ON_CI = os.environ.get("CI", "").lower() not in ("", "0", "false")
 
 
@@ -78,7 +79,7 @@ def inventor_numbers(text, node, field):
 
 
 def check_inventor(path, mesh):
-    require(shutil.which("ivinfo") is not None, "ivinfo not installed (Debian: inventor-clients)")
+    require(shutil.which("ivinfo") is not None, IVINFO_MISSING)
     info = run_tool("ivinfo", str(path))
     assert info.returncode == 0, info.stdout + info.stderr
     # Separator, ShapeHints, Material, Coordinate3, Normal, NormalBinding,
@@ -169,7 +170,8 @@ def check_stl(path, mesh):
     loaded = load_single(path)
     assert len(loaded.faces) == mesh.n_faces
     assert len(loaded.vertices) == 3 * mesh.n_faces
-    np.testing.assert_allclose(loaded.bounds, [mesh.vertices.min(0), mesh.vertices.max(0)], atol=1e-4)
+    bounds = [mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)]
+    np.testing.assert_allclose(loaded.bounds, bounds, atol=1e-4)
     stored = loaded.face_normals
     expected = face_normals(mesh.vertices, mesh.faces)
     expected /= np.linalg.norm(expected, axis=1, keepdims=True)
@@ -243,7 +245,8 @@ class TestExport:
             file_obj.write(b"#VRML V2.0 utf8\nShape { geometry IndexedFaceSet { coord")
             raise OSError("disk full")
 
-        monkeypatch.setattr(exporters, "_WRITERS", {**exporters._WRITERS, ".wrl": write_half_then_fail})
+        patched = {**exporters._WRITERS, ".wrl": write_half_then_fail}
+        monkeypatch.setattr(exporters, "_WRITERS", patched)
         with pytest.raises(OSError, match="disk full"):
             export(hemisphere_mesh(3), target)
         assert target.read_bytes() == good
@@ -318,7 +321,7 @@ class TestInventorWriter:
             assert token in text
 
     def test_ivinfo_and_ivcat_reject_malformed_files(self, tmp_path, mesh):
-        require(shutil.which("ivinfo") is not None, "ivinfo not installed (Debian: inventor-clients)")
+        require(shutil.which("ivinfo") is not None, IVINFO_MISSING)
         text = export(mesh, tmp_path / "m.iv").read_text()
         broken = {
             "truncated.iv": text[: len(text) // 2],

@@ -1,4 +1,4 @@
-"""Tests for shadeform.mesh: Mesh validation and to_mesh (counts, winding, no silhouette bridges)."""
+"""Tests for shadeform.mesh: Mesh checks and to_mesh (counts, winding, no silhouette bridges)."""
 
 from __future__ import annotations
 

@@ -127,8 +127,10 @@ def _check_reconstruction(reconstruction: Reconstruction) -> tuple[np.ndarray, .
     return mask, depth, normals
 
 
-def _outside_count(background: np.ndarray, top: np.ndarray, left: np.ndarray, size: int) -> np.ndarray:
-    """Background pixels in each ``size`` x ``size`` block at ``(top, left)``, via an integral image.
+def _outside_count(
+    background: np.ndarray, top: np.ndarray, left: np.ndarray, size: int
+) -> np.ndarray:
+    """Background pixels in each ``size`` x ``size`` block at ``(top, left)`` (integral image).
 
     Parameters
     ----------
@@ -144,7 +146,9 @@ def _outside_count(background: np.ndarray, top: np.ndarray, left: np.ndarray, si
     integral = np.zeros((background.shape[0] + 1, background.shape[1] + 1), dtype=np.int64)
     np.cumsum(np.cumsum(background, axis=0), axis=1, out=integral[1:, 1:])
     bottom, right = top + size, left + size
-    return integral[bottom, right] - integral[top, right] - integral[bottom, left] + integral[top, left]
+    return (integral[bottom, right] - integral[top, right]) - (
+        integral[bottom, left] - integral[top, left]
+    )
 
 
 # The four single triangles of a cell with one corner missing, as (corner, corner, corner) with

@@ -140,9 +140,11 @@ def _write_glb(mesh: Mesh, file_obj: BinaryIO) -> None:
     file_obj.write(data)
 
 
-register(".wrl", write_vrml, description="VRML 2.0 (VRML97), per-vertex normals, texture coordinates")
-register(".iv", write_inventor, description="Open Inventor 2.1 ASCII, per-vertex normals, texture coordinates")
+register(".wrl", write_vrml, description="VRML 2.0 (VRML97), per-vertex normals, texture coords")
+register(
+    ".iv", write_inventor, description="Open Inventor 2.1 ASCII, per-vertex normals, texture coords"
+)
 register(".obj", _write_obj, description="Wavefront OBJ, per-vertex normals")
 register(".ply", _write_ply, description="PLY (binary), per-vertex normals")
 register(".stl", _write_stl, description="STL (binary), face normals only")
-register(".glb", _write_glb, description="glTF 2.0 binary, per-vertex normals, texture coordinates")
+register(".glb", _write_glb, description="glTF 2.0 binary, per-vertex normals, texture coords")

@@ -70,8 +70,8 @@ def save_normal_map(normals: np.ndarray, path: str | os.PathLike[str]) -> Path:
     lengths = np.linalg.norm(present, axis=1)
     if present.size and np.abs(lengths - 1.0).max() > _UNIT_TOLERANCE:
         raise InputError(
-            f"normals must be unit vectors, found lengths {lengths.min():.4g}..{lengths.max():.4g}; "
-            "normalise them first"
+            f"normals must be unit vectors, found lengths "
+            f"{lengths.min():.4g}..{lengths.max():.4g}; normalise them first"
         )
 
     encoded = np.rint((np.clip(normals, -1.0, 1.0) + 1.0) * (65535 / 2.0))
@@ -220,6 +220,7 @@ def load_depth(path: str | os.PathLike[str]) -> np.ndarray:
             f"'{path.name}' is not a readable depth map; give a file written by save_depth"
         ) from None
     if not isinstance(depth, np.ndarray) or depth.ndim != 2:
-        held = f"an array of shape {depth.shape}" if isinstance(depth, np.ndarray) else "several arrays"
+        is_array = isinstance(depth, np.ndarray)
+        held = f"an array of shape {depth.shape}" if is_array else "several arrays"
         raise InputError(f"'{path.name}' holds {held}; a depth map is one (H, W) array")
     return depth.astype(np.float64)

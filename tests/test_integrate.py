@@ -1,0 +1,109 @@
+"""Depth from normals: path averaging (2002) and masked least squares."""
+
+import numpy as np
+import pytest
+
+from shadeform import synth
+from shadeform.errors import InputError
+from shadeform.integrate import integrate
+from shadeform.integrate.paths import integrate_paths, integrate_paths_reference
+from shadeform.integrate.poisson import integrate_poisson
+
+
+def normals_of(zx, zy):
+    n = np.stack([-zx, -zy, np.ones_like(zx)], axis=-1)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def pixel_xy(shape):
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+    return cols, -rows
+
+
+def l_shaped_mask(shape=(30, 40)):
+    mask = np.zeros(shape, bool)
+    mask[2:28, 3:12] = True
+    mask[20:28, 3:37] = True
+    return mask
+
+
+class TestIntegratePaths:
+    def test_plane_is_exact_on_a_nonconvex_mask(self):
+        mask = l_shaped_mask()
+        x, y = pixel_xy(mask.shape)
+        truth = 0.3 * x - 0.7 * y
+        n = normals_of(np.full(mask.shape, 0.3), np.full(mask.shape, -0.7))
+        z = integrate_paths(n, mask, origin=(5, 5))
+        np.testing.assert_allclose(z[mask], (truth - truth[5, 5])[mask], atol=1e-10)
+        assert np.isnan(z[~mask]).all()
+
+    def test_paraboloid_is_exact_with_the_trapezoid_rule(self):
+        mask = l_shaped_mask()
+        x, y = pixel_xy(mask.shape)
+        truth = 0.01 * x**2 + 0.02 * y**2 - 0.005 * x * y  # slopes are linear: trapezoid is exact
+        zx, zy = 0.02 * x - 0.005 * y, 0.04 * y - 0.005 * x
+        z = integrate_paths(normals_of(zx, zy), mask, origin=(24, 20))
+        np.testing.assert_allclose(z[mask], (truth - truth[24, 20])[mask], atol=1e-9)
+
+    def test_origin_is_zero_and_disconnected_parts_nan(self):
+        mask = np.zeros((10, 10), bool)
+        mask[1:4, 1:4] = True
+        mask[6:9, 6:9] = True
+        n = normals_of(np.full(mask.shape, 0.1), np.zeros(mask.shape))
+        z = integrate_paths(n, mask, origin=(2, 2))
+        assert z[2, 2] == 0 and np.isnan(z[6:9, 6:9]).all()
+
+    def test_compiled_matches_reference(self):
+        scene = synth.scene("vase", size=48)
+        origin = np.unravel_index(np.nanargmax(scene.normals[..., 2]), scene.mask.shape)
+        fast = integrate_paths(scene.normals, scene.mask, origin=origin)
+        slow = integrate_paths_reference(scene.normals, scene.mask, origin=origin)
+        np.testing.assert_array_equal(np.isnan(fast), np.isnan(slow))
+        np.testing.assert_allclose(fast[scene.mask], slow[scene.mask], atol=1e-12)
+
+
+class TestIntegratePoisson:
+    def test_paraboloid_matches_truth(self):
+        mask = l_shaped_mask()
+        x, y = pixel_xy(mask.shape)
+        truth = 0.01 * x**2 + 0.02 * y**2
+        z = integrate_poisson(normals_of(0.02 * x, 0.04 * y), mask, origin=(24, 20))
+        np.testing.assert_allclose(z[mask], (truth - truth[24, 20])[mask], atol=1e-4)  # CG tolerance
+
+    def test_agrees_with_paths_on_an_integrable_field(self):
+        scene = synth.scene("sphere", size=64)
+        inner = scene.mask & (scene.normals[..., 2] > 0.3)
+        a = integrate_poisson(scene.normals, inner, origin=(32, 32))
+        b = integrate_paths(scene.normals, inner, origin=(32, 32))
+        assert np.nanmax(np.abs(a - b)) < 0.05 * np.nanmax(np.abs(b))
+
+    def test_weights_move_the_solution_toward_trusted_pixels(self):
+        # an inconsistent field: the top half says slope +1, the bottom half slope -1 along y;
+        # heavy weights on the top half make its slope win
+        mask = np.ones((20, 20), bool)
+        zy = np.where(np.arange(20)[:, None] < 10, 1.0, -1.0) * np.ones((20, 20))
+        n = normals_of(np.zeros((20, 20)), zy)
+        w = np.where(np.arange(20)[:, None] < 10, 100.0, 1.0) * np.ones((20, 20))
+        z = integrate_poisson(n, mask, weights=w)
+        assert z[2, 5] - z[8, 5] == pytest.approx(6.0, rel=1e-3)
+
+
+class TestIntegrate:
+    def test_dispatch_and_default_origin(self):
+        scene = synth.scene("sphere", size=32)
+        for method in ("paths", "poisson"):
+            z = integrate(scene.normals, scene.mask, method=method)
+            assert np.isfinite(z[scene.mask]).all() and np.isnan(z[~scene.mask]).all()
+
+    def test_errors(self):
+        scene = synth.scene("sphere", size=32)
+        with pytest.raises(InputError, match="unknown integration method"):
+            integrate(scene.normals, scene.mask, method="magic")
+        with pytest.raises(InputError, match="not on the mask"):
+            integrate(scene.normals, scene.mask, origin=(0, 0))
+        with pytest.raises(InputError, match=r"\(H, W, 3\)"):
+            integrate(scene.normals[..., :2], scene.mask)
+        bad = scene.normals.copy()
+        bad[16, 16] = np.nan
+        with pytest.raises(InputError, match="NaN"):
+            integrate(bad, scene.mask)

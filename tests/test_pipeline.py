@@ -1,0 +1,192 @@
+"""reconstruct(): the 2002 pipeline end to end, and the issue's accuracy bars (256x256, light +z)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from shadeform import metrics, reconstruct, synth
+from shadeform.errors import InputError
+from shadeform.reconstruction import Reconstruction
+
+SIZE = 256
+
+
+def whole_image_region(shape, axis="both"):
+    h, w = shape
+    return {"regions": [{"polygon": [[0, 0], [w, 0], [w, h], [0, h]], "axis": axis}]}
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return {name: synth.scene(name, size=SIZE) for name in ("sphere", "ellipsoid", "cylinder", "bowl")}
+
+
+class TestBars:
+    @pytest.mark.parametrize("name", ["sphere", "ellipsoid", "cylinder"])
+    def test_convex_shapes(self, scenes, name):
+        scene = scenes[name]
+        rec = reconstruct(scene.image, mask=scene.mask)
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) <= 3.0
+        assert metrics.depth_error(rec.depth, scene.depth, scene.mask) <= 3.0
+
+    def test_bowl_needs_its_concave_region(self, scenes):
+        scene = scenes["bowl"]
+        with_region = reconstruct(scene.image, mask=scene.mask, concave=whole_image_region(scene.mask.shape))
+        without = reconstruct(scene.image, mask=scene.mask)
+        assert metrics.angular_error(with_region.normals, scene.normals, scene.mask) <= 3.0
+        assert metrics.depth_error(with_region.depth, scene.depth, scene.mask) <= 3.0
+        assert metrics.angular_error(without.normals, scene.normals, scene.mask) > 10.0
+        # the convex reading bulges toward the viewer, the concave one away from it
+        centre = (SIZE // 2, SIZE // 2)
+        rim = np.argwhere(scene.mask)[0]
+        assert without.depth[centre] > without.depth[tuple(rim)]
+        assert with_region.depth[centre] < with_region.depth[tuple(rim)]
+
+    def test_several_references_never_worse_than_the_worst_single_one(self, scenes):
+        scene = scenes["sphere"]
+        refs = [(128, 128), (90, 110), (170, 150), (128, 60)]
+
+        def errors(rec):
+            return (metrics.angular_error(rec.normals, scene.normals, scene.mask),
+                    metrics.depth_error(rec.depth, scene.depth, scene.mask))
+
+        singles = [errors(reconstruct(scene.image, mask=scene.mask, references=[r])) for r in refs]
+        combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs))
+        assert combined[0] <= max(s[0] for s in singles) + 1e-9
+        assert combined[1] <= max(s[1] for s in singles) + 1e-9
+
+    def test_refinement_off_is_the_2002_field(self, scenes):
+        scene = scenes["sphere"]
+        rec = reconstruct(scene.image, mask=scene.mask, refine=0)
+        assert rec.info["refine"] == 0
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 1.0
+
+
+class TestReconstruct:
+    def test_result_shapes_and_conventions(self):
+        scene = synth.scene("sphere", size=64)
+        rec = reconstruct(scene.image)  # automatic mask
+        assert isinstance(rec, Reconstruction)
+        assert rec.normals.shape == (64, 64, 3) and rec.depth.shape == (64, 64) and rec.mask.dtype == bool
+        assert np.isnan(rec.depth[~rec.mask]).all() and np.isnan(rec.normals[~rec.mask]).all()
+        assert np.isfinite(rec.depth[rec.mask]).all()
+        ref = rec.info["references"][0]
+        assert rec.depth[ref] == 0  # offset rule: z = 0 at the main reference
+        assert rec.info["method"] == "propagation" and rec.info["integrator"] == "paths"
+        assert set(rec.info["timings"]) >= {"mask", "normals", "depth"}
+        assert rec.albedo == pytest.approx(scene.image.max())
+        with pytest.raises(Exception):
+            rec.depth = None  # frozen
+
+    def test_auto_mask_matches_truth(self):
+        scene = synth.scene("sphere", size=128)
+        rec = reconstruct(scene.image)
+        assert np.count_nonzero(rec.mask ^ scene.mask) <= 0.01 * scene.mask.sum()
+
+    def test_user_reference_sets_the_origin(self):
+        scene = synth.scene("sphere", size=64)
+        rec = reconstruct(scene.image, mask=scene.mask, references=[(20, 30)])
+        assert rec.depth[20, 30] == 0 and rec.info["references"][0] == (20, 30)
+
+    def test_reference_with_normal_sets_the_brightness_scale(self):
+        scene = synth.scene("sphere", size=64, albedo=0.5)
+        n = scene.normals[20, 30]
+        rec = reconstruct(scene.image, mask=scene.mask, references=[(20, 30, tuple(n))])
+        assert rec.albedo == pytest.approx(0.5, rel=1e-9)
+
+    def test_poisson_integrator(self):
+        scene = synth.scene("sphere", size=128)
+        rec = reconstruct(scene.image, mask=scene.mask, integrator="poisson")
+        assert metrics.depth_error(rec.depth, scene.depth, scene.mask) < 3.0
+
+    def test_filter_helps_with_noise(self):
+        scene = synth.scene("sphere", size=128, noise=0.01, seed=3)
+        raw = reconstruct(scene.image, mask=scene.mask)
+        smooth = reconstruct(scene.image, mask=scene.mask, filter="gaussian:1")
+        assert smooth.info["filter"] == "gaussian"
+        assert (metrics.angular_error(smooth.normals, scene.normals, scene.mask)
+                < metrics.angular_error(raw.normals, scene.normals, scene.mask))
+
+    def test_oblique_light_sphere(self):
+        from shadeform.light import light_from_slant_tilt
+
+        light = light_from_slant_tilt(30, 45)
+        scene = synth.scene("sphere", size=128, light=light)
+        rec = reconstruct(scene.image, mask=scene.mask, light=light)
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 3.0
+
+    def test_concave_accepts_json_text_and_paths(self, tmp_path):
+        scene = synth.scene("bowl", size=64)
+        regions = whole_image_region(scene.mask.shape)
+        path = tmp_path / "regions.json"
+        path.write_text(json.dumps(regions))
+        a = reconstruct(scene.image, mask=scene.mask, concave=json.dumps(regions))
+        b = reconstruct(scene.image, mask=scene.mask, concave=path)
+        np.testing.assert_allclose(a.depth, b.depth, atol=1e-8)
+        assert metrics.angular_error(a.normals, scene.normals, scene.mask) < 3.0
+
+    def test_every_part_of_the_mask_gets_a_reference(self):
+        scene = synth.scene("sphere", size=48)
+        image = np.hstack([scene.image, scene.image])
+        rec = reconstruct(image)  # automatic mask keeps the largest part only
+        assert rec.info["parts"] == 1
+        mask = np.hstack([scene.mask, scene.mask])
+        rec = reconstruct(image, mask=mask)
+        assert rec.info["parts"] == 2 and len(rec.info["references"]) == 2
+        assert np.isfinite(rec.depth[mask]).all()
+
+
+class TestBadInput:
+    @pytest.fixture
+    def scene(self):
+        return synth.scene("sphere", size=32)
+
+    @pytest.mark.parametrize("image,match", [
+        (np.zeros((32, 32)), "black"),
+        (np.ones((32, 32)), "saturated|constant"),
+        (np.zeros((1, 1)), "at least"),
+        (np.zeros((0, 5)), "at least"),
+        (np.zeros((8, 8, 3)), "one channel"),
+        ([[0.5, 0.5]], "numpy array"),
+    ])
+    def test_bad_images(self, image, match):
+        with pytest.raises(InputError, match=match):
+            reconstruct(image)
+
+    def test_nan_in_image(self, scene):
+        image = scene.image.copy()
+        image[5, 5] = np.nan
+        with pytest.raises(InputError, match="NaN"):
+            reconstruct(image, mask=scene.mask)
+
+    def test_saturated_with_given_mask(self, scene):
+        image = np.where(scene.mask, 1.0, 0.0)
+        with pytest.raises(InputError, match="saturated"):
+            reconstruct(image, mask=scene.mask)
+
+    def test_reference_outside_mask(self, scene):
+        with pytest.raises(InputError, match="not on the object"):
+            reconstruct(scene.image, mask=scene.mask, references=[(0, 0)])
+        with pytest.raises(InputError, match="not on the object"):
+            reconstruct(scene.image, mask=scene.mask, references=[(500, 3)])
+
+    @pytest.mark.parametrize("kwargs,match", [
+        ({"method": "magic"}, "unknown method"),
+        ({"integrator": "magic"}, "unknown integrator"),
+        ({"refine": -1}, "refine"),
+        ({"light": (0, 0, -1)}, "z <= 0"),
+        ({"concave": '{"regions": [{"polygon": [[0, 0]], "axis": "x"}]}'}, "3"),
+        ({"concave": "{not json"}, "JSON"),
+        ({"references": [(1,)]}, "reference"),
+        ({"filter": "blur:2"}, "filter|gaussian"),
+    ])
+    def test_bad_options(self, scene, kwargs, match):
+        with pytest.raises(InputError, match=match):
+            reconstruct(scene.image, mask=scene.mask, **kwargs)
+
+    def test_mask_of_wrong_shape(self, scene):
+        with pytest.raises(InputError, match="shape"):
+            reconstruct(scene.image, mask=np.ones((10, 10), bool))
+        with pytest.raises(InputError, match="empty"):
+            reconstruct(scene.image, mask=np.zeros((32, 32), bool))
