@@ -21,10 +21,9 @@ _OFFSETS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
 
 
 @numba.njit(cache=True)
-def _paths_kernel(zx, zy, mask, r0, c0, depth):
+def _paths_kernel(zx, zy, mask, r0, c0, depth, layer, queue):
+    # work arrays come from the caller so that numpy (and memory profilers) see them
     h, w = mask.shape
-    layer = np.full((h, w), -1, dtype=np.int64)
-    queue = np.empty(h * w, dtype=np.int64)
     layer[r0, c0] = 0
     depth[r0, c0] = 0.0
     queue[0] = r0 * w + c0
@@ -73,7 +72,9 @@ def integrate_paths(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int,
     mask = np.asarray(mask, dtype=bool)
     zx, zy = slopes(normals, mask)
     depth = np.full(mask.shape, np.nan)
-    _paths_kernel(zx, zy, mask, int(origin[0]), int(origin[1]), depth)
+    layer = np.full(mask.shape, -1, dtype=np.int64)
+    queue = np.empty(mask.size, dtype=np.int64)
+    _paths_kernel(zx, zy, mask, int(origin[0]), int(origin[1]), depth, layer, queue)
     return depth
 
 

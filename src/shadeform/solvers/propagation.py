@@ -136,10 +136,9 @@ _OFFSETS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
 
 @numba.njit(cache=True)
 def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, seed_r, seed_c,
-                      seed_normal, normals):
+                      seed_normal, normals, done, queue):
+    # work arrays come from the caller so that numpy (and memory profilers) see them
     h, w = mask.shape
-    done = np.zeros((h, w), dtype=np.bool_)
-    queue = np.empty(h * w, dtype=np.int64)
     normals[seed_r, seed_c, :] = seed_normal
     done[seed_r, seed_c] = True
     queue[0] = seed_r * w + seed_c
@@ -170,7 +169,6 @@ def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, s
             done[r, c] = True
             queue[tail] = r * w + c
             tail += 1
-    return done
 
 
 def _prepare(image, mask, light, reference, k, concave_x, concave_y, gradient_floor):
@@ -233,7 +231,9 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, k
     else:
         seed[:] = reference_normal
     normals = np.full(mask.shape + (3,), np.nan)
-    _propagate_kernel(cos_t, gx, gy, g_min, mask, cx, cy, light, r, c, seed, normals)
+    done = np.zeros(mask.shape, dtype=bool)
+    queue = np.empty(mask.size, dtype=np.int64)
+    _propagate_kernel(cos_t, gx, gy, g_min, mask, cx, cy, light, r, c, seed, normals, done, queue)
     return normals
 
 
