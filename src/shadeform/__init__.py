@@ -34,7 +34,7 @@ _EXPORTS = {
     "Mesh": "shadeform.mesh",
     "parse_regions": "shadeform.regions",
 }
-_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integrate", "io", "mesh"}
+_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integrate", "io", "mesh", "render", "examples"}
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 

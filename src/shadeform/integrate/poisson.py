@@ -3,8 +3,11 @@
 Finds the depth whose forward differences between neighbouring object pixels best match the
 trapezoid-rule steps of the given slopes, in the least-squares sense, with optional per-pixel
 confidence weights (Horn & Brooks 1986; the masked formulation of e.g. Queau, Durou & Aujol 2018).
-The normal equations are a graph Laplacian over the mask, solved by algebraic multigrid
-(pyamg) as a preconditioner for conjugate gradients.
+The normal equations are a weighted graph Laplacian over the mask, ``D^T W D z = D^T W s``, with one
+free offset per connected part. They are solved by conjugate gradients preconditioned with a
+geometric multigrid V-cycle on the mask's bounding box (:mod:`shadeform.integrate._multigrid`),
+compiled with numba; :func:`poisson_integrator_reference` solves the same system with a sparse
+direct factorisation and is the slow, obviously correct check.
 
 References
 ----------
@@ -13,19 +16,182 @@ References
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-import pyamg
 import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
+import scipy.sparse.linalg as spla
 
-from shadeform.integrate._slopes import slopes
+from shadeform.errors import InputError
+from shadeform.integrate._multigrid import Hierarchy
+from shadeform.integrate._slopes import MIN_NZ, slopes
 
+#: Conjugate-gradient iterations at most (the multigrid preconditioner needs about 10).
+MAX_ITERATIONS = 500
+
+_BIG = np.finfo(np.float64).max
+
+
+@numba.njit(cache=True, inline="always")
+def _finite(v, nan):
+    """``np.nan_to_num`` for one value."""
+    if v != v:
+        return nan
+    if v > _BIG:
+        return _BIG
+    if v < -_BIG:
+        return -_BIG
+    return v
+
+
+@numba.njit(cache=True)
+def _rhs(normals, mask, r0, c0, wx, wy, b):
+    """``b = D^T W s`` on the padded, cropped grid, straight from the normals.
+
+    The steps ``s`` are those of :func:`shadeform.integrate._slopes.slopes` (trapezoid rule,
+    ``+dz/dx`` to the right, ``-dz/dy`` one row down); the crop starts at ``(r0, c0)``.
+    """
+    h, w = mask.shape
+    zx = np.zeros((2, w + 1))  # slopes of the current and the next row (a ring of two rows)
+    zy = np.zeros((2, w + 1))
+    b[:, :] = 0.0
+    for i in range(-1, h):
+        # slopes of row i + 1 into the ring
+        if i + 1 < h:
+            k = (i + 1) & 1
+            for j in range(w):
+                if mask[i + 1, j]:
+                    n = normals[r0 + i + 1, c0 + j]
+                    nz = max(_finite(n[2], 1.0), MIN_NZ)
+                    zx[k, j] = -_finite(n[0], 0.0) / nz
+                    zy[k, j] = -_finite(n[1], 0.0) / nz
+        if i < 0:
+            continue
+        k = i & 1
+        for j in range(w):
+            if not mask[i, j]:
+                continue
+            if j + 1 < w:
+                f = wx[i + 1, j + 1] * 0.5 * (zx[k, j] + zx[k, j + 1])
+                b[i + 1, j + 1] -= f
+                b[i + 1, j + 2] += f
+            if i + 1 < h:
+                f = wy[i + 1, j + 1] * -0.5 * (zy[k, j] + zy[1 - k, j])
+                b[i + 1, j + 1] -= f
+                b[i + 2, j + 1] += f
+
+
+def _check_weights(mask: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
+    if weights is None:
+        return np.ones(mask.shape)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != mask.shape:
+        raise InputError(f"weights must have the mask's shape {mask.shape}, got {w.shape}")
+    on = w[mask]
+    if not np.isfinite(on).all() or (on < 0).any():
+        raise InputError("weights must be finite and non-negative on the mask")
+    return w
+
+
+def _bounding_box(mask: np.ndarray) -> tuple[slice, slice]:
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+
+
+def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, tol: float = 1e-8):
+    """Set up the least-squares system for one mask and weighting; return ``solve(normals)``.
+
+    The multigrid hierarchy is built here, once, so callers that integrate several fields over the
+    same mask and weights (iterative refinement) pay for it once.
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+    weights : (H, W) float, optional
+        Confidence per pixel, finite and >= 0 (a pair of pixels gets the smaller of the two);
+        default uniform.
+    tol : float
+        Relative residual ``|b - A z| / |b|`` at which conjugate gradients stop.
+
+    Returns
+    -------
+    solve : callable
+        ``solve(normals) -> depth`` with normals (H, W, 3) and depth (H, W) float64, NaN outside
+        the mask, mean 0 over each connected part (pixels joined by pairs of positive weight; a
+        pixel with no such pair is a part of its own, at 0). After a call, ``solve.info`` holds
+        the iteration count and final relative residual.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    if mask.ndim != 2:
+        raise InputError(f"mask must be (H, W), got shape {mask.shape}")
+    w = _check_weights(mask, weights)
+    shape = mask.shape
+    if not mask.any():
+        def solve_empty(normals: np.ndarray) -> np.ndarray:
+            return np.full(shape, np.nan)
+
+        return solve_empty
+    box = _bounding_box(mask)
+    r0, c0 = box[0].start, box[1].start
+    sub_mask = np.ascontiguousarray(mask[box])
+    hierarchy = Hierarchy(sub_mask, np.ascontiguousarray(w[box]))
+    wx, wy = hierarchy.fine_pairs()
+
+    def solve(normals: np.ndarray) -> np.ndarray:
+        normals = np.ascontiguousarray(normals, dtype=np.float64)
+        if normals.shape != (*shape, 3):
+            raise InputError(f"normals must be {(*shape, 3)} to match the mask, got {normals.shape}")
+        b = np.empty(hierarchy.fine_shape)
+        _rhs(normals, sub_mask, r0, c0, wx, wy, b)
+        x, iterations, residual = hierarchy.solve(b, tol=tol, maxiter=MAX_ITERATIONS)
+        solve.info = {"iterations": iterations, "residual": residual}
+        depth = np.full(shape, np.nan)
+        depth[box][sub_mask] = x[1:-1, 1:-1][sub_mask]
+        return depth
+
+    solve.info = {}
+    return solve
+
+
+def integrate_poisson(normals: np.ndarray, mask: np.ndarray, *, weights: np.ndarray | None = None,
+                      origin: tuple[int, int] | None = None, tol: float = 1e-8) -> np.ndarray:
+    """Least-squares depth from normals over an arbitrary mask.
+
+    Parameters
+    ----------
+    normals : (H, W, 3) float
+        Unit normals, finite on the mask.
+    mask : (H, W) bool
+    weights : (H, W) float, optional
+        Confidence per pixel, finite and >= 0 (a pair of pixels gets the smaller of the two);
+        default uniform.
+    origin : (int, int), optional
+        (row, col) where ``z = 0``; by default the mean depth of each connected part is 0.
+    tol : float
+        Relative residual at which conjugate gradients stop.
+
+    Returns
+    -------
+    depth : (H, W) float64
+        Height in pixel units, NaN outside the mask.
+    """
+    depth = poisson_integrator(mask, weights=weights, tol=tol)(normals)
+    if origin is not None:
+        depth -= depth[tuple(origin)]
+    return depth
+
+
+# ---------------------------------------------------------------------------------------------
+# Reference: the same least-squares problem, assembled as sparse matrices and solved directly
+# ---------------------------------------------------------------------------------------------
 
 def _difference_system(mask, weights):
     """Difference operator over every 4-neighbour pair of object pixels.
 
-    Returns the pairs ``(r, c, horizontal)`` (pixel and whether its partner is to the right or
-    below), the sparse operator ``D`` with ``(D z)[e] = z[partner] - z[pixel]``, and the pair
-    weights (the smaller of the two pixels' weights).
+    Returns the pairs ``(rh, ch, rv, cv)`` (pixels whose partner is to the right, resp. below),
+    the sparse operator ``D`` with ``(D z)[e] = z[partner] - z[pixel]``, and the pair weights (the
+    smaller of the two pixels' weights).
     """
     index = np.full(mask.shape, -1, dtype=np.int64)
     n = int(mask.sum())
@@ -49,68 +215,37 @@ def _steps(zx, zy, pairs):
                            -0.5 * (zy[rv, cv] + zy[rv + 1, cv])])
 
 
-def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, tol: float = 1e-8):
-    """Set up the least-squares system for one mask and weighting; return ``solve(normals)``.
+def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None = None):
+    """Same problem and result as :func:`poisson_integrator`, solved exactly (slow).
 
-    Building the multigrid hierarchy is most of the cost, so callers that integrate several
-    fields over the same mask (iterative refinement) set it up once.
-
-    Parameters
-    ----------
-    mask : (H, W) bool
-    weights : (H, W) float, optional
-        Confidence per pixel (a pair of pixels gets the smaller of the two); default uniform.
-    tol : float
-        Relative residual at which conjugate gradients stop.
-
-    Returns
-    -------
-    solve : callable
-        ``solve(normals) -> depth`` with normals (H, W, 3) and depth (H, W) float64, NaN outside
-        the mask, mean 0 over each connected part.
+    Assembles ``A = D^T W D`` as a sparse matrix, pins one pixel of every connected part (pixels
+    joined by pairs of positive weight) to make it non-singular, factorises it (SuperLU) and
+    removes each part's mean from the solution. Exact up to round-off; for checking the fast
+    solver on small and medium masks (memory and time grow quickly beyond ~500k pixels).
     """
     mask = np.asarray(mask, dtype=bool)
-    w = np.ones(mask.shape) if weights is None else np.asarray(weights, dtype=np.float64)
+    w = _check_weights(mask, weights)
     pairs, D, wts = _difference_system(mask, w)
+    n = D.shape[1]
     A = (D.T @ sp.diags(wts) @ D).tocsr()
-    # the Laplacian is singular (free offset per connected part): a tiny ridge term fixes it
-    # without visibly pulling the solution toward 0
-    A = A + sp.identity(A.shape[0], format="csr") * (1e-9 * A.diagonal().mean())
-    amg = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500)
+    A.eliminate_zeros()  # pairs of weight 0 join nothing
+    n_parts, labels = csgraph.connected_components(A, directed=False)
+    pinned = np.zeros(n, dtype=bool)
+    pinned[np.unique(labels, return_index=True)[1]] = True  # the first pixel of each part
+    free = ~pinned
+    A_free = A[free][:, free].tocsc()
+    factor = spla.splu(A_free) if A_free.shape[0] else None
 
     def solve(normals: np.ndarray) -> np.ndarray:
-        zx, zy = slopes(normals, mask)
-        rhs = _steps(zx, zy, pairs)
-        z = amg.solve(D.T @ (wts * rhs), tol=tol, accel="cg", maxiter=200)
+        zx, zy = slopes(np.asarray(normals, dtype=np.float64), mask)
+        b = D.T @ (wts * _steps(zx, zy, pairs))
+        z = np.zeros(n)
+        if factor is not None:
+            z[free] = factor.solve(b[free])
+        z -= (np.bincount(labels, weights=z, minlength=n_parts)
+              / np.bincount(labels, minlength=n_parts))[labels]
         depth = np.full(mask.shape, np.nan)
         depth[mask] = z
         return depth
 
     return solve
-
-
-def integrate_poisson(normals: np.ndarray, mask: np.ndarray, *, weights: np.ndarray | None = None,
-                      origin: tuple[int, int] | None = None, tol: float = 1e-8) -> np.ndarray:
-    """Least-squares depth from normals over an arbitrary mask.
-
-    Parameters
-    ----------
-    normals : (H, W, 3) float
-        Unit normals, finite on the mask.
-    mask : (H, W) bool
-    weights : (H, W) float, optional
-        Confidence per pixel (a pair of pixels gets the smaller of the two); default uniform.
-    origin : (int, int), optional
-        (row, col) where ``z = 0``; by default the mean depth of each connected part is 0.
-    tol : float
-        Relative residual at which conjugate gradients stop.
-
-    Returns
-    -------
-    depth : (H, W) float64
-        Height in pixel units, NaN outside the mask.
-    """
-    depth = poisson_integrator(mask, weights=weights, tol=tol)(normals)
-    if origin is not None:
-        depth -= depth[tuple(origin)]
-    return depth

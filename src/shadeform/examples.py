@@ -1,0 +1,116 @@
+"""Shipped examples: a real photograph from an installed package, and the synthetic scenes.
+
+Nothing is downloaded. The photograph comes from scikit-image's sample images, which are bundled
+inside the scikit-image wheel (a dependency of ``shadeform``); the synthetic scenes are rendered
+on the fly by :mod:`shadeform.synth`.
+
+========================= ===================================================================
+``coin``                  One silver coin (a helmeted head in relief), cropped from
+                          :func:`skimage.data.coins`: a matte-ish object under one frontal
+                          light on a dark background, what the 2002 method assumes.
+``synth:<scene>``         A noise-free Lambertian rendering of a :data:`shadeform.synth.SCENES`
+                          scene under the light ``(0, 0, 1)``, with its true mask.
+========================= ===================================================================
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+
+from shadeform.errors import InputError
+from shadeform.synth import SCENES
+
+__all__ = ["EXAMPLES", "load_example"]
+
+# (rows, cols) of the coin in skimage.data.coins() (303 x 384): the large helmeted head on the
+# right of the third row, with a few pixels of dark background all round.
+_COIN_CROP = (slice(145, 225), slice(305, 384))
+
+#: Example name -> one-line description.
+EXAMPLES: dict[str, str] = {
+    "coin": (
+        "photograph: one silver coin (a helmeted head in relief), 79x80 pixels cropped from "
+        "scikit-image's coins() sample, frontal light, dark background"
+    ),
+    **{f"synth:{name}": f"synthetic: Lambertian {name}, light (0, 0, 1), true mask" for name in SCENES},
+}
+
+_SYNTH_SIZE = 256
+
+
+def load_example(name: str, *, size: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """Load a shipped example image and the settings it is best reconstructed with.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`EXAMPLES`.
+    size : int, optional, keyword-only
+        Side in pixels of a synthetic scene (default 256, at least 16). Photographs have a fixed
+        size; giving ``size`` for one is an error.
+
+    Returns
+    -------
+    image : (H, W) float32
+        Intensities in ``[0, 1]``, row 0 at the top.
+    info : dict
+        ``name``, ``description``, ``source`` (where the pixels come from) and the suggested
+        settings: ``light`` (3-tuple), ``mask`` ((H, W) bool, or None to find it
+        automatically), ``filter`` (a :func:`shadeform.preprocess.parse_filter` spec or None)
+        and ``step`` (mesh step in pixels).
+
+    Raises
+    ------
+    InputError
+        If ``name`` is not an example, or ``size`` is given for a photograph or is invalid.
+
+    Examples
+    --------
+    >>> image, info = load_example("coin")
+    >>> image.shape, image.dtype, info["light"]
+    ((80, 79), dtype('float32'), (0.0, 0.0, 1.0))
+    """
+    if not isinstance(name, str) or name not in EXAMPLES:
+        raise InputError(f"unknown example {name!r}; choose one of: {', '.join(EXAMPLES)}")
+    info: dict[str, Any] = {"name": name, "description": EXAMPLES[name]}
+    if name.startswith("synth:"):
+        return _synthetic(name.removeprefix("synth:"), size, info)
+    if size is not None:
+        raise InputError(f"example {name!r} is a photograph of fixed size; size only applies to synth: examples")
+    return _coin(info)
+
+
+def _coin(info: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
+    from skimage import data  # bundled in the scikit-image wheel; no download
+
+    rows, cols = _COIN_CROP
+    image = data.coins()[rows, cols].astype(np.float32) / np.float32(255)
+    info.update(
+        source=f"skimage.data.coins()[{rows.start}:{rows.stop}, {cols.start}:{cols.stop}]",
+        light=(0.0, 0.0, 1.0),
+        mask=None,
+        filter="gaussian:1",
+        step=1,
+    )
+    return image, info
+
+
+def _synthetic(scene_name: str, size: int | None, info: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
+    from shadeform.synth import scene
+
+    if size is None:
+        size = _SYNTH_SIZE
+    if isinstance(size, bool) or not isinstance(size, numbers.Integral):
+        raise InputError(f"size must be a whole number of pixels, got {size!r}")
+    rendered = scene(scene_name, size=int(size))
+    info.update(
+        source=f"shadeform.synth.scene({scene_name!r}, size={int(size)})",
+        light=tuple(float(v) for v in rendered.light),
+        mask=np.array(rendered.mask),
+        filter=None,
+        step=max(1, int(size) // 128),
+    )
+    return rendered.image.astype(np.float32), info
