@@ -22,6 +22,7 @@ _EXPORTS = {
     "InputError": "shadeform.errors",
     "load_image": "shadeform.io.images",
     "load_mask": "shadeform.io.images",
+    "load_image_rgb": "shadeform.io.images",
     "save_normal_map": "shadeform.io.maps",
     "load_normal_map": "shadeform.io.maps",
     "save_depth": "shadeform.io.maps",

@@ -9,12 +9,20 @@ is a light behind the camera. Slant is the angle from +z, tilt the angle in the 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from shadeform.errors import InputError
 
-__all__ = ["as_light", "light_from_slant_tilt", "slant_tilt", "parse_light"]
+__all__ = [
+    "as_light",
+    "light_from_slant_tilt",
+    "slant_tilt",
+    "parse_light",
+    "LightEstimate",
+    "estimate_light",
+]
 
 
 def as_light(light) -> np.ndarray:

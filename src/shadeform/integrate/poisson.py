@@ -16,81 +16,27 @@ References
 
 from __future__ import annotations
 
-import numba
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.csgraph as csgraph
-import scipy.sparse.linalg as spla
 
 from shadeform.errors import InputError
-from shadeform.integrate._multigrid import Hierarchy
+from shadeform.integrate._multigrid import Hierarchy, weight_range
 from shadeform.integrate._slopes import MIN_NZ, slopes
 
 #: Conjugate-gradient iterations at most (the multigrid preconditioner needs about 10).
 MAX_ITERATIONS = 500
 
-_BIG = np.finfo(np.float64).max
 
-
-@numba.njit(cache=True, inline="always")
-def _finite(v, nan):
-    """``np.nan_to_num`` for one value."""
-    if v != v:
-        return nan
-    if v > _BIG:
-        return _BIG
-    if v < -_BIG:
-        return -_BIG
-    return v
-
-
-@numba.njit(cache=True)
-def _rhs(normals, mask, r0, c0, wx, wy, b):
-    """``b = D^T W s`` on the padded, cropped grid, straight from the normals.
-
-    The steps ``s`` are those of :func:`shadeform.integrate._slopes.slopes` (trapezoid rule,
-    ``+dz/dx`` to the right, ``-dz/dy`` one row down); the crop starts at ``(r0, c0)``.
-    """
-    h, w = mask.shape
-    zx = np.zeros((2, w + 1))  # slopes of the current and the next row (a ring of two rows)
-    zy = np.zeros((2, w + 1))
-    b[:, :] = 0.0
-    for i in range(-1, h):
-        # slopes of row i + 1 into the ring
-        if i + 1 < h:
-            k = (i + 1) & 1
-            for j in range(w):
-                if mask[i + 1, j]:
-                    n = normals[r0 + i + 1, c0 + j]
-                    nz = max(_finite(n[2], 1.0), MIN_NZ)
-                    zx[k, j] = -_finite(n[0], 0.0) / nz
-                    zy[k, j] = -_finite(n[1], 0.0) / nz
-        if i < 0:
-            continue
-        k = i & 1
-        for j in range(w):
-            if not mask[i, j]:
-                continue
-            if j + 1 < w:
-                f = wx[i + 1, j + 1] * 0.5 * (zx[k, j] + zx[k, j + 1])
-                b[i + 1, j + 1] -= f
-                b[i + 1, j + 2] += f
-            if i + 1 < h:
-                f = wy[i + 1, j + 1] * -0.5 * (zy[k, j] + zy[1 - k, j])
-                b[i + 1, j + 1] -= f
-                b[i + 2, j + 1] += f
-
-
-def _check_weights(mask: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
+def _check_weights(mask: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """The weights as float64 (uniform if None) and their largest value on the mask."""
     if weights is None:
-        return np.ones(mask.shape)
-    w = np.asarray(weights, dtype=np.float64)
+        return np.ones(mask.shape), 1.0
+    w = np.ascontiguousarray(weights, dtype=np.float64)
     if w.shape != mask.shape:
         raise InputError(f"weights must have the mask's shape {mask.shape}, got {w.shape}")
-    on = w[mask]
-    if not np.isfinite(on).all() or (on < 0).any():
+    ok, top = weight_range(mask, w)
+    if not ok:
         raise InputError("weights must be finite and non-negative on the mask")
-    return w
+    return w, top
 
 
 def _bounding_box(mask: np.ndarray) -> tuple[slice, slice]:
@@ -122,35 +68,35 @@ def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, t
         pixel with no such pair is a part of its own, at 0). After a call, ``solve.info`` holds
         the iteration count and final relative residual.
     """
-    mask = np.asarray(mask, dtype=bool)
+    mask = np.ascontiguousarray(mask, dtype=bool)
     if mask.ndim != 2:
         raise InputError(f"mask must be (H, W), got shape {mask.shape}")
-    w = _check_weights(mask, weights)
+    pixel_weights, top = _check_weights(mask, weights)
     shape = mask.shape
+    info = {}
     if not mask.any():
         def solve_empty(normals: np.ndarray) -> np.ndarray:
             return np.full(shape, np.nan)
 
+        solve_empty.info = info
         return solve_empty
     box = _bounding_box(mask)
     r0, c0 = box[0].start, box[1].start
-    sub_mask = np.ascontiguousarray(mask[box])
-    hierarchy = Hierarchy(sub_mask, np.ascontiguousarray(w[box]))
-    wx, wy = hierarchy.fine_pairs()
+    hierarchy = Hierarchy(np.ascontiguousarray(mask[box]), np.ascontiguousarray(pixel_weights[box]),
+                          top)
 
     def solve(normals: np.ndarray) -> np.ndarray:
         normals = np.ascontiguousarray(normals, dtype=np.float64)
         if normals.shape != (*shape, 3):
-            raise InputError(f"normals must be {(*shape, 3)} to match the mask, got {normals.shape}")
-        b = np.empty(hierarchy.fine_shape)
-        _rhs(normals, sub_mask, r0, c0, wx, wy, b)
-        x, iterations, residual = hierarchy.solve(b, tol=tol, maxiter=MAX_ITERATIONS)
-        solve.info = {"iterations": iterations, "residual": residual}
+            raise InputError(f"normals must be {(*shape, 3)} to match the mask, "
+                             f"got {normals.shape}")
         depth = np.full(shape, np.nan)
-        depth[box][sub_mask] = x[1:-1, 1:-1][sub_mask]
+        iterations, residual = hierarchy.solve(normals, r0, c0, MIN_NZ, depth, tol=tol,
+                                               maxiter=MAX_ITERATIONS)
+        info.update(iterations=iterations, residual=residual)
         return depth
 
-    solve.info = {}
+    solve.info = info
     return solve
 
 
@@ -193,6 +139,8 @@ def _difference_system(mask, weights):
     the sparse operator ``D`` with ``(D z)[e] = z[partner] - z[pixel]``, and the pair weights (the
     smaller of the two pixels' weights).
     """
+    import scipy.sparse as sp
+
     index = np.full(mask.shape, -1, dtype=np.int64)
     n = int(mask.sum())
     index[mask] = np.arange(n)
@@ -221,10 +169,14 @@ def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None
     Assembles ``A = D^T W D`` as a sparse matrix, pins one pixel of every connected part (pixels
     joined by pairs of positive weight) to make it non-singular, factorises it (SuperLU) and
     removes each part's mean from the solution. Exact up to round-off; for checking the fast
-    solver on small and medium masks (memory and time grow quickly beyond ~500k pixels).
+    solver (the factorisation takes about 20 s for 600k pixels).
     """
-    mask = np.asarray(mask, dtype=bool)
-    w = _check_weights(mask, weights)
+    import scipy.sparse as sp
+    import scipy.sparse.csgraph as csgraph
+    import scipy.sparse.linalg as spla
+
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    w, _ = _check_weights(mask, weights)
     pairs, D, wts = _difference_system(mask, w)
     n = D.shape[1]
     A = (D.T @ sp.diags(wts) @ D).tocsr()
@@ -248,4 +200,5 @@ def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None
         depth[mask] = z
         return depth
 
+    solve.info = {}
     return solve
