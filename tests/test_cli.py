@@ -442,19 +442,22 @@ class TestEvaluate:
         assert result.exit_code == 0, result.output
         for name in synth.SCENES:
             assert name in result.stdout
-        assert "bowl, concave region given" in result.stdout and "bowl, no region" in result.stdout
+        assert "bowl, concave regions drawn" in result.stdout and "eikonal" in result.stdout
 
     def test_numbers(self):
         result = invoke("evaluate", "--size", "64", "--scenes", "sphere,bowl", "--json")
         assert result.exit_code == 0, result.output
         rows = json.loads(result.stdout)["rows"]
-        # sphere: 2 methods; bowl: 2 methods x with/without its region
-        assert [(r["scene"], r["concave_region"], r["refine"]) for r in rows] == [
-            ("sphere", False, 3), ("sphere", False, 0),
-            ("bowl", False, 3), ("bowl", True, 3), ("bowl", False, 0), ("bowl", True, 0)]
-        error = {(r["scene"], r["concave_region"], r["refine"]): r["angular_error_deg"] for r in rows}
-        assert error["sphere", False, 3] < 3
-        assert error["bowl", True, 3] < 3 < 10 < error["bowl", False, 3]
+        # sphere: 3 methods; bowl: 3 methods x without/with its region
+        assert [(r["scene"], r["concave_region"], r["label"]) for r in rows] == [
+            ("sphere", False, "propagation"), ("sphere", False, "propagation (2002, no refinement)"),
+            ("sphere", False, "eikonal"),
+            ("bowl", False, "propagation"), ("bowl", True, "propagation"),
+            ("bowl", False, "propagation (2002, no refinement)"), ("bowl", True, "propagation (2002, no refinement)"),
+            ("bowl", False, "eikonal"), ("bowl", True, "eikonal")]
+        error = {(r["scene"], r["concave_region"], r["label"]): r["angular_error_deg"] for r in rows}
+        assert error["sphere", False, "propagation"] < 3 and error["sphere", False, "eikonal"] < 3
+        assert error["bowl", True, "propagation"] < 3 < 10 < error["bowl", False, "propagation"]
 
     def test_unknown_scene(self, out):
         assert_fails(invoke("evaluate", "--scenes", "sphere,teapot"), out, "teapot")

@@ -482,6 +482,7 @@ def synth(
 _METHODS = (
     ("propagation", {"method": "propagation", "refine": 3, "integrator": "paths"}),
     ("propagation (2002, no refinement)", {"method": "propagation", "refine": 0, "integrator": "paths"}),
+    ("eikonal", {"method": "eikonal"}),
 )
 
 
@@ -506,11 +507,12 @@ def evaluate(
         if name not in synth_module.SCENES:
             raise InputError(f"unknown scene {name!r}; choose from: {', '.join(synth_module.SCENES)}")
 
-    runs = []  # (scene name, concave region given, method label, reconstruct kwargs)
+    runs = []  # (scene name, concave regions given, method label, reconstruct kwargs)
     for name in names:
+        marked = bool(synth_module.concave_regions(name, size=size)["regions"])
         for label, kwargs in _METHODS:
             runs.append((name, False, label, kwargs))
-            if name == "bowl":
+            if marked:
                 runs.append((name, True, label, kwargs))
 
     rows = []
@@ -523,7 +525,7 @@ def evaluate(
         for name, with_region, label, kwargs in runs:
             progress.update(task, description=f"{name}: {label}")
             scene = synth_module.scene(name, size=size)
-            concave = _whole_image_region(size) if with_region else None
+            concave = synth_module.concave_regions(name, size=size) if with_region else None
             start = time.perf_counter()
             rec = shadeform.reconstruct(scene.image, mask=scene.mask, light=scene.light, concave=concave, **kwargs)
             seconds = time.perf_counter() - start
@@ -553,17 +555,11 @@ def evaluate(
     table.add_column("time", justify="right", no_wrap=True, min_width=7)
     for row in rows:
         scene_label = row["scene"]
-        if row["scene"] == "bowl":
-            scene_label += ", concave region given" if row["concave_region"] else ", no region"
+        if row["concave_region"]:
+            scene_label += ", concave regions drawn"
         table.add_row(scene_label, row["label"], f"{row['angular_error_deg']:.2f}",
                       f"{row['depth_error_pct']:.2f}", _seconds(row["seconds"]))
     _stdout().print(table)
-
-
-def _whole_image_region(size: int) -> dict:
-    """A concave region (axis "both") covering the whole image, as for the bowl."""
-    edge = size - 0.5
-    return {"regions": [{"polygon": [[-0.5, -0.5], [edge, -0.5], [edge, edge], [-0.5, edge]], "axis": "both"}]}
 
 
 # --- formats -----------------------------------------------------------------------------------

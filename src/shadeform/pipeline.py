@@ -21,8 +21,10 @@ from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
 
-METHODS = ("propagation",)
+METHODS = ("propagation", "eikonal")
 INTEGRATORS = ("paths", "poisson")
+#: What turns each method's normals into depth when ``integrator`` is not given.
+DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)"}
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -39,7 +41,7 @@ def reconstruct(
     filter: str | None = None,
     references: Sequence | None = None,
     concave: Any = None,
-    integrator: str = "paths",
+    integrator: str | None = None,
     refine: int = 3,
 ) -> Reconstruction:
     """Recover normals and depth from one shading image.
@@ -55,8 +57,10 @@ def reconstruct(
         scaled by their type's maximum.
     light : (3,) float
         Direction toward the light in the camera frame (``docs/conventions.md``).
-    method : {"propagation"}
-        Normal-field solver.
+    method : {"propagation", "eikonal"}
+        Solver: the 2002 convexity-guided propagation (any light), or fast marching of the
+        eikonal equation from the singular points (light at +z only; concave regions and
+        references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`).
     mask : (H, W) bool, optional
         Object pixels; by default found automatically (dark background).
     filter : str, optional
@@ -69,8 +73,9 @@ def reconstruct(
     concave : regions, optional
         Concave regions: a dict or JSON string in the format of ``docs/conventions.md``, a path to
         such a file, or a sequence of :class:`shadeform.regions.Region`.
-    integrator : {"paths", "poisson"}
-        Depth from normals: the report's path averaging, or masked least squares.
+    integrator : {"paths", "poisson"}, optional
+        Depth from normals: the report's path averaging, or masked least squares. By default
+        "paths" for propagation, and the eikonal solver's own depth for "eikonal".
     refine : int
         Iterations of the integrability refinement of the propagated field
         (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
@@ -109,7 +114,7 @@ def reconstruct(
     light = as_light(light)
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
-    if integrator not in INTEGRATORS:
+    if integrator is not None and integrator not in INTEGRATORS:
         raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
         raise InputError(f"refine must be a whole number of iterations >= 0, got {refine!r}")
@@ -126,9 +131,36 @@ def reconstruct(
     cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
     lap("references")
 
-    normals_sum = np.zeros(image.shape + (3,))
-    depth_sum = np.zeros(image.shape)
-    depth_count = np.zeros(image.shape)
+    if method == "eikonal":
+        normals, depth, method_info = _eikonal(shading, mask, light, k, references, concave_x, concave_y,
+                                               integrator, lap)
+    else:
+        normals, depth, method_info = _propagation(shading, mask, light, k, refs, labels, n_parts, cos_theta,
+                                                   concave_x, concave_y, integrator, refine, lap)
+    normals[~mask] = np.nan
+    depth[~mask] = np.nan
+    lap("combine")
+    info = {
+        "method": method,
+        "integrator": integrator or DEFAULT_INTEGRATOR[method],
+        "refine": int(refine) if method == "propagation" else 0,
+        "filter": parse_filter(filter).kind if filter else "none",
+        "references": [(int(r), int(c)) for (r, c), _ in refs],
+        "parts": int(n_parts),
+        "k": float(k),
+        "timings": timings,
+        **method_info,
+    }
+    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
+
+
+def _propagation(shading, mask, light, k, refs, labels, n_parts, cos_theta, concave_x, concave_y,
+                 integrator, refine, lap):
+    """The 2002 route: a field per reference, integrated from it, combined by eq. 7."""
+    integrator = integrator or "paths"
+    normals_sum = np.zeros(mask.shape + (3,))
+    depth_sum = np.zeros(mask.shape)
+    depth_count = np.zeros(mask.shape)
     for part in range(1, n_parts + 1):
         part_refs = [ref for ref in refs if labels[ref[0]] == part]
         part_mask = labels == part
@@ -151,22 +183,29 @@ def reconstruct(
             depth_sum[part_mask] += depth[part_mask] + depth_main[r, c]
             depth_count[part_mask] += 1
             normals_sum[part_mask] += field[part_mask]
+    if len(refs) > 1:
+        normals_sum /= np.linalg.norm(normals_sum, axis=-1, keepdims=True).clip(1e-300)
+        depth_sum /= np.maximum(depth_count, 1)
+    return normals_sum, depth_sum, {}
 
-    normals = normals_sum / np.linalg.norm(normals_sum, axis=-1, keepdims=True).clip(1e-300)
-    normals[~mask] = np.nan
-    depth = np.where(mask, depth_sum / np.maximum(depth_count, 1), np.nan)
-    lap("combine")
-    info = {
-        "method": method,
-        "integrator": integrator,
-        "refine": int(refine),
-        "filter": parse_filter(filter).kind if filter else "none",
-        "references": [(int(r), int(c)) for (r, c), _ in refs],
-        "parts": int(n_parts),
-        "k": float(k),
-        "timings": timings,
-    }
-    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
+
+def _eikonal(shading, mask, light, k, references, concave_x, concave_y, integrator, lap):
+    """Fast marching from the singular points (light at +z only); its own depth by default."""
+    from shadeform.solvers.eikonal import eikonal_depth
+
+    if not np.allclose(light, (0.0, 0.0, 1.0), atol=1e-6):
+        raise InputError("method 'eikonal' needs the light at (0, 0, 1); use method='propagation' for "
+                         "other light directions")
+    sources = [(int(item[0]), int(item[1])) for item in references or ()]
+    result = eikonal_depth(shading, mask, k=k, sources=sources or None, concave=(concave_x, concave_y))
+    lap("normals")
+    depth = result.depth.copy()
+    if integrator is not None:
+        main = (result.sources[0].row, result.sources[0].col)
+        depth = _integrate(result.normals, mask, main, integrator)
+    lap("depth")
+    sources_info = [{"row": s.row, "col": s.col, "kind": s.kind, "height": float(s.height)} for s in result.sources]
+    return result.normals.copy(), depth, {"sources": sources_info}
 
 
 def _integrate(normals, mask, origin, integrator):
@@ -252,15 +291,18 @@ def _references(references, image, mask, labels, n_parts):
             normal = normal / length
         refs.append(((r, c), normal))
     covered = {labels[r, c] for (r, c), _ in refs}
-    # among equally bright pixels prefer the one deepest inside its part: a flat top's centre
-    inside = ndi.distance_transform_edt(mask)
+    inside = None
     for part in range(1, n_parts + 1):
         if part in covered:
             continue
         in_part = labels == part
         top = image[in_part].max()
-        score = np.where(in_part & (image >= top * (1 - 1e-9)), inside, -1.0)
-        r, c = np.unravel_index(np.argmax(score), score.shape)
+        brightest = in_part & (image >= top * (1 - 1e-9))
+        if np.count_nonzero(brightest) > 1:
+            # among equally bright pixels prefer the one deepest inside its part: a flat top's centre
+            inside = ndi.distance_transform_edt(mask) if inside is None else inside
+            brightest = np.where(brightest, inside, -1.0)
+        r, c = np.unravel_index(np.argmax(brightest), brightest.shape)
         refs.append(((int(r), int(c)), None))
     return refs
 

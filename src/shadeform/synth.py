@@ -272,6 +272,62 @@ def scene(
 # --- (depth, (n_x, n_y, n_z), mask); values outside the mask are discarded by surface().
 
 
+def concave_regions(name: str, *, size: int = 256) -> dict:
+    """The concave regions a user would draw on a scene, in the JSON format of the conventions.
+
+    Derived from each scene's geometry: the bowl is concave along both axes everywhere; the vase's
+    neck, where its profile curves outward (``F'' > 0``), is concave along y while it stays convex
+    across; the bumps' dent is concave along both axes; the saddle is concave along x everywhere.
+    The other scenes are convex: no regions.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SCENES`.
+    size : int
+        Image side in pixels, as given to :func:`scene`.
+
+    Returns
+    -------
+    dict
+        ``{"regions": [{"polygon": [[x, y], ...], "axis": ...}, ...]}``, x = column, y = row.
+    """
+    _check_name(name)
+    size = _check_size(size)
+    centre = (size - 1) / 2
+
+    def box(x0, y0, x1, y1, axis):
+        # scene coordinates (y up, origin at the centre) -> pixel polygon (x = column, y = row)
+        corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        return {"polygon": [[float(centre + x), float(centre - y)] for x, y in corners], "axis": axis}
+
+    whole = size / 2 + 1
+    if name == "bowl":
+        regions = [box(-whole, -whole, whole, whole, "both")]
+    elif name == "saddle":
+        regions = [box(-whole, -whole, whole, whole, "x")]
+    elif name == "vase":
+        curvature = _VASE_PROFILE.deriv(2)
+        roots = sorted(r.real for r in curvature.roots() if abs(r.imag) < 1e-9 and 0 < r.real < 1)
+        # the neck: the last interval of (0, 1) where the profile curves outward
+        edges = [0.0, *roots, 1.0]
+        neck = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if curvature((a + b) / 2) > 0][-1]
+        height = 0.9 * size
+        u = np.linspace(*neck, 64)
+        half_width = height * _VASE_PROFILE(u).max() + 1
+        y0, y1 = (neck[0] - 0.5) * height, (neck[1] - 0.5) * height
+        regions = [box(-half_width, y0, half_width, y1, "y")]
+    elif name == "bumps":
+        regions = []
+        for x0, y0, height, sigma in _BUMPS:
+            if height < 0:
+                half = 1.7 * sigma * size
+                regions.append(box(x0 * size - half, y0 * size - half, x0 * size + half, y0 * size + half, "both"))
+    else:
+        regions = []
+    return {"regions": regions}
+
+
 def _sphere(x, y, size):
     radius = 0.42 * size
     rho2 = x * x + y * y

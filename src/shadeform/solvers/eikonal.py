@@ -14,7 +14,8 @@ every pixel ``x`` and every singular point ``a`` of height ``z_a``
     z_a - T_a(x) <= z(x) <= z_a + T_a(x),
 
 with equality on the left when ``x`` lies on a path of steepest descent from ``a`` and on the
-right when it lies on a path of steepest ascent from ``a``. Hence (Dupuis & Oliensis, 1994)
+right when it lies on a path of steepest ascent from ``a``. Hence (Dupuis & Oliensis, 1994;
+Kimmel & Sethian, 2001, march from the minima)
 
 * ``L(x) = max_a (z_a - T_a(x))`` is exact wherever the steepest ascent from ``x`` ends in a
   singular point (every pixel of a convex object: ascent ends at its top);
@@ -23,19 +24,24 @@ right when it lies on a path of steepest ascent from ``a``. Hence (Dupuis & Olie
 
 The solver
 
-1. finds the singular regions, the connected sets of object pixels with ``c >= 1 - tol``. Each
-   becomes a source whose pixels are its brightest ones (``T = 0`` there). Its **kind** comes from
-   the user's concave regions (``docs/conventions.md``): a maximum by default, a minimum inside a
-   region concave along both axes (a bowl's bottom), a saddle inside a region concave along one
-   axis only (the neck of a vase: convex across, concave along). User sources add to or replace
-   the detected ones; every connected part of the mask without a source gets its brightest pixel;
+1. finds the singular regions: the bright caps around maxima of ``c`` that reach ``1 - tol``
+   and rise at least ``tol`` above the pass to any brighter one (h-maxima), so noise and ripples
+   on a level plateau do not split it. Each becomes a source whose pixels within ``tol / 10`` of
+   its top start the marching (``T = 0``): a point, a ridge's crest or a plateau. Its **kind**
+   comes from the user's concave regions (``docs/conventions.md``): a maximum by default, a
+   minimum inside a region concave along both axes (a bowl's bottom), a saddle inside a region
+   concave along one axis only (a vase's neck: convex across, concave along it). User sources
+   add to or replace the detected ones; every connected part of the mask without a source gets
+   its brightest pixel;
 2. fixes the sources' heights. The main source (the first user source, else the brightest) is at
-   0. Then, nearest first, each source ``b`` is linked to the placed ones: between singular points
-   of *different* kinds the surface can run monotonically, so the bound is reached: a maximum is
-   placed at the lowest upper bound ``min_a (z_a + D_ab)``, a minimum at the highest lower bound
-   ``max_a (z_a - D_ab)``, a saddle at the bound of the kind of its nearest linked neighbour
-   (``D_ab`` is ``T_a`` at ``b``). A source with no placed source of another kind is put at the
-   bound that adds no shape (a maximum no higher than its neighbours imply, a minimum no lower);
+   0; then, nearest first, each source ``b`` is bounded by the placed ones, ``|z_b - z_a| <=
+   D_ab`` (``D_ab`` is ``T_a`` at ``b``). A maximum is put at the lowest upper bound
+   ``min_a (z_a + D_ab)``, a minimum at the highest lower bound ``max_a (z_a - D_ab)``: the bound
+   is reached when a path of steepest ascent (descent) joins ``b`` to a placed source, as it does
+   between singular points of different kinds, so those go first (a vase's lip is placed from
+   its neck, not from its belly). A saddle goes below the maximum or above the minimum that
+   links it. Unmarked, all are maxima and each rises as high as the placed ones allow: bumps on
+   a plate come out as bumps (and an unmarked dent as one more);
 3. takes ``U`` where the source nearest in the metric ``f`` is a minimum and ``L`` everywhere
    else, with ``z = 0`` at each part's main source;
 4. returns the normals on each pixel's shading cone (``n_z = c`` exactly) with the tilt of the
@@ -51,6 +57,12 @@ semi-Lagrangian update ``min_y T(y) + |x - y| tan((theta_x + theta_y) / 2)`` ove
 between accepted neighbours (Tsitsiklis, 1995), with ``theta = arccos c`` interpolated linearly.
 The step ``tan`` of the mean angle is the exact rise of a circular arc between the two slopes, so
 a sphere's rim is integrated without error along its radius.
+
+Limits. Uniform albedo, the light at +z, no cast shadows. What the singular points and the
+user's marks do not decide, no marching can: a surface whose slopes run out through the image
+border on both sides (the synthetic saddle, whose image is also that of a dome) needs heights on
+that border, and a neck left unmarked is read as a hill top. ``tol`` must exceed what noise does
+to the brightest pixels: filter noisy images and raise it (see :data:`TOL`).
 
 ``arrival_times`` is the compiled kernel; ``arrival_times_reference`` is a slow, plain-Python
 transcription (heapq, every stencil re-evaluated at every step) kept for the tests.
@@ -68,7 +80,6 @@ References
    solution to the eikonal equation on Cartesian domains", IEEE TPAMI 29(9), 1563-1574, 2007.
 .. [6] J. N. Tsitsiklis, "Efficient algorithms for globally optimal trajectories", IEEE Trans.
    Automatic Control 40(9), 1528-1538, 1995.
-.. [7] E. Prados and O. Faugeras, "Shape from shading: a well-posed problem?", CVPR 2005.
 """
 
 from __future__ import annotations
@@ -94,19 +105,22 @@ __all__ = [
     "arrival_times",
     "arrival_times_reference",
     "cone_normals",
+    "cone_normals_reference",
 ]
 
 #: Kinds of singular points (sources).
 KINDS = ("max", "min", "saddle")
 
-#: Default ``c`` tolerance: pixels with ``I / k >= 1 - tol`` form the singular regions.
+#: Default tolerance on ``c = I / k``: a singular region's top reaches ``1 - tol`` and rises
+#: ``tol`` above the pass to any brighter one. Noisy images need more (about 2e-2 at 1% noise
+#: after a Gaussian of sigma 2).
 TOL = 1e-3
 #: Default slope above which the semi-Lagrangian arc update replaces finite differences.
 STEEP = 1.5
 #: ``c`` is floored here before ``f`` is computed, so a black pixel is a steep wall, not inf.
 COS_FLOOR = 1e-3
-#: Pixels of a singular region this close to its brightest value are all sources.
-TIE = 1e-9
+#: The sources of a singular region are its pixels within this fraction of ``tol`` of its top.
+SOURCE_FRACTION = 0.1
 #: At most this many detected singular regions are kept (the largest); more mean noise.
 MAX_DETECTED = 32
 
@@ -127,11 +141,11 @@ class SingularPoint:
     Attributes
     ----------
     row, col : int
-        Its representative pixel (the brightest; the one nearest the centroid among equals).
+        Its representative pixel: of its source pixels, the one nearest their centroid.
     kind : {"max", "min", "saddle"}
         Local maximum, minimum or saddle of the height.
     height : float
-        Its height ``z`` in the result's frame (pixel units).
+        The height ``z`` it was given, in the result's frame (pixel units).
     pixels : (K, 2) int64
         ``(row, col)`` of the pixels where the marching starts (``T = 0``), read-only.
     origin : {"detected", "user", "brightest"}
@@ -182,27 +196,39 @@ class EikonalResult:
 
 
 @numba.njit(cache=True)
-def _heap_push(keys, items, size, key, item):
-    """Insert ``(key, item)`` into the binary min-heap of length ``size``; return the new size."""
-    i = size
+def _heap_update(keys, items, where, size, key, item):
+    """Insert ``item`` with ``key``, or lower its key if it is queued already.
+
+    A binary min-heap in ``keys``/``items`` of length ``size``; ``where[item]`` is the item's
+    position in it, -1 when it is not queued. Returns the new size.
+    """
+    i = where[item]
+    if i < 0:
+        i = size
+        size += 1
     while i > 0:
         parent = (i - 1) // 2
         if keys[parent] <= key:
             break
         keys[i] = keys[parent]
         items[i] = items[parent]
+        where[items[i]] = i
         i = parent
     keys[i] = key
     items[i] = item
-    return size + 1
+    where[item] = i
+    return size
 
 
 @numba.njit(cache=True)
-def _heap_pop(keys, items, size):
+def _heap_pop(keys, items, where, size):
     """Remove the smallest key; return ``(key, item, new size)``."""
     key = keys[0]
     item = items[0]
+    where[item] = -1
     size -= 1
+    if size == 0:
+        return key, item, size
     last_key = keys[size]
     last_item = items[size]
     i = 0
@@ -216,9 +242,11 @@ def _heap_pop(keys, items, size):
             break
         keys[i] = keys[child]
         items[i] = items[child]
+        where[items[i]] = i
         i = child
     keys[i] = last_key
     items[i] = last_item
+    where[last_item] = i
     return key, item, size
 
 
@@ -381,7 +409,7 @@ def _arc_update_from(T, done, theta, r, c, pr, pc):
 
 @numba.njit(cache=True)
 def _march(f, theta, mask, steep, src_index, src_value, src_label, goal, need,
-           T, label, done, keys, items, reached):
+           T, label, done, keys, items, where, reached):
     """Fast marching over ``mask`` from the sources; fills ``T``, ``label``, ``done``.
 
     Work arrays come from the caller. ``goal`` holds a target id per pixel (-1 for none); the
@@ -397,13 +425,11 @@ def _march(f, theta, mask, steep, src_index, src_value, src_label, goal, need,
         if src_value[s] < T[r, c]:
             T[r, c] = src_value[s]
             label[r, c] = src_label[s]
-            size = _heap_push(keys, items, size, src_value[s], i)
+            size = _heap_update(keys, items, where, size, src_value[s], i)
     while size > 0:
-        key, i, size = _heap_pop(keys, items, size)
+        key, i, size = _heap_pop(keys, items, where, size)
         r = i // width
         c = i % width
-        if done[r, c] or key > T[r, c]:
-            continue  # stale heap entry
         done[r, c] = True
         g = goal[r, c]
         if need > 0 and g >= 0 and reached[g] == np.inf:
@@ -426,7 +452,7 @@ def _march(f, theta, mask, steep, src_index, src_value, src_label, goal, need,
                 if t < T[rr, cc]:
                     T[rr, cc] = t
                     label[rr, cc] = label[r, c]
-                    size = _heap_push(keys, items, size, t, rr * width + cc)
+                    size = _heap_update(keys, items, where, size, t, rr * width + cc)
     return need
 
 
@@ -450,15 +476,19 @@ def _check_times_input(cos_theta, mask, sources, values, steep):
     mask = mask.astype(bool)
     if not np.isfinite(cos_theta[mask]).all():
         raise InputError("cos_theta has NaN or inf inside the mask; fix it or shrink the mask")
-    pixels = np.asarray(sources, dtype=np.int64).reshape(-1, 2) if len(sources) else np.zeros((0, 2), np.int64)
-    if len(pixels) == 0:
+    pairs = "sources must be a sequence of whole-number (row, col) pairs"
+    try:
+        pixels = np.asarray(sources)
+    except ValueError:
+        raise InputError(pairs) from None
+    if pixels.size == 0:
         raise InputError("give at least one source pixel (row, col) to march from")
-    rows, cols = pixels[:, 0], pixels[:, 1]
-    inside = (rows >= 0) & (rows < mask.shape[0]) & (cols >= 0) & (cols < mask.shape[1])
-    if not inside.all() or not mask[rows, cols].all():
-        r, c = pixels[np.flatnonzero(~inside | ~mask[np.clip(rows, 0, mask.shape[0] - 1),
-                                                     np.clip(cols, 0, mask.shape[1] - 1)])[0]]
-        raise InputError(f"source pixel (row {r}, col {c}) is not on the mask; pick one inside it")
+    if pixels.ndim != 2 or pixels.shape[1] != 2 or not np.issubdtype(pixels.dtype, np.integer):
+        raise InputError(pairs)
+    pixels = pixels.astype(np.int64)
+    for r, c in pixels.tolist():
+        if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
+            raise InputError(f"source pixel (row {r}, col {c}) is not on the mask; pick one inside it")
     if values is None:
         values = np.zeros(len(pixels))
     values = np.asarray(values, dtype=np.float64).reshape(-1)
@@ -543,23 +573,28 @@ def arrival_times_reference(cos_theta, mask, sources, *, values=None,
     return T
 
 
-def _run_march(f, theta, mask, steep, index, values, labels, goal=None, n_goals=0):
-    """Allocate the work arrays and run :func:`_march`; returns ``(T, label)`` or, with goals,
-    ``(T, label, reached)``."""
+def _run_march(f, theta, mask, steep, index, values, labels, goal=None, need=0):
+    """Allocate the work arrays and run :func:`_march`.
+
+    Returns ``(T, label)``, or ``(T, label, reached)`` when a ``goal`` image of target ids is
+    given: ``reached[j]`` is the first accepted value of target ``j`` (inf if not reached); the
+    marching stops once ``need`` targets were reached.
+    """
     shape = mask.shape
     T = np.full(shape, np.inf)
     label = np.full(shape, -1, dtype=np.int64)
     done = np.zeros(shape, dtype=bool)
-    # every pixel is pushed at most once per accepted neighbour
-    capacity = 8 * int(np.count_nonzero(mask)) + len(index) + 1
+    # each pixel is queued at most once at a time
+    capacity = int(np.count_nonzero(mask)) + 1
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
-    if goal is None:
-        goal = np.full(shape, -1, dtype=np.int64)
-    reached = np.full(max(n_goals, 1), np.inf)
+    where = np.full(mask.size, -1, dtype=np.int64)
+    targets = np.full(shape, -1, dtype=np.int64) if goal is None else goal
+    reached = np.full(max(int(targets.max()) + 1, 1), np.inf)
     _march(f, theta, mask, float(steep), index.astype(np.int64), values.astype(np.float64),
-           labels.astype(np.int64), goal, int(n_goals), T, label, done, keys, items, reached)
-    if n_goals:
+           labels.astype(np.int64), targets, int(need), T, label, done, keys, items, where,
+           reached)
+    if goal is not None:
         return T, label, reached
     return T, label
 
@@ -628,7 +663,10 @@ def eikonal_depth(
         Find singular regions automatically (default). With False only ``sources`` are used (and
         the brightest pixel of every part of the mask without one).
     tol : float, optional
-        Pixels with ``I / k >= 1 - tol`` are singular (their slope is below ``sqrt(2 tol)``).
+        A singular region is a cap of pixels reaching ``I / k >= 1 - tol`` (slope below
+        ``sqrt(2 tol)``) that rises ``tol`` above the pass to any brighter one. Raise it for noisy
+        images (2e-2 at 1% noise after a Gaussian of sigma 2); at most :data:`MAX_DETECTED` caps,
+        the largest, are kept.
     smooth : float, optional
         Standard deviation in pixels of a Gaussian (inside the mask) applied before singular
         points and ``k`` are found; the marching itself uses ``image`` unchanged. 0: none.
@@ -724,7 +762,7 @@ def eikonal_depth(
 
 
 def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> np.ndarray:
-    """Normals with ``n_z = cos_theta`` tilted along the steepest descent of ``depth``.
+    """Normals with ``n_z = cos_theta`` tilted along the steepest descent of ``depth`` (compiled).
 
     Parameters
     ----------
@@ -732,7 +770,7 @@ def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> 
         Height; read only on ``mask``.
     mask : (H, W) bool
     cos_theta : (H, W) float
-        Required ``n_z`` in [0, 1] (``I / k`` for a light at +z).
+        Required ``n_z``, clipped to [0, 1] (``I / k`` for a light at +z).
 
     Returns
     -------
@@ -741,6 +779,17 @@ def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> 
         neighbours are on the mask, one-sided ones where only one is; where it vanishes the
         normal is ``(0, 0, 1)``.
     """
+    depth = np.asarray(depth, dtype=np.float64)
+    mask = np.asarray(mask, dtype=bool)
+    cos = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    normals = np.full(mask.shape + (3,), np.nan)
+    _cone_normals_kernel(depth, mask, cos, normals)
+    return normals
+
+
+def cone_normals_reference(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> np.ndarray:
+    """Plain numpy version of :func:`cone_normals` (same arguments and result), for the tests."""
+    mask = np.asarray(mask, dtype=bool)
     z = np.where(mask, depth, 0.0)
 
     def derivative(axis: int) -> np.ndarray:
@@ -773,6 +822,52 @@ def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> 
     return normals
 
 
+@numba.njit(cache=True)
+def _cone_normals_kernel(z, mask, cos, out):
+    height, width = mask.shape
+    for r in range(height):
+        for c in range(width):
+            if not mask[r, c]:
+                continue
+            # d/dx along the row, d/drow down the column: the mean of the one-sided
+            # differences that stay on the mask
+            gx = 0.0
+            n = 0
+            if c + 1 < width and mask[r, c + 1]:
+                gx += z[r, c + 1] - z[r, c]
+                n += 1
+            if c > 0 and mask[r, c - 1]:
+                gx += z[r, c] - z[r, c - 1]
+                n += 1
+            if n:
+                gx /= n
+            grow = 0.0
+            n = 0
+            if r + 1 < height and mask[r + 1, c]:
+                grow += z[r + 1, c] - z[r, c]
+                n += 1
+            if r > 0 and mask[r - 1, c]:
+                grow += z[r, c] - z[r - 1, c]
+                n += 1
+            if n:
+                grow /= n
+            gy = -grow  # y is up
+            slope = np.sqrt(gx * gx + gy * gy)
+            if slope == 0.0:
+                out[r, c, 0] = 0.0
+                out[r, c, 1] = 0.0
+                out[r, c, 2] = 1.0
+                continue
+            sin = np.sqrt(1.0 - cos[r, c] * cos[r, c])
+            nx = -gx / slope * sin
+            ny = -gy / slope * sin
+            nz = cos[r, c]
+            length = np.sqrt(nx * nx + ny * ny + nz * nz)
+            out[r, c, 0] = nx / length
+            out[r, c, 1] = ny / length
+            out[r, c, 2] = nz / length
+
+
 # --------------------------------------------------------------------------------------------
 # Steps of the solver.
 # --------------------------------------------------------------------------------------------
@@ -794,12 +889,21 @@ def _detect(cos_seen, mask, parts, concave_x, concave_y, tol):
     at least ``tol`` above the pass to any brighter one (an h-maximum, found by morphological
     reconstruction of ``c - tol`` under ``c``), so maxima of noise or ripples on a singular
     plateau merge into one. A cap whose top reaches ``1 - tol`` is singular; its sources are its
-    pixels within :data:`TIE` of the top.
+    pixels within ``SOURCE_FRACTION * tol`` of the top (a ridge's whole crest, a plateau).
     """
-    c = np.where(mask, cos_seen, 0.0)
+    # Only caps reaching 1 - tol matter, and they lie above 1 - 2 tol: flooring c there and
+    # cropping to where it rises above the floor changes none of them, and saves most of the work.
+    floor = 1.0 - 2.0 * tol
+    bright = mask & (cos_seen > floor)
+    regions = np.zeros(mask.shape, dtype=np.int64)
+    if not bright.any():
+        return [], regions, 0
+    rows, cols = np.nonzero(bright)
+    box = (slice(max(rows.min() - 1, 0), rows.max() + 2), slice(max(cols.min() - 1, 0), cols.max() + 2))
+    c = np.where(bright[box], cos_seen[box], floor)
     domes = reconstruction(c - tol, c, method="dilation", footprint=_EIGHT)
-    caps = local_maxima(domes, connectivity=2, allow_borders=True) & mask
-    regions, count = ndi.label(caps, structure=_EIGHT)
+    caps = local_maxima(domes, connectivity=2, allow_borders=True) & bright[box]
+    count = ndi.label(caps, structure=_EIGHT, output=regions[box])
     nodes = []
     kept = np.zeros(count + 1, dtype=bool)
     for index, window in enumerate(ndi.find_objects(regions), start=1):
@@ -811,7 +915,7 @@ def _detect(cos_seen, mask, parts, concave_x, concave_y, tol):
         if top < 1.0 - tol:
             continue
         kept[index] = True
-        rows, cols = np.nonzero(inside & (values >= top - TIE))
+        rows, cols = np.nonzero(inside & (values >= top - SOURCE_FRACTION * tol))
         pixels = np.column_stack([rows + window[0].start, cols + window[1].start]).astype(np.int64)
         node = _Node(pixels=pixels, kind="max", part=int(parts[pixels[0, 0], pixels[0, 1]]),
                      top=top, size=int(inside.sum()), origin="detected", region=index)
@@ -860,7 +964,8 @@ def _parse_source(item, mask) -> tuple[int, int, str | None]:
             raise InputError(f"source {item!r} must have whole-number row and col")
     r, c = int(r), int(c)
     if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
-        raise InputError(f"source pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+        raise InputError(f"source pixel (row {r}, col {c}) is not on the object; "
+                         "pick a pixel inside the mask")
     kind = item[2] if length == 3 else None
     if kind is not None and kind not in KINDS:
         raise InputError(f"source kind must be one of {', '.join(KINDS)} or None, got {kind!r}")
@@ -869,15 +974,14 @@ def _parse_source(item, mask) -> tuple[int, int, str | None]:
 
 def _cover_parts(nodes, cos_seen, parts, n_parts, concave_x, concave_y) -> list[_Node]:
     """Give every connected part of the mask without a source its brightest pixel."""
-    covered = {node.part for node in nodes}
-    for part in range(1, n_parts + 1):
-        if part in covered:
-            continue
-        values = np.where(parts == part, cos_seen, -1.0)
-        r, c = np.unravel_index(np.argmax(values), values.shape)
+    bare = sorted(set(range(1, n_parts + 1)) - {node.part for node in nodes})
+    if not bare:
+        return nodes
+    for part, (r, c) in zip(bare, ndi.maximum_position(cos_seen, parts, bare)):
+        r, c = int(r), int(c)
         nodes.append(_Node(pixels=np.array([[r, c]], dtype=np.int64),
                            kind=_kind_at(r, c, concave_x, concave_y), part=part,
-                           top=float(values[r, c]), size=1, origin="brightest"))
+                           top=float(cos_seen[r, c]), size=1, origin="brightest"))
     return nodes
 
 
@@ -896,7 +1000,14 @@ def _main_sources(nodes, n_parts) -> dict[int, int]:
 
 
 def _place_heights(nodes, main_of_part, f, theta, mask, steep) -> None:
-    """Heights of all sources from their weighted distances (module docstring, step 2)."""
+    """Heights of all sources from their weighted distances (module docstring, step 2).
+
+    Every placed source ``a`` bounds a new one ``b``: ``|z_b - z_a| <= D_ab``. A maximum takes
+    the lowest upper bound, a minimum the highest lower bound; both are reached where a path of
+    steepest ascent (descent) joins ``b`` to a placed source, which is why sources linked to a
+    placed one of another kind go first. A saddle lies below the maximum or above the minimum
+    that links it; one that nothing links takes its nearest neighbour's height.
+    """
     for part, main in main_of_part.items():
         members = [i for i, node in enumerate(nodes) if node.part == part]
         nodes[main].height = 0.0
@@ -904,51 +1015,54 @@ def _place_heights(nodes, main_of_part, f, theta, mask, steep) -> None:
             continue
         distance = _pairwise_distances([nodes[i] for i in members], f, theta, mask, steep)
         local = {i: j for j, i in enumerate(members)}
+
+        def d(a: int, b: int) -> float:
+            return distance[local[a], local[b]]
+
         placed = [main]
         waiting = [i for i in members if i != main]
         while waiting:
-            linked = [(distance[local[a], local[b]], b, a) for b in waiting for a in placed
+            linked = [(d(a, b), b, a) for b in waiting for a in placed
                       if nodes[a].kind != nodes[b].kind]
-            if linked:
-                _, b, nearest = min(linked)
-            else:
-                _, b, nearest = min((distance[local[a], local[b]], b, a)
-                                    for b in waiting for a in placed)
-            lower = max(nodes[a].height - distance[local[a], local[b]] for a in placed)
-            upper = min(nodes[a].height + distance[local[a], local[b]] for a in placed)
+            _, b, nearest = min(linked or [(d(a, b), b, a) for b in waiting for a in placed])
+            lower = max(nodes[a].height - d(a, b) for a in placed)
+            upper = min(nodes[a].height + d(a, b) for a in placed)
             kind = nodes[b].kind
-            if not linked:
-                # nothing links it monotonically: add no shape
-                nodes[b].height = upper if kind == "min" else lower
-            elif kind == "max":
+            if kind == "max":
                 nodes[b].height = upper
             elif kind == "min":
                 nodes[b].height = lower
-            else:  # saddle: below a maximum, above a minimum
+            elif not linked:
+                nodes[b].height = nodes[nearest].height
+            else:
                 nodes[b].height = lower if nodes[nearest].kind == "max" else upper
             placed.append(b)
             waiting.remove(b)
 
 
 def _pairwise_distances(members, f, theta, mask, steep) -> np.ndarray:
-    """``D[a, b]``: weighted distance from node a's sources to the nearest source of node b,
-    symmetrised; each marching stops once it has reached every other node."""
+    """``D[a, b]``: weighted distance between the sources of nodes a and b (symmetric).
+
+    The marching from node a measures the nodes after it and stops once it has reached them all.
+    """
     n = len(members)
     goal = np.full(mask.shape, -1, dtype=np.int64)
     for j, node in enumerate(members):
         goal[node.pixels[:, 0], node.pixels[:, 1]] = j
     width = mask.shape[1]
     distance = np.zeros((n, n))
-    for a, node in enumerate(members):
+    for a, node in enumerate(members[:-1]):
+        goal[node.pixels[:, 0], node.pixels[:, 1]] = -1  # measured from now on
         index = node.pixels[:, 0] * width + node.pixels[:, 1]
-        own = goal[node.pixels[:, 0], node.pixels[:, 1]].copy()
-        goal[node.pixels[:, 0], node.pixels[:, 1]] = -1
-        _, _, reached = _run_march(f, theta, mask, steep, index, np.zeros(len(index)),
-                                   np.zeros(len(index), np.int64), goal=goal, n_goals=n)
-        goal[node.pixels[:, 0], node.pixels[:, 1]] = own
-        reached[a] = 0.0
-        distance[a] = reached
-    return 0.5 * (distance + distance.T)
+        need = len(np.unique(goal[goal > a]))
+        T, _, reached = _run_march(f, theta, mask, steep, index, np.zeros(len(index)),
+                                   np.zeros(len(index), np.int64), goal=goal, need=need)
+        for b in range(a + 1, n):
+            # a node whose pixels all belong to others (a repeated source) is read from T
+            pixels = members[b].pixels
+            first = reached[b] if b < len(reached) else np.inf
+            distance[a, b] = distance[b, a] = min(first, T[pixels[:, 0], pixels[:, 1]].min())
+    return distance
 
 
 def _surface(nodes, f, theta, mask, steep) -> np.ndarray:
