@@ -397,14 +397,6 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
         keep = np.ones_like(cut)
     b, root, v, run = normals[keep], np.sqrt(depth[keep]), values[keep], runs[keep]
     limb, limb_rms, limb_cov = _fit_ring(b, root, v, run, intercept=False, scale=scale)
-    # the normal turns toward the viewer as sqrt(2 d / rho): rho may be one radius of curvature,
-    # or follow the local half-width (round cross-sections); keep the better fit
-    width = _half_width(inside, rows[keep], cols[keep], b)
-    round_root = root * np.sqrt(np.median(width) / width)
-    fit2 = _fit_ring(b, round_root, v, run, intercept=False, scale=scale)
-    info["round_sections"] = bool(fit2[1] < limb_rms)
-    if fit2[1] < limb_rms:
-        limb, limb_rms, limb_cov = fit2
     rim, rim_rms, _ = _fit_ring(b, root, v, None, intercept=True, scale=scale)
     info.update(limb_fit=tuple(map(float, limb[:3])), limb_rms=limb_rms,
                 rim_fit=tuple(map(float, rim)), rim_rms=rim_rms)
@@ -652,19 +644,6 @@ def _paint(shape, rows, cols) -> np.ndarray:
     canvas = np.zeros(shape, dtype=bool)
     canvas[rows, cols] = True
     return canvas
-
-
-def _half_width(inside, rows, cols, normals) -> np.ndarray:
-    """Half-width of the silhouette at each boundary pixel: the largest distance to the outline
-    met on the way inward along ``-b`` (the medial axis)."""
-    from scipy import ndimage as ndi
-
-    reach = 2.0 * float(inside.max())
-    steps = np.arange(0.0, reach + 1.0, 1.0)
-    path_r = rows[:, None] + steps[None, :] * normals[:, 1][:, None]  # inward: -b; rows go down
-    path_c = cols[:, None] - steps[None, :] * normals[:, 0][:, None]
-    along = ndi.map_coordinates(inside, [path_r.ravel(), path_c.ravel()], order=1, cval=0.0)
-    return np.maximum(along.reshape(path_r.shape).max(axis=1), 1.0)
 
 
 def _boundary_runs(rows, cols, normals, values, shape, peak, noise):
