@@ -364,6 +364,17 @@ class TestReconstruct:
         assert report["timings"]["total"] > 0
         assert report["mesh"]["vertices"] == len(trimesh.load(out / "m.glb", force="mesh").vertices)
 
+    def test_estimated_light_and_eikonal(self, sphere, out):
+        for extra in (["--light", "estimate"], ["--method", "eikonal"]):
+            result = invoke("reconstruct", sphere["image"], "-o", out / "m.glb", "--mask", sphere["mask"],
+                            "--json", *extra)
+            assert result.exit_code == 0, result.output
+            info = json.loads(result.stdout)["info"]
+            if extra[0] == "--light":
+                assert info["light_estimate"]["slant"] < 3  # the sphere is lit from +z
+            else:
+                assert info["method"] == "eikonal" and info["sources"]
+
     @pytest.mark.parametrize("depth_name", ["depth.tiff", "depth.npy"])
     def test_depth_and_normals_are_readable_and_right(self, sphere, out, depth_name):
         result = invoke("reconstruct", sphere["image"], "-o", out / "m.obj", "--depth", out / depth_name,

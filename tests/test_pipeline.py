@@ -235,3 +235,21 @@ class TestSynthConcaveRegions:
             assert np.mean(zxx[inner_x] > 0) > 0.6
         if inner_y.any():
             assert np.mean(zyy[inner_y] > 0) > 0.6
+
+
+class TestEstimatedLight:
+    def test_light_and_albedo_are_estimated(self):
+        from shadeform.light import light_from_slant_tilt
+
+        truth = light_from_slant_tilt(30, 120)
+        scene = synth.scene("sphere", size=128, light=truth, albedo=0.8)
+        rec = reconstruct(scene.image, mask=scene.mask, light="estimate")
+        assert np.degrees(np.arccos(np.clip(rec.light @ truth, -1, 1))) < 3
+        assert rec.albedo == pytest.approx(0.8, rel=0.03)
+        assert rec.info["light_estimate"]["evidence"]
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 5
+
+    def test_only_estimate_is_a_valid_word(self):
+        scene = synth.scene("sphere", size=32)
+        with pytest.raises(InputError, match="estimate"):
+            reconstruct(scene.image, mask=scene.mask, light="guess")

@@ -30,6 +30,8 @@ _EXPORTS = {
     "export": "shadeform.io.exporters",
     "available_formats": "shadeform.io.exporters",
     "reconstruct": "shadeform.pipeline",
+    "estimate_light": "shadeform.light",
+    "LightEstimate": "shadeform.light",
     "Reconstruction": "shadeform.reconstruction",
     "to_mesh": "shadeform.mesh",
     "Mesh": "shadeform.mesh",

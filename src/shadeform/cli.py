@@ -184,13 +184,13 @@ class _Outputs:
             tmp.unlink(missing_ok=True)
 
 
-def _resolve_light(light: str | None, slant: float | None, tilt: float | None) -> np.ndarray:
+def _resolve_light(light: str | None, slant: float | None, tilt: float | None) -> np.ndarray | str:
     from shadeform.light import as_light, light_from_slant_tilt, parse_light
 
     if light is not None and (slant is not None or tilt is not None):
         raise InputError("give the light either as --light X,Y,Z or as --slant/--tilt, not both")
     if light is not None:
-        return parse_light(light)
+        return "estimate" if light.strip().lower() == "estimate" else parse_light(light)
     if tilt is not None and slant is None:
         raise InputError("--tilt needs --slant too (the angle of the light from the viewing direction)")
     if slant is not None:
@@ -302,7 +302,7 @@ def reconstruct(
     ] = None,
     light: Annotated[
         str | None,
-        typer.Option(metavar="X,Y,Z", help="Direction toward the light in the camera frame; 0,0,1 if not given."),
+        typer.Option(metavar="X,Y,Z", help="Direction toward the light in the camera frame, or \"estimate\" to estimate it from the image; 0,0,1 if not given."),
     ] = None,
     slant: Annotated[
         float | None, typer.Option(metavar="DEGREES", help="Light slant: angle from the viewing direction.")

@@ -3,7 +3,8 @@
 Frame and angles as in ``docs/conventions.md``: x right, y up, z toward the viewer; ``(0, 0, 1)``
 is a light behind the camera. Slant is the angle from +z, tilt the angle in the image plane from
 +x toward +y, so ``L = (sin s cos t, sin s sin t, cos s)``. The 2002 system fixed the light at
-+z; every solver here takes any light the camera can see lit surfaces under (z > 0).
++z; every solver here takes any light the camera can see lit surfaces under (z > 0), and
+:func:`estimate_light` reads it, with ``k * albedo``, from one image.
 """
 
 from __future__ import annotations
@@ -197,7 +198,7 @@ _RIM_GAIN = 0.6
 _RELIEF_FRACTION = 0.1
 # Above this standard error (degrees) the contour alone cannot fix the slant.
 _DEGENERATE_SLANT = 1.5
-# Half-width (pixels) of the window of the quadratic fits at the brightest and the topmost points.
+# Radius (pixels) of the quadratic fit at the brightest point: at most twice this.
 _PEAK_RADIUS = 8
 _MIN_BOUNDARY_PIXELS = 20
 _FIT_ITERATIONS = 30
@@ -218,11 +219,12 @@ class LightEstimate:
     slant : float
         Degrees from the viewing direction +z, in ``[0, 90)``.
     tilt : float
-        Degrees in the image plane from +x toward +y (up), in ``(-180, 180]``; 0 when the slant is 0.
-    method : {"limb", "limb-peak", "rim", "relief", "round"}
-        Which evidence fixed the light: the occluding contour and the top of the object; the top
-        and the brightest point (the contour could not fix the slant); a tilted rim and the top;
-        a relief on a base facing the camera; rings inside a round object.
+        Degrees in the image plane from +x toward +y (up), in ``(-180, 180]``; 0 when the slant
+        is 0.
+    evidence : {"limb", "limb-peak", "rim", "relief", "round"}
+        What fixed the light: the occluding contour and the top of the object; the top and the
+        brightest point (the contour could not fix the slant); a tilted rim and the top; a relief
+        on a base facing the camera; rings inside a round object.
     info : dict
         Measured quantities behind the estimate (levels, fitted coefficients, pixel counts).
     """
@@ -231,7 +233,7 @@ class LightEstimate:
     albedo: float
     slant: float
     tilt: float
-    method: str
+    evidence: str
     info: dict = field(default_factory=dict)
 
 
@@ -239,7 +241,9 @@ class LightEstimate:
 ESTIMATION_METHODS = ("contour", "round")
 
 
-def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = True) -> LightEstimate:
+def estimate_light(
+    image, mask=None, *, method: str = "contour", convex: bool = True
+) -> LightEstimate:
     """Estimate the direction and brightness of a distant light from one shading image.
 
     Lambertian surface of uniform albedo, one distant light, orthographic camera, attached shadows
@@ -260,7 +264,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     2. **The top of the object.** The point deepest inside the silhouette is taken to face the
        viewer, so its intensity (a robust quadratic fit around it) is ``k L_z``. Then
        ``L ~ (A, k L_z)`` and ``k = |(A, k L_z)|``.
-    3. **The brightest point** (``method`` ``"limb-peak"`` in the result). When the contour
+    3. **The brightest point** (``evidence="limb-peak"`` in the result). When the contour
        cannot fix ``A`` (only straight sides lit, as on a cylinder), the brightest point is taken
        to face the light: ``k = I_max``, ``cos(slant) = k L_z / I_max``, and the tilt is the lit
        contour's mean normal.
@@ -299,8 +303,8 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     Returns
     -------
     LightEstimate
-        ``light`` (3,), ``albedo``, ``slant`` and ``tilt`` in degrees, the evidence that fixed
-        it (``method``) and measured ``info``.
+        ``light`` (3,), ``albedo``, ``slant`` and ``tilt`` in degrees, the ``evidence`` that
+        fixed it and measured ``info``.
 
     Raises
     ------
@@ -340,7 +344,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     >>> from shadeform import synth
     >>> scene = synth.scene("sphere", size=128, light=light_from_slant_tilt(30, 45))
     >>> est = estimate_light(scene.image, scene.mask)
-    >>> bool(abs(est.slant - 30) < 3 and abs(est.tilt - 45) < 5), est.method
+    >>> bool(abs(est.slant - 30) < 3 and abs(est.tilt - 45) < 5), est.evidence
     (True, 'limb')
     """
     image, mask = _estimation_input(image, mask)
@@ -355,8 +359,10 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
 
     inside = ndi.distance_transform_edt(mask)
     noise = _noise_level(image, mask, inside)
-    peak = _peak_level(image, mask, inside, noise)
-    top = _top_level(image, mask, inside)
+    brightest = float(image[mask].max())
+    peak = max(_peak_level(image, mask, inside, noise), 1e-3 * brightest)
+    # a top in shadow would put the light behind the object's horizon
+    top = max(_top_level(image, mask, inside), 1e-3 * peak)
     rows, cols, normals, depth = _boundary(mask)
     values = image[rows, cols]
     scale = max(3.0 * noise, 0.02 * peak)
@@ -394,7 +400,8 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
         keep &= near[rows, cols] > 3.0 * _MASK_SIGMA
     info.update(cut_pixels=int(cut.sum()), straight_runs=int(runs.max() + 1))
     if keep.sum() < _MIN_BOUNDARY_PIXELS:
-        keep = np.ones_like(cut)
+        lit = values > scale
+        return _from_peak(normals[lit], values[lit], top, peak, convex, info)
     b, root, v, run = normals[keep], np.sqrt(depth[keep]), values[keep], runs[keep]
     limb, limb_rms, limb_cov = _fit_ring(b, root, v, run, intercept=False, scale=scale)
     rim, rim_rms, _ = _fit_ring(b, root, v, None, intercept=True, scale=scale)
@@ -488,7 +495,7 @@ def _estimation_input(image, mask):
     return array, mask
 
 
-def _result(slant, tilt, albedo, method, convex, info) -> LightEstimate:
+def _result(slant, tilt, albedo, evidence, convex, info) -> LightEstimate:
     slant = min(slant, _MAX_SLANT)  # a light at the horizon or beyond lights nothing we see
     if slant < 1e-9:
         slant, tilt = 0.0, 0.0
@@ -498,7 +505,7 @@ def _result(slant, tilt, albedo, method, convex, info) -> LightEstimate:
     light = light_from_slant_tilt(slant, tilt)
     light.flags.writeable = False
     return LightEstimate(light=light, albedo=float(albedo), slant=float(slant), tilt=float(tilt),
-                         method=method, info=info)
+                         evidence=evidence, info=info)
 
 
 def _from_components(across, along_view) -> tuple[float, float, float]:
@@ -510,7 +517,8 @@ def _from_components(across, along_view) -> tuple[float, float, float]:
 
 
 def _slant_error(across, along_view, covariance) -> float:
-    """Standard error (degrees) of ``atan2(|across|, along_view)`` from the covariance of ``across``."""
+    """Standard error (degrees) of ``atan2(|across|, along_view)``, given the covariance of
+    ``across``; ``inf`` when the data leave ``across`` unconstrained."""
     if not np.isfinite(covariance).all():
         return math.inf
     size = math.hypot(float(across[0]), float(across[1]))
@@ -563,11 +571,11 @@ def _window(mask, centre, radius):
 
 
 def _peak_level(image, mask, inside, noise) -> float:
-    """Brightest level of the object: a quadratic fitted over the top of the brightest blob.
+    """Brightest level of the object: the peak of a quadratic fitted around the brightest point.
 
-    The blob is the connected part around the maximum of the smoothed image that lies within a
-    few noise levels (at least 1%) of that maximum. The maximum of a noisy image is biased upward;
-    the fitted quadratic's peak is not.
+    The fit covers a disk around the maximum of the smoothed image, sized from the blob that lies
+    within a few noise levels (at least 1%) of that maximum. The maximum of a noisy image is
+    biased upward; the fitted quadratic's peak is not.
     """
     from scipy import ndimage as ndi
 
@@ -619,15 +627,19 @@ def _top_level(image, mask, inside) -> float:
 
 
 def _boundary(mask):
-    """Outermost object pixels off the image frame: rows, cols, outward normals (n, 2) in (x, y),
-    and their distances (pixels, >= 0) inside the silhouette, from the smoothed mask."""
+    """Outermost object pixels away from the image frame: rows, cols, outward normals (n, 2) in
+    (x, y), and their distances (pixels, >= 0) inside the silhouette, from the smoothed mask."""
     from scipy import ndimage as ndi
 
     smooth = ndi.gaussian_filter(mask.astype(np.float64), _MASK_SIGMA, mode="constant")
     grad_r, grad_c = np.gradient(smooth)
     ring = mask & ~ndi.binary_erosion(mask, border_value=1)
-    ring[0, :] = ring[-1, :] = False
-    ring[:, 0] = ring[:, -1] = False
+    on_frame = np.zeros_like(mask)
+    on_frame[[0, -1], :] = mask[[0, -1], :]
+    on_frame[:, [0, -1]] = mask[:, [0, -1]]
+    if on_frame.any():
+        # the frame cuts the object there: no silhouette, and the smoothed mask's normal is off
+        ring &= ndi.distance_transform_edt(~on_frame) > 3.0 * _MASK_SIGMA
     rows, cols = np.nonzero(ring)
     # outward is down the smoothed mask; x = col, y = -row
     normals = np.column_stack([-grad_c[rows, cols], grad_r[rows, cols]])

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from shadeform.errors import InputError
-from shadeform.light import as_light
+from shadeform.light import as_light, estimate_light
 from shadeform.preprocess import apply_filter, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
@@ -35,7 +35,7 @@ SATURATED_FRACTION = 0.9
 def reconstruct(
     image: np.ndarray,
     *,
-    light: Sequence[float] = (0.0, 0.0, 1.0),
+    light: Sequence[float] | str = (0.0, 0.0, 1.0),
     method: str = "propagation",
     mask: np.ndarray | None = None,
     filter: str | None = None,
@@ -55,8 +55,10 @@ def reconstruct(
     image : (H, W) float array
         One channel, values >= 0 (e.g. from :func:`shadeform.load_image`); integer arrays are
         scaled by their type's maximum.
-    light : (3,) float
-        Direction toward the light in the camera frame (``docs/conventions.md``).
+    light : (3,) float or "estimate"
+        Direction toward the light in the camera frame (``docs/conventions.md``), or
+        ``"estimate"`` to estimate it and ``k * albedo`` from the image
+        (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
     method : {"propagation", "eikonal"}
         Solver: the 2002 convexity-guided propagation (any light), or fast marching of the
         eikonal equation from the singular points (light at +z only; concave regions and
@@ -111,7 +113,10 @@ def reconstruct(
         clock = now
 
     image = _check_image(image)
-    light = as_light(light)
+    estimate_wanted = isinstance(light, str)
+    if estimate_wanted and light != "estimate":
+        raise InputError(f"light must be a direction (x, y, z) or 'estimate', got {light!r}")
+    light = None if estimate_wanted else as_light(light)
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
     if integrator is not None and integrator not in INTEGRATORS:
@@ -124,10 +129,18 @@ def reconstruct(
     lap("mask")
     shading = apply_filter(image, mask, parse_filter(filter)) if filter else image
     lap("filter")
+    light_info = {}
+    if estimate_wanted:
+        estimate = estimate_light(shading, mask)
+        light = np.asarray(estimate.light, dtype=np.float64)
+        light_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
+                                         "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
+        lap("light")
     concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
     refs = _references(references, shading, mask, labels, n_parts)
-    k = _brightness_scale(shading, mask, refs[0], light)
+    k = _brightness_scale(shading, mask, refs[0], light,
+                          estimated=float(estimate.albedo) if estimate_wanted else None)
     cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
     lap("references")
 
@@ -150,6 +163,7 @@ def reconstruct(
         "k": float(k),
         "timings": timings,
         **method_info,
+        **light_info,
     }
     return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
 
@@ -307,8 +321,9 @@ def _references(references, image, mask, labels, n_parts):
     return refs
 
 
-def _brightness_scale(image, mask, main_ref, light) -> float:
-    """``k * albedo``: from the main reference when its normal is given, else the brightest pixel."""
+def _brightness_scale(image, mask, main_ref, light, *, estimated=None) -> float:
+    """``k * albedo``: from the main reference when its normal is given, else the light
+    estimate's, else the brightest pixel (the 2002 rule: it faces the light)."""
     (r, c), normal = main_ref
     if normal is not None:
         facing = float(normal @ light)
@@ -316,4 +331,6 @@ def _brightness_scale(image, mask, main_ref, light) -> float:
             raise InputError(f"reference (row {r}, col {c}) is in shadow or its normal faces away from the light; "
                              "pick a lit reference")
         return float(image[r, c] / facing)
+    if estimated is not None:
+        return estimated
     return float(image[mask].max())
