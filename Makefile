@@ -29,6 +29,10 @@ test: $(STAMP) $(JSSTAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_pipeline.py
+	$(PY) benchmarks/bench_poisson.py > benchmarks/results/poisson.txt && cat benchmarks/results/poisson.txt
+	$(PY) benchmarks/bench_eikonal.py
+	$(PY) benchmarks/bench_light.py
+	$(PY) benchmarks/bench_diligent.py
 
 clean:
 	rm -rf $(VENV) $(JS)/node_modules out

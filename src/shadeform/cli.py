@@ -596,7 +596,7 @@ def demo(
 ) -> None:
     """Reconstruct a shipped example photo: writes meshes, the normal map and result.png."""
     import shadeform
-    from shadeform.examples import EXAMPLES, load_example
+    from shadeform.examples import load_example
     from shadeform.io.maps import save_normal_map
     from shadeform.render import result_picture
 

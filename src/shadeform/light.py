@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from shadeform._checks import is_number, shading_image
 from shadeform.errors import InputError
 
 __all__ = [
@@ -100,7 +101,7 @@ def light_from_slant_tilt(slant: float, tilt: float) -> np.ndarray:
     array([0.    , 0.7071, 0.7071])
     """
     for name, value in (("slant", slant), ("tilt", tilt)):
-        if not _is_number(value) or not math.isfinite(value):
+        if not is_number(value) or not math.isfinite(value):
             raise InputError(f"{name} must be a finite number of degrees, got {value!r}")
     if not 0 <= slant < 90:
         raise InputError(
@@ -168,9 +169,6 @@ def parse_light(text: str) -> np.ndarray:
         raise InputError(f"bad light {text!r}: not all numbers; {usage}") from None
     return as_light(values)
 
-
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
 # --- the light from one image --------------------------------------------------------------------
@@ -451,23 +449,7 @@ def _from_peak(normals, values, top, peak, convex, info) -> LightEstimate:
 
 def _estimation_input(image, mask):
     """Validated ``(image float64 (H, W), mask bool (H, W))``."""
-    array = np.asarray(image)
-    if array.ndim == 3 and array.shape[2] == 1:
-        array = array[..., 0]
-    if array.ndim != 2:
-        raise InputError(
-            f"image must be one channel (H, W), got shape {array.shape}; pick a channel with "
-            "shadeform.load_image(path, channel='luma')"
-        )
-    if np.issubdtype(array.dtype, np.integer):
-        array = array / np.iinfo(array.dtype).max
-    elif array.dtype == bool or not np.issubdtype(array.dtype, np.floating):
-        raise InputError(f"image must hold numbers, got dtype {array.dtype}")
-    array = array.astype(np.float64)
-    if not np.isfinite(array).all():
-        raise InputError("image contains NaN or infinite values; replace them (e.g. by 0)")
-    if array.min() < 0:
-        raise InputError("image has negative values; intensities must be >= 0")
+    array = shading_image(np.asarray(image))
     if mask is None:
         from shadeform.preprocess import object_mask
 

@@ -6,7 +6,6 @@ checks the user's input once, at the boundary, and wires the stages together.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -14,6 +13,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage as ndi
 
+from shadeform._checks import StageTimer, shading_image
 from shadeform.errors import InputError
 from shadeform.light import as_light, estimate_light
 from shadeform.preprocess import apply_filter, object_mask, parse_filter
@@ -103,15 +103,8 @@ def reconstruct(
     >>> bool(metrics.angular_error(rec.normals, scene.normals) < 3)
     True
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = timings.get(stage, 0.0) + now - clock
-        clock = now
-
+    timer = StageTimer()
+    lap = timer.lap
     image = _check_image(image)
     estimate_wanted = isinstance(light, str)
     if estimate_wanted and light != "estimate":
@@ -161,7 +154,7 @@ def reconstruct(
         "references": [(int(r), int(c)) for (r, c), _ in refs],
         "parts": int(n_parts),
         "k": float(k),
-        "timings": timings,
+        "timings": timer.timings,
         **method_info,
         **light_info,
     }
@@ -229,27 +222,10 @@ def _integrate(normals, mask, origin, integrator):
 
 
 def _check_image(image) -> np.ndarray:
-    if not isinstance(image, np.ndarray):
-        raise InputError(f"image must be a numpy array, got {type(image).__name__}; load it with shadeform.load_image")
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[..., 0]
-    if image.ndim != 2:
-        raise InputError(
-            f"image must be one channel (H, W), got shape {image.shape}; "
-            "pick a channel with shadeform.load_image(path, channel='luma')"
-        )
+    image = shading_image(image)
     if min(image.shape) < MIN_SIDE:
         raise InputError(f"image is {image.shape[1]}x{image.shape[0]} pixels; it needs at least "
                          f"{MIN_SIDE}x{MIN_SIDE}")
-    if np.issubdtype(image.dtype, np.integer):
-        image = image / np.iinfo(image.dtype).max
-    elif image.dtype == bool or not np.issubdtype(image.dtype, np.floating):
-        raise InputError(f"image must hold numbers, got dtype {image.dtype}")
-    image = image.astype(np.float64)
-    if not np.isfinite(image).all():
-        raise InputError("image contains NaN or infinite values; replace them (e.g. by 0) or mask them out")
-    if image.min() < 0:
-        raise InputError("image has negative values; intensities must be >= 0")
     return image
 
 

@@ -15,6 +15,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 
+from shadeform._checks import is_number
 from shadeform.errors import InputError
 
 __all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter"]
@@ -81,7 +82,7 @@ def object_mask(
     if threshold is None:
         mask = _hysteresis_mask(image)
     else:
-        if not _is_number(threshold) or not math.isfinite(threshold):
+        if not is_number(threshold) or not math.isfinite(threshold):
             raise InputError(f"threshold must be a finite number, got {threshold!r}")
         mask = image > threshold
         if not mask.any():
@@ -151,7 +152,7 @@ class Filter:
                 f"unknown filter kind {self.kind!r}; choose one of {', '.join(FILTER_KINDS)}"
             )
         size = self.size
-        if not _is_number(size):
+        if not is_number(size):
             raise InputError(f"filter size must be a number, got {size!r}")
         if not math.isfinite(size) or size < 0:
             raise InputError(f"filter size must be finite and >= 0, got {size!r}")
@@ -303,7 +304,3 @@ def _as_image(image: np.ndarray) -> np.ndarray:
     if image.size == 0 or not np.isfinite(image).all():
         raise InputError("image is empty or has NaN or infinite values; give a finite image")
     return image
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)

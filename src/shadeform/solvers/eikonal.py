@@ -86,7 +86,6 @@ from __future__ import annotations
 
 import heapq
 import numbers
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -95,6 +94,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from skimage.morphology import local_maxima, reconstruction
 
+from shadeform._checks import StageTimer
 from shadeform.errors import InputError
 
 __all__ = [
@@ -699,14 +699,8 @@ def eikonal_depth(
     >>> bool(metrics.depth_error(res.depth, s.depth, s.mask) < 0.5)
     True
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = timings.get(stage, 0.0) + now - clock
-        clock = now
+    timer = StageTimer()
+    lap = timer.lap
 
     image, mask = _check_image_mask(image, mask)
     concave_x, concave_y = _check_concave(concave, mask.shape)
@@ -757,7 +751,7 @@ def eikonal_depth(
     main = 0 if nodes[0].origin == "user" else main_of_part[1]
     points = tuple(_as_point(node) for node in [nodes[main], *nodes[:main], *nodes[main + 1:]])
     info = {"parts": int(n_parts), "detected": int(found), "tol": tol, "steep": steep,
-            "smooth": smooth, "timings": timings}
+            "smooth": smooth, "timings": timer.timings}
     return EikonalResult(depth=depth, normals=normals, sources=points, k=float(k), info=info)
 
 
