@@ -21,7 +21,7 @@ import numpy as np
 
 import shadeform
 from shadeform import synth
-from shadeform.integrate.paths import integrate_paths
+from shadeform.integration.paths import integrate_paths
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
 
 

@@ -26,7 +26,7 @@ import tracemalloc
 import numba
 import numpy as np
 
-from shadeform.integrate.poisson import poisson_integrator, poisson_integrator_reference
+from shadeform.integration.poisson import poisson_integrator, poisson_integrator_reference
 
 
 def sphere_case(n: int, full: bool, weights: str):
@@ -51,8 +51,8 @@ def pyamg_integrator(mask, *, weights=None, tol=1e-8):
     import pyamg
     import scipy.sparse as sp
 
-    from shadeform.integrate._slopes import slopes
-    from shadeform.integrate.poisson import _difference_system, _steps
+    from shadeform.integration._slopes import slopes
+    from shadeform.integration.poisson import _difference_system, _steps
 
     w = np.ones(mask.shape) if weights is None else weights
     pairs, D, wts = _difference_system(mask, w)

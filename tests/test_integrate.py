@@ -5,9 +5,9 @@ import pytest
 
 from shadeform import synth
 from shadeform.errors import InputError
-from shadeform.integrate import integrate
-from shadeform.integrate.paths import integrate_paths, integrate_paths_reference
-from shadeform.integrate.poisson import integrate_poisson
+from shadeform.integration import integrate
+from shadeform.integration.paths import integrate_paths, integrate_paths_reference
+from shadeform.integration.poisson import integrate_poisson
 
 
 def normals_of(zx, zy):
@@ -107,3 +107,22 @@ class TestIntegrate:
         bad[16, 16] = np.nan
         with pytest.raises(InputError, match="NaN"):
             integrate(bad, scene.mask)
+
+
+class TestPublicIntegrate:
+    def test_top_level_name_and_every_method(self):
+        import shadeform
+
+        scene = synth.scene("sphere", size=48)
+        inner = scene.mask & (scene.normals[..., 2] > 0.3)
+        for method in ("paths", "poisson", "bilateral"):
+            z = shadeform.integrate(scene.normals, inner, method=method, origin=(24, 24))
+            assert z[24, 24] == pytest.approx(0, abs=1e-9)
+            truth = scene.depth - scene.depth[24, 24]
+            assert np.nanmax(np.abs(z - truth)[inner]) < 0.05 * np.ptp(truth[inner]), method
+
+    def test_perspective_needs_bilateral(self):
+        scene = synth.scene("sphere", size=32)
+        K = np.array([[100.0, 0, 16], [0, 100.0, 16], [0, 0, 1]])
+        with pytest.raises(InputError, match="bilateral"):
+            integrate(scene.normals, scene.mask, method="poisson", K=K)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from shadeform.errors import InputError
-from shadeform.integrate import _multigrid
-from shadeform.integrate.poisson import (
+from shadeform.integration import _multigrid
+from shadeform.integration.poisson import (
     integrate_poisson,
     poisson_integrator,
     poisson_integrator_reference,
@@ -142,7 +142,7 @@ class TestAgainstReference:
             assert abs(fast[inside].mean()) < 1e-9 * np.ptp(fast[inside])
 
     def test_normals_with_nan_outside_and_steep_inside(self):
-        # slopes are taken as in shadeform.integrate._slopes.slopes: NaN outside the mask, n_z
+        # slopes are taken as in shadeform.integration._slopes.slopes: NaN outside the mask, n_z
         # clipped to MIN_NZ, NaN components inside read as 0 (x, y) and 1 (z)
         mask = annulus(64)
         normals = bumpy_normals(mask.shape, seed=6)

@@ -36,8 +36,9 @@ _EXPORTS = {
     "to_mesh": "shadeform.mesh",
     "Mesh": "shadeform.mesh",
     "parse_regions": "shadeform.regions",
+    "integrate": "shadeform.integration",
 }
-_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integrate", "io", "mesh", "render", "examples"}
+_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integration", "io", "mesh", "render", "examples"}
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 

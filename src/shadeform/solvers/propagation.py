@@ -324,7 +324,7 @@ def refine_by_integrability(normals: np.ndarray, cos_theta: np.ndarray, mask: np
     -------
     (H, W, 3) float64, NaN outside the mask.
     """
-    from shadeform.integrate.poisson import poisson_integrator
+    from shadeform.integration.poisson import poisson_integrator
 
     mask = mask & np.isfinite(normals[..., 0])
     field = np.where(mask[..., None], normals, np.nan)

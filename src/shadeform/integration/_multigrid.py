@@ -512,7 +512,7 @@ def _finite(v, nan):
 @numba.njit(cache=True, parallel=True)
 def _slopes_rb(normals, mask, r0, c0, min_nz, zx, zy):
     """Slopes ``dz/dx = -n_x / n_z``, ``dz/dy = -n_y / n_z`` as in
-    :func:`shadeform.integrate._slopes.slopes` (NaN read as 0, ``n_z`` NaN as 1, ``n_z`` at least
+    :func:`shadeform.integration._slopes.slopes` (NaN read as 0, ``n_z`` NaN as 1, ``n_z`` at least
     ``min_nz``) of pixel ``(r0 + i - 1, c0 + j - 1)`` at cell ``(i, j)``; 0 off the mask."""
     h, w = mask.shape
     m = zx.shape[2]
@@ -852,7 +852,7 @@ class Hierarchy:
 
         ``normals`` (float64, C order) and ``out`` are whole images; the mask's pixel ``(r, c)``
         is their pixel ``(r0 + r, c0 + c)``. The slopes are those of
-        :func:`shadeform.integrate._slopes.slopes` with ``MIN_NZ = min_nz``. Writes ``out`` on the
+        :func:`shadeform.integration._slopes.slopes` with ``MIN_NZ = min_nz``. Writes ``out`` on the
         mask's pixels only. Returns the number of CG iterations and the final relative residual.
         """
         x, r, p, q = self._workspace()
@@ -867,7 +867,7 @@ class Hierarchy:
 
 # ---------------------------------------------------------------------------------------------
 # Explicit pair weights (each 4-neighbour pair its own weight), a given right-hand side, and a
-# warm start: for iteratively reweighted least squares (shadeform.integrate.bilateral)
+# warm start: for iteratively reweighted least squares (shadeform.integration.bilateral)
 # ---------------------------------------------------------------------------------------------
 
 @numba.njit(cache=True, parallel=True, fastmath=_FAST)

@@ -15,7 +15,7 @@ from collections import deque
 import numba
 import numpy as np
 
-from shadeform.integrate._slopes import slopes
+from shadeform.integration._slopes import slopes
 
 _OFFSETS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
 

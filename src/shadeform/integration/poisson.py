@@ -5,7 +5,7 @@ trapezoid-rule steps of the given slopes, in the least-squares sense, with optio
 confidence weights (Horn & Brooks 1986; the masked formulation of e.g. Queau, Durou & Aujol 2018).
 The normal equations are a weighted graph Laplacian over the mask, ``D^T W D z = D^T W s``, with one
 free offset per connected part. They are solved by conjugate gradients preconditioned with a
-geometric multigrid V-cycle on the mask's bounding box (:mod:`shadeform.integrate._multigrid`),
+geometric multigrid V-cycle on the mask's bounding box (:mod:`shadeform.integration._multigrid`),
 compiled with numba; :func:`poisson_integrator_reference` solves the same system with a sparse
 direct factorisation and is the slow, obviously correct check.
 
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from shadeform.errors import InputError
-from shadeform.integrate._multigrid import Hierarchy, weight_range
-from shadeform.integrate._slopes import MIN_NZ, slopes
+from shadeform.integration._multigrid import Hierarchy, weight_range
+from shadeform.integration._slopes import MIN_NZ, slopes
 
 #: Conjugate-gradient iterations at most (the multigrid preconditioner needs about 10).
 MAX_ITERATIONS = 500
