@@ -805,6 +805,13 @@ class Hierarchy:
         _pixel_weights(mask, weights, scale, self.wpix)
         self.labels = np.empty((h, w), np.int32)
         self.n_parts = _label_parts(mask, weights, self.labels)
+        self._build_levels(lambda wx, wy: _fine_pairs(mask, weights, scale, wx, wy), _pseudo_inverse)
+        self._work = None
+
+    def _build_levels(self, fill_fine_pairs, coarse_inverse) -> None:
+        """Multigrid levels from the finest pair weights (``fill_fine_pairs(wx, wy)`` writes them)
+        and ``coarse_inverse`` for the dense solve on the coarsest grid."""
+        h, w = self.mask.shape
         # multigrid levels: natural layout (float32) first
         dims = [(h, w, *self.shape)]
         while dims[-1][2] * dims[-1][3] > _COARSEST and max(dims[-1][:2]) > 1:
@@ -813,7 +820,7 @@ class Hierarchy:
         self.dims = np.array(dims, dtype=np.int64)
         wx = [np.zeros(d[2:], np.float32) for d in dims]
         wy = [np.zeros(d[2:], np.float32) for d in dims]
-        _fine_pairs(mask, weights, scale, wx[0], wy[0])
+        fill_fine_pairs(wx[0], wy[0])
         for lev in range(1, len(dims)):
             _coarsen(wx[lev - 1], wy[lev - 1], wx[lev], wy[lev], dims[lev][0], dims[lev][1],
                      _COARSE_SCALE)
@@ -833,11 +840,10 @@ class Hierarchy:
                 _split(nat, _level(buf, self.offsets, self.dims, lev))
         # coarsest grid: dense pseudo-inverse over its active cells
         cells = np.flatnonzero(inv).astype(np.int64)
-        self.coarse_pinv = _pseudo_inverse(_coarsest_matrix(wx[-1], wy[-1], cells))
+        self.coarse_pinv = coarse_inverse(_coarsest_matrix(wx[-1], wy[-1], cells))
         i, j = np.divmod(cells, dims[-1][3])
         self.coarse_cells = ((((i + j) % 2) * dims[-1][2] + i) * (dims[-1][3] // 2)
                              + j // 2).astype(np.int64)
-        self._work = None
 
     def _workspace(self) -> list[np.ndarray]:
         """Four float64 red-black arrays, made on first use and kept for the next solves (fresh
@@ -1044,35 +1050,8 @@ class PairHierarchy(Hierarchy):
         self.wpix = np.zeros(rb_shape)
         self.labels = np.empty((h, w), np.int32)
         self.n_parts = _label_parts(mask, mask.astype(np.float64), self.labels)
-        dims = [(h, w, *self.shape)]
-        while dims[-1][2] * dims[-1][3] > _COARSEST and max(dims[-1][:2]) > 1:
-            hc, wc = (dims[-1][0] + 1) // 2, (dims[-1][1] + 1) // 2
-            dims.append((hc, wc, *_padded(hc, wc)))
-        self.dims = np.array(dims, dtype=np.int64)
-        wx = [np.zeros(d[2:], np.float32) for d in dims]
-        wy = [np.zeros(d[2:], np.float32) for d in dims]
-        _fine_pairs_explicit(px, py, scale, wx[0], wy[0])
-        for lev in range(1, len(dims)):
-            _coarsen(wx[lev - 1], wy[lev - 1], wx[lev], wy[lev], dims[lev][0], dims[lev][1],
-                     _COARSE_SCALE)
-        sizes = self.dims[:, 2] * self.dims[:, 3]
-        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        total = int(self.offsets[-1])
-        self.mg_wx = np.empty(total, np.float32)
-        self.mg_wy = np.empty(total, np.float32)
-        self.mg_inv = np.empty(total, np.float32)
-        self.z_work = np.zeros(total, np.float32)
-        self.b_work = np.zeros(total, np.float32)
-        for lev, d in enumerate(dims):
-            inv = np.zeros(d[2:], np.float32)
-            _inverse_diagonal(wx[lev], wy[lev], inv)
-            for nat, buf in ((wx[lev], self.mg_wx), (wy[lev], self.mg_wy), (inv, self.mg_inv)):
-                _split(nat, _level(buf, self.offsets, self.dims, lev))
-        cells = np.flatnonzero(inv).astype(np.int64)
-        self.coarse_pinv = _graph_pseudo_inverse(_coarsest_matrix(wx[-1], wy[-1], cells))
-        i, j = np.divmod(cells, dims[-1][3])
-        self.coarse_cells = ((((i + j) % 2) * dims[-1][2] + i) * (dims[-1][3] // 2)
-                             + j // 2).astype(np.int64)
+        self._build_levels(lambda wx, wy: _fine_pairs_explicit(px, py, scale, wx, wy),
+                           _graph_pseudo_inverse)
         self._work = None
         self.px = np.empty(rb_shape)
         self.py = np.empty(rb_shape)
