@@ -605,7 +605,7 @@ def demo(
     total = time.perf_counter()
     image, info = load_example(example, size=size)
     mesh_step = info["step"] if step is None else step
-    with _step(err, f"reconstructing the example '{escape(example)}'", timings, "reconstruct"):
+    with _step(err, f"reconstructing the example '{escape(example)}' (the very first run also compiles the numba kernels: about a minute)", timings, "reconstruct"):
         rec = shadeform.reconstruct(image, light=info["light"], mask=info["mask"], filter=info["filter"])
     with _step(err, "building the mesh", timings, "mesh"):
         mesh = shadeform.to_mesh(rec, step=mesh_step)
