@@ -126,3 +126,26 @@ class TestPublicIntegrate:
         K = np.array([[100.0, 0, 16], [0, 100.0, 16], [0, 0, 1]])
         with pytest.raises(InputError, match="bilateral"):
             integrate(scene.normals, scene.mask, method="poisson", K=K)
+
+
+class TestIntegrateFourier:
+    def test_equals_least_squares_on_a_full_rectangle(self):
+        from shadeform.integration.fourier import integrate_fourier
+
+        rng = np.random.default_rng(4)
+        mask = np.ones((37, 52), bool)
+        # a non-integrable field: the two least-squares solutions must still agree
+        n = normals_of(rng.normal(0, 0.5, mask.shape), rng.normal(0, 0.5, mask.shape))
+        a = integrate_fourier(n, mask)
+        b = integrate_poisson(n, mask)
+        np.testing.assert_allclose(a - a.mean(), b - b.mean(), atol=1e-6)
+
+    def test_paraboloid_on_a_box_inside_the_image(self):
+        mask = np.zeros((40, 50), bool)
+        mask[5:30, 8:45] = True
+        x, y = pixel_xy(mask.shape)
+        truth = 0.01 * x**2 - 0.02 * y**2 + 0.003 * x * y
+        zx, zy = 0.02 * x + 0.003 * y, -0.04 * y + 0.003 * x
+        z = integrate(normals_of(zx, zy), mask, method="fourier", origin=(10, 10))
+        np.testing.assert_allclose(z[mask], (truth - truth[10, 10])[mask], atol=1e-8)
+        assert np.isnan(z[~mask]).all()

@@ -22,7 +22,7 @@ from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
 
 METHODS = ("propagation", "eikonal")
-INTEGRATORS = ("paths", "poisson", "bilateral")
+INTEGRATORS = ("paths", "poisson", "fourier", "bilateral")
 #: What turns each method's normals into depth when ``integrator`` is not given.
 DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)"}
 
@@ -75,9 +75,9 @@ def reconstruct(
     concave : regions, optional
         Concave regions: a dict or JSON string in the format of ``docs/conventions.md``, a path to
         such a file, or a sequence of :class:`shadeform.regions.Region`.
-    integrator : {"paths", "poisson", "bilateral"}, optional
-        Depth from normals: the report's path averaging, masked least squares, or
-        discontinuity-preserving (:func:`shadeform.integration.integrate`). By default
+    integrator : {"paths", "poisson", "fourier", "bilateral"}, optional
+        Depth from normals: the report's path averaging, masked least squares, its DCT solve on
+        the bounding rectangle, or discontinuity-preserving (:func:`shadeform.integration.integrate`). By default
         "paths" for propagation, and the eikonal solver's own depth for "eikonal".
     refine : int
         Iterations of the integrability refinement of the propagated field

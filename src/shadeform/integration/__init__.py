@@ -8,6 +8,10 @@ paths
 poisson
     Masked least squares, solved by multigrid-preconditioned conjugate gradients
     (:mod:`shadeform.integration.poisson`).
+fourier
+    The discrete Poisson equation on the mask's bounding rectangle, one DCT solve
+    (Frankot & Chellappa 1988; :mod:`shadeform.integration.fourier`): the fastest, exact on full
+    rectangles, approximate near the silhouette of other masks.
 bilateral
     Discontinuity-preserving integration in the spirit of BiNI (Cao et al., ECCV 2022):
     one-sided differences reweighted by how well each side agrees; orthographic or perspective
@@ -20,7 +24,7 @@ import numpy as np
 
 from shadeform.errors import InputError
 
-METHODS = ("paths", "poisson", "bilateral")
+METHODS = ("paths", "poisson", "fourier", "bilateral")
 
 
 def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
@@ -32,7 +36,7 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
     normals : (H, W, 3) float
         Unit normals in the camera frame (``docs/conventions.md``), finite on the mask.
     mask : (H, W) bool
-    method : {"paths", "poisson", "bilateral"}
+    method : {"paths", "poisson", "fourier", "bilateral"}
     origin : (int, int), optional
         (row, col) where ``z = 0`` (orthographic only). For "paths" only the mask's part holding
         the origin is integrated. Default: the most frontal normal's pixel.
@@ -74,6 +78,11 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
         from shadeform.integration.poisson import integrate_poisson
 
         return integrate_poisson(normals, mask, origin=origin)
+    if method == "fourier":
+        from shadeform.integration.fourier import integrate_fourier
+
+        depth = integrate_fourier(normals, mask)
+        return depth - depth[origin]
     from shadeform.integration.bilateral import integrate_bilateral
 
     return integrate_bilateral(normals, mask, origin=origin)
