@@ -10,24 +10,9 @@ from shadeform.integration._multigrid import PairHierarchy
 from shadeform.integration.bilateral import integrate_bilateral
 from shadeform.integration.poisson import integrate_poisson
 
+from _surfaces import l_shaped_mask, normals_of, pixel_xy
+
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "diligent-normals"
-
-
-def normals_of(zx, zy):
-    n = np.stack([-zx, -zy, np.ones_like(zx)], axis=-1)
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
-
-
-def pixel_xy(shape):
-    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
-    return cols, -rows
-
-
-def l_shaped_mask(shape=(30, 40)):
-    mask = np.zeros(shape, bool)
-    mask[2:28, 3:12] = True
-    mask[20:28, 3:37] = True
-    return mask
 
 
 def offset_error(depth, truth, mask):

@@ -9,22 +9,7 @@ from shadeform.integration import integrate
 from shadeform.integration.paths import integrate_paths, integrate_paths_reference
 from shadeform.integration.poisson import integrate_poisson
 
-
-def normals_of(zx, zy):
-    n = np.stack([-zx, -zy, np.ones_like(zx)], axis=-1)
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
-
-
-def pixel_xy(shape):
-    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
-    return cols, -rows
-
-
-def l_shaped_mask(shape=(30, 40)):
-    mask = np.zeros(shape, bool)
-    mask[2:28, 3:12] = True
-    mask[20:28, 3:37] = True
-    return mask
+from _surfaces import l_shaped_mask, normals_of, pixel_xy
 
 
 class TestIntegratePaths:
