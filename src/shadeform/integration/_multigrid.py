@@ -151,39 +151,24 @@ def _residual_row(z, b, wx, wy, i, c, out):
 
 
 @numba.njit(cache=True)
-def _sweep_block(z, b, wx, wy, inv, i0, i1, first):
-    """Rows ``i0 .. i1-1`` of a red-black sweep, ``c = 0`` first, in one pass: red on row ``i``,
-    then black on row ``i - 1``, whose red neighbours are final by then. Black on the block's first
-    and last rows needs the neighbouring blocks: :func:`_sweep_edges` does those afterwards."""
+def _sweep_block(z, b, wx, wy, inv, i0, i1, lead, first):
+    """Rows ``i0 .. i1-1`` of a red-black sweep in one pass: colour ``lead`` (0 red, 1 black) on
+    row ``i``, then the other colour on row ``i - 1``, whose ``lead`` neighbours are final by
+    then. The forward sweep leads with red, its adjoint with black. The second colour on the
+    block's first and last rows needs the neighbouring blocks: :func:`_sweep_edges` does those
+    afterwards."""
     for i in range(i0, i1):
-        _gs_row(z, b, wx, wy, inv, i, 0, first)
+        _gs_row(z, b, wx, wy, inv, i, lead, first)
         if i - 1 > i0:
-            _gs_row(z, b, wx, wy, inv, i - 1, 1, False)
+            _gs_row(z, b, wx, wy, inv, i - 1, 1 - lead, False)
 
 
 @numba.njit(cache=True)
-def _sweep_edges(z, b, wx, wy, inv, i0, i1):
+def _sweep_edges(z, b, wx, wy, inv, i0, i1, lead):
     if i1 > i0:
-        _gs_row(z, b, wx, wy, inv, i0, 1, False)
+        _gs_row(z, b, wx, wy, inv, i0, 1 - lead, False)
     if i1 - 1 > i0:
-        _gs_row(z, b, wx, wy, inv, i1 - 1, 1, False)
-
-
-@numba.njit(cache=True)
-def _sweep_block_back(z, b, wx, wy, inv, i0, i1):
-    """The adjoint sweep, black first: black on row ``i``, then red on row ``i - 1``."""
-    for i in range(i0, i1):
-        _gs_row(z, b, wx, wy, inv, i, 1, False)
-        if i - 1 > i0:
-            _gs_row(z, b, wx, wy, inv, i - 1, 0, False)
-
-
-@numba.njit(cache=True)
-def _sweep_edges_back(z, b, wx, wy, inv, i0, i1):
-    if i1 > i0:
-        _gs_row(z, b, wx, wy, inv, i0, 0, False)
-    if i1 - 1 > i0:
-        _gs_row(z, b, wx, wy, inv, i1 - 1, 0, False)
+        _gs_row(z, b, wx, wy, inv, i1 - 1, 1 - lead, False)
 
 
 @numba.njit(cache=True)
@@ -237,28 +222,21 @@ def _block(n, k, blocks):
 
 @numba.njit(cache=True, parallel=True)
 def _sweep_par(z, b, wx, wy, inv, h, back, first, blocks):
+    lead = 1 if back else 0
+    first = first and not back
     for t in prange(blocks):
         i0, i1 = _block(h, t, blocks)
-        if back:
-            _sweep_block_back(z, b, wx, wy, inv, i0, i1)
-        else:
-            _sweep_block(z, b, wx, wy, inv, i0, i1, first)
+        _sweep_block(z, b, wx, wy, inv, i0, i1, lead, first)
     for t in range(blocks):
         i0, i1 = _block(h, t, blocks)
-        if back:
-            _sweep_edges_back(z, b, wx, wy, inv, i0, i1)
-        else:
-            _sweep_edges(z, b, wx, wy, inv, i0, i1)
+        _sweep_edges(z, b, wx, wy, inv, i0, i1, lead)
 
 
 @numba.njit(cache=True)
 def _sweep_ser(z, b, wx, wy, inv, h, back, first):
-    if back:
-        _sweep_block_back(z, b, wx, wy, inv, 1, h + 1)
-        _sweep_edges_back(z, b, wx, wy, inv, 1, h + 1)
-    else:
-        _sweep_block(z, b, wx, wy, inv, 1, h + 1, first)
-        _sweep_edges(z, b, wx, wy, inv, 1, h + 1)
+    lead = 1 if back else 0
+    _sweep_block(z, b, wx, wy, inv, 1, h + 1, lead, first and not back)
+    _sweep_edges(z, b, wx, wy, inv, 1, h + 1, lead)
 
 
 @numba.njit(cache=True, parallel=True)
