@@ -7,6 +7,7 @@ Commands::
     shadeform evaluate                       error table of the methods on the synthetic scenes
     shadeform formats                        the mesh formats -o understands
     shadeform demo                           the main job on a shipped photograph
+    shadeform app [IMAGE]                    the browser app, served on 127.0.0.1
 
 Everything here is input parsing, file I/O, printing and progress display; the work is done by
 the library (``shadeform.reconstruct``, ``shadeform.to_mesh``, ``shadeform.export``, ...).
@@ -644,3 +645,87 @@ def demo(
         "  open result.png to see it; view the .glb in any glTF viewer (e.g. Blender) or the .wrl in a "
         "VRML viewer; try your own photo with: shadeform reconstruct PHOTO -o model.glb"
     )
+
+
+# --- app ---------------------------------------------------------------------------------------
+
+
+@app.command("app")
+def app_command(
+    image: Annotated[
+        str | None,
+        typer.Argument(help="Photo to open at start, or a shipped example (coin, synth:bowl, ...).", show_default=False),
+    ] = None,
+    port: Annotated[int, typer.Option(min=0, max=65535, help="Port to serve on (0: any free port).")] = 8000,
+    host: Annotated[str, typer.Option(help="Address to bind; loopback unless --allow-remote.")] = "127.0.0.1",
+    allow_remote: Annotated[
+        bool, typer.Option("--allow-remote", help="Allow binding a non-loopback address: anyone who can reach it can use the app.")
+    ] = False,
+    no_browser: Annotated[bool, typer.Option("--no-browser", help="Do not open a web browser.")] = False,
+) -> None:
+    """Start the browser app: open a photo, draw concave regions, see and export the 3D model."""
+    import ipaddress
+    import socket
+    import threading
+    import webbrowser
+
+    try:
+        import uvicorn
+
+        from shadeform.app.server import LOOPBACK_HOSTS, create_app
+    except ImportError as missing:
+        raise InputError(f"the app needs {missing.name or 'its web server'}, which is not installed; "
+                         "install shadeform with its app extra: pip install 'shadeform[app]'") from None
+    from shadeform.examples import EXAMPLES
+
+    try:
+        loopback = host == "localhost" or ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        loopback = False
+    if not loopback and not allow_remote:
+        raise InputError(f"--host {host} is not a loopback address; other machines could use the app. "
+                         "Add --allow-remote if that is what you want")
+    initial = None
+    if image is not None:
+        # the user's own argument: a file, else an example name
+        if Path(image).exists() or image not in EXAMPLES:
+            initial = Path(image)
+            if not initial.is_file():
+                raise InputError(f"no such image file or example: '{image}'; give a photo's path or one "
+                                 f"of: {', '.join(EXAMPLES)}")
+        else:
+            initial = image
+    err = _stderr()
+    with err.status("opening the image", spinner="dots"):
+        # warm: the numba kernels compile (or load) in the background, so the first click does not wait
+        application = create_app(initial_image=initial, allowed_hosts=None if allow_remote else LOOPBACK_HOSTS,
+                                 warm=True)
+    # bind first, so that the printed address (and port 0's pick) is the one that answers
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host.strip("[]"), port))
+    except OSError as error:
+        sock.close()
+        raise InputError(f"cannot listen on {host}:{port} ({error.strerror}); choose another --port") from None
+    bound_port = sock.getsockname()[1]
+    shown_host = f"[{host.strip('[]')}]" if ":" in host else host
+    url = f"http://{shown_host}:{bound_port}/"
+    if not loopback:
+        err.print(f"[bold yellow]warning:[/] serving on {escape(host)}, not loopback: anyone who can reach "
+                  "this address can use the app and read the images opened in it")
+    _stdout().print(f"[bold]shadeform app[/] at {escape(url)}  (Ctrl+C stops it)")
+    if not no_browser and _has_display():
+        threading.Timer(0.5, webbrowser.open, args=(url,)).start()
+    config = uvicorn.Config(application, log_level="warning")
+    uvicorn.Server(config).run(sockets=[sock])
+
+
+def _has_display() -> bool:
+    """Whether a browser could show a window here (a desktop session, or macOS/Windows)."""
+    import sys
+
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))

@@ -2,7 +2,9 @@
 
 One internal decoder turns a file into an ``(H, W, C)`` float32 array in ``[0, 1]`` with ``C = 1``
 (gray) or ``C = 3`` (colour); :func:`load_image` picks one channel from it, :func:`load_image_rgb`
-keeps the colour for texturing, :func:`load_mask` keeps the non-zero pixels.
+keeps the colour for texturing, :func:`load_mask` keeps the non-zero pixels. :func:`load_pixels`
+keeps the array as stored (gray or colour) for :func:`select_channel` to pick from later. The
+readers take a path or the file's content as ``bytes`` (an upload, decoded from memory).
 
 Decoders, chosen by the file's first bytes (never its name):
 
@@ -21,6 +23,7 @@ palette; alpha is ignored.
 
 from __future__ import annotations
 
+import io
 import struct
 import warnings
 import zlib
@@ -34,7 +37,15 @@ from PIL import Image, UnidentifiedImageError
 
 from shadeform.errors import InputError
 
-__all__ = ["load_image", "load_image_rgb", "load_mask", "CHANNELS"]
+__all__ = [
+    "load_image",
+    "load_image_rgb",
+    "load_mask",
+    "load_pixels",
+    "select_channel",
+    "ImageTooLargeError",
+    "CHANNELS",
+]
 
 #: Channel names accepted by :func:`load_image`.
 CHANNELS = ("luma", "r", "g", "b", "max")
@@ -47,23 +58,35 @@ _MIN_SIDE = 3
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+
+#: What a file's content, given as bytes instead of a path, is called in messages.
+_MEMORY_NAME = "image data"
 _EXIF_ORIENTATION = 0x0112
 
 # TIFF photometric interpretations the TIFF decoder understands.
 _MINISWHITE, _MINISBLACK, _RGB, _PALETTE = 0, 1, 2, 3
 
 
+class ImageTooLargeError(InputError):
+    """An image with more pixels than allowed (``max_pixels`` or Pillow's bomb guard).
+
+    A subclass of :class:`shadeform.InputError`, so that a caller can tell "too large" from
+    "not an image" (the app answers 413 to one and 415 to the other).
+    """
+
+
 def load_image(
-    path: str | PathLike, *, channel: str = "luma", max_pixels: int = 250_000_000
+    path: str | PathLike | bytes, *, channel: str = "luma", max_pixels: int = 250_000_000
 ) -> np.ndarray:
     """Read a photo as one channel of intensities.
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, path-like or bytes
         A PNG, JPEG, TIFF or BMP file (other formats Pillow reads work too): 1-, 8- or 16-bit,
         gray, gray + alpha, RGB, RGBA or palette; float TIFFs are taken to hold values in
-        ``[0, 1]`` and are clipped to it.
+        ``[0, 1]`` and are clipped to it. ``bytes`` (or ``bytearray``, ``memoryview``) are the
+        content of such a file, already in memory (e.g. an upload).
     channel : {"luma", "r", "g", "b", "max"}
         Which intensity to return for a colour image: Rec. 601 luma
         ``0.299 R + 0.587 G + 0.114 B``, one of the colour channels, or the largest of R, G, B.
@@ -91,11 +114,65 @@ def load_image(
     >>> image.shape, image.dtype  # doctest: +SKIP
     ((512, 612), dtype('float32'))
     """
-    if channel not in CHANNELS:
+    _check_channel(channel)
+    return select_channel(_decode(path, max_pixels), channel)
+
+
+def load_pixels(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) -> np.ndarray:
+    """Read a photo as it is stored: gray stays one channel, colour keeps three.
+
+    For a caller that picks channels later, again and again, without decoding again (the app
+    keeps this array and calls :func:`select_channel` per request).
+
+    Parameters
+    ----------
+    path : str, path-like or bytes
+        Any file :func:`load_image` reads, or its content.
+    max_pixels : int
+        As in :func:`load_image`.
+
+    Returns
+    -------
+    (H, W, C) float32
+        ``C = 1`` for gray files, ``C = 3`` (R, G, B) for colour ones; values in ``[0, 1]``.
+
+    Raises
+    ------
+    InputError
+        As :func:`load_image`; :class:`ImageTooLargeError` if the image has too many pixels.
+    """
+    return _decode(path, max_pixels)
+
+
+def select_channel(pixels: np.ndarray, channel: str = "luma") -> np.ndarray:
+    """One channel of intensities from a gray or colour picture.
+
+    Parameters
+    ----------
+    pixels : (H, W), (H, W, 1) or (H, W, 3) float32
+        E.g. from :func:`load_pixels`; values in ``[0, 1]``.
+    channel : {"luma", "r", "g", "b", "max"}
+        As in :func:`load_image`; a gray picture returns its gray values for every choice.
+
+    Returns
+    -------
+    (H, W) float32
+        The same values :func:`load_image` returns for the file ``pixels`` came from.
+
+    Raises
+    ------
+    InputError
+        If ``channel`` is unknown or ``pixels`` is not one of those shapes.
+    """
+    _check_channel(channel)
+    pixels = np.asarray(pixels)
+    if pixels.ndim == 2:
+        return pixels
+    if pixels.ndim != 3 or pixels.shape[2] not in (1, 3):
         raise InputError(
-            f"unknown channel {channel!r}; choose one of {', '.join(map(repr, CHANNELS))}"
+            f"pixels must have shape (H, W), (H, W, 1) or (H, W, 3), got {pixels.shape}; "
+            "read them with load_pixels"
         )
-    pixels = _decode(path, max_pixels)
     if pixels.shape[2] == 1:
         return np.ascontiguousarray(pixels[:, :, 0])
     if channel == "luma":
@@ -106,13 +183,20 @@ def load_image(
     return np.ascontiguousarray(pixels[:, :, "rgb".index(channel)])
 
 
-def load_image_rgb(path: str | PathLike, *, max_pixels: int = 250_000_000) -> np.ndarray:
+def _check_channel(channel) -> None:
+    if not isinstance(channel, str) or channel not in CHANNELS:
+        raise InputError(
+            f"unknown channel {channel!r}; choose one of {', '.join(map(repr, CHANNELS))}"
+        )
+
+
+def load_image_rgb(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) -> np.ndarray:
     """Read a photo in colour, e.g. to texture a mesh with it.
 
     Parameters
     ----------
-    path : str or path-like
-        Any file :func:`load_image` reads.
+    path : str, path-like or bytes
+        Any file :func:`load_image` reads, or its content.
     max_pixels : int
         As in :func:`load_image`.
 
@@ -172,13 +256,31 @@ def load_mask(path: str | PathLike, *, shape: tuple[int, ...] | None = None) -> 
 # --- the one decoder -------------------------------------------------------------------------
 
 
-def _decode(path: str | PathLike, max_pixels: int) -> np.ndarray:
+class _Memory:
+    """A file's content held in memory; named in messages as a path would be."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def __str__(self) -> str:
+        return _MEMORY_NAME
+
+
+_Source = Path | _Memory
+
+
+def _open(source: _Source):
+    """A binary file object reading ``source`` from its start (every decoder reads it anew)."""
+    return io.BytesIO(source.data) if isinstance(source, _Memory) else open(source, "rb")
+
+
+def _decode(path: str | PathLike | bytes, max_pixels: int) -> np.ndarray:
     """File -> (H, W, C) float32 in [0, 1], C in {1, 3}, upright (EXIF orientation applied)."""
     whole = isinstance(max_pixels, (int, np.integer)) and not isinstance(max_pixels, bool)
     if not whole or max_pixels < 1:
         raise InputError(f"max_pixels must be a positive whole number, got {max_pixels!r}")
     path = _existing_file(path)
-    with open(path, "rb") as fh:
+    with _open(path) as fh:
         head = fh.read(33)
     if head.startswith(_PNG_SIGNATURE):
         pixels, orientation = _decode_png(path, head, max_pixels)
@@ -189,7 +291,11 @@ def _decode(path: str | PathLike, max_pixels: int) -> np.ndarray:
     return np.ascontiguousarray(_orient(pixels, orientation))
 
 
-def _existing_file(path: str | PathLike) -> Path:
+def _existing_file(path: str | PathLike | bytes) -> _Source:
+    if isinstance(path, (bytes, bytearray, memoryview)):
+        if len(path) == 0:
+            raise InputError(f"empty file: the {_MEMORY_NAME} has 0 bytes; give an image file")
+        return _Memory(bytes(path))
     path = Path(path)
     if not path.exists():
         raise InputError(f"file not found: '{path}'; check the path")
@@ -200,10 +306,10 @@ def _existing_file(path: str | PathLike) -> Path:
     return path
 
 
-def _check_dimensions(path: Path, width: int, height: int, max_pixels: int) -> None:
+def _check_dimensions(path: _Source, width: int, height: int, max_pixels: int) -> None:
     """Refuse absurd declared sizes before any pixel is decoded."""
     if width * height > max_pixels:
-        raise InputError(
+        raise ImageTooLargeError(
             f"image too large: '{path}' declares {width}x{height} = {width * height:,} pixels, "
             f"more than max_pixels={max_pixels:,} (a damaged file or a decompression bomb); "
             "crop or downscale it, or raise max_pixels if you trust the file"
@@ -215,7 +321,7 @@ def _check_dimensions(path: Path, width: int, height: int, max_pixels: int) -> N
         )
 
 
-def _damaged(path: Path, kind: str, err: BaseException) -> InputError:
+def _damaged(path: _Source, kind: str, err: BaseException) -> InputError:
     reason = " ".join(str(err).split()) or type(err).__name__
     return InputError(
         f"truncated or damaged {kind}: '{path}' could not be decoded ({reason}); "
@@ -223,7 +329,7 @@ def _damaged(path: Path, kind: str, err: BaseException) -> InputError:
     )
 
 
-def _not_an_image(path: Path) -> InputError:
+def _not_an_image(path: _Source) -> InputError:
     return InputError(
         f"not an image: '{path}' could not be decoded as PNG, JPEG, TIFF or BMP; give a photo file"
     )
@@ -243,7 +349,7 @@ def _drop_alpha(samples: np.ndarray) -> np.ndarray:
 # --- PNG ---------------------------------------------------------------------------------------
 
 
-def _decode_png(path: Path, head: bytes, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_png(path: _Source, head: bytes, max_pixels: int) -> tuple[np.ndarray, int]:
     if len(head) < 33 or head[12:16] != b"IHDR":
         raise InputError(
             f"truncated or damaged PNG: '{path}' has no IHDR header; save or download it again"
@@ -255,7 +361,7 @@ def _decode_png(path: Path, head: bytes, max_pixels: int) -> tuple[np.ndarray, i
         pixels, _ = _decode_pillow(path, max_pixels)
         return pixels, orientation
     try:
-        with open(path, "rb") as fh:
+        with _open(path) as fh:
             width, height, rows, info = png.Reader(file=fh).read()
             samples = np.stack([np.frombuffer(row, dtype=np.uint16) for row in rows])
     except (png.Error, zlib.error, ValueError) as err:
@@ -270,11 +376,11 @@ def _decode_png(path: Path, head: bytes, max_pixels: int) -> tuple[np.ndarray, i
     return _unsigned_to_unit(_drop_alpha(samples), 16), orientation
 
 
-def _png_orientation(path: Path) -> int:
+def _png_orientation(path: _Source) -> int:
     """Check every chunk (lengths, CRCs, IEND) and return the eXIf orientation (1 if none)."""
     orientation = 1
     try:
-        with open(path, "rb") as fh:
+        with _open(path) as fh:
             for kind, data in png.Reader(file=fh).chunks():
                 if kind == b"eXIf":
                     exif = Image.Exif()
@@ -288,9 +394,9 @@ def _png_orientation(path: Path) -> int:
 # --- TIFF --------------------------------------------------------------------------------------
 
 
-def _decode_tiff(path: Path, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_tiff(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
     try:
-        with tifffile.TiffFile(path) as tif:
+        with _open(path) as fh, tifffile.TiffFile(fh) as tif:
             page = tif.pages.first
             axes, shape = page.axes, page.shape
             bits, fmt = page.bitspersample, page.sampleformat
@@ -333,7 +439,7 @@ def _decode_tiff(path: Path, max_pixels: int) -> tuple[np.ndarray, int]:
 
 
 def _tiff_samples_to_unit(
-    path: Path, samples: np.ndarray, bits: int, photometric: int, colormap: np.ndarray | None
+    path: _Source, samples: np.ndarray, bits: int, photometric: int, colormap: np.ndarray | None
 ) -> np.ndarray:
     if photometric not in (_MINISWHITE, _MINISBLACK, _RGB, _PALETTE):
         raise InputError(
@@ -380,12 +486,12 @@ def _tiff_samples_to_unit(
 # --- Pillow ------------------------------------------------------------------------------------
 
 
-def _decode_pillow(path: Path, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_pillow(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
     try:
         # Pillow warns about large images and only raises past twice its limit; refuse both.
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
-            with Image.open(path) as image:
+            with _open(path) as fh, Image.open(fh) as image:
                 _check_dimensions(path, *image.size, max_pixels)
                 # ImageFile.LOAD_TRUNCATED_IMAGES is False (Pillow's default): short files raise.
                 image.load()
@@ -394,7 +500,7 @@ def _decode_pillow(path: Path, max_pixels: int) -> tuple[np.ndarray, int]:
     except UnidentifiedImageError:
         raise _not_an_image(path) from None
     except (Image.DecompressionBombError, Image.DecompressionBombWarning):
-        raise InputError(
+        raise ImageTooLargeError(
             f"image too large: '{path}' has more pixels than Pillow's limit of "
             f"{Image.MAX_IMAGE_PIXELS:,} (a guard against decompression bombs); downscale it, "
             "or raise PIL.Image.MAX_IMAGE_PIXELS if you trust the file"
@@ -404,7 +510,7 @@ def _decode_pillow(path: Path, max_pixels: int) -> tuple[np.ndarray, int]:
     return pixels, orientation
 
 
-def _pillow_pixels(path: Path, image: Image.Image) -> np.ndarray:
+def _pillow_pixels(path: _Source, image: Image.Image) -> np.ndarray:
     mode = image.mode
     if mode.startswith("I;16"):
         return _unsigned_to_unit(np.asarray(image).astype(np.uint16), 16)[:, :, None]

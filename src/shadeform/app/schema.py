@@ -1,0 +1,310 @@
+"""The app's request and response schema, defined once (pydantic) for the server and the client.
+
+The web client's TypeScript types (``web/src/api.gen.ts``) are generated from these models by
+:func:`typescript`; ``python -m shadeform.app.schema`` prints that file, and a test checks that the
+committed copy is current. Field meanings and conventions (frames, regions JSON) are those of
+``docs/conventions.md``; the server only validates types and ranges here and leaves every other
+check to the library, whose :class:`shadeform.InputError` messages reach the user unchanged.
+
+Arrays in :class:`MeshData` travel as base64 text of little-endian ``float32`` (positions,
+normals, uvs) and ``uint32`` (indices) so that the client can view them as typed arrays without
+parsing numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+from pydantic.json_schema import models_json_schema
+from typing_extensions import TypeAliasType
+
+__all__ = [
+    "Channel",
+    "FilterKind",
+    "LightMode",
+    "Axis",
+    "FilterParams",
+    "LightParams",
+    "ConcaveRegion",
+    "ConcaveRegions",
+    "ReconstructParams",
+    "ReconstructRequest",
+    "FormatInfo",
+    "ExampleInfo",
+    "Limits",
+    "ImageInfo",
+    "Options",
+    "MeshData",
+    "ReconstructResult",
+    "ErrorBody",
+    "typescript",
+]
+
+Channel = TypeAliasType("Channel", Literal["luma", "r", "g", "b", "max"])
+FilterKind = TypeAliasType("FilterKind", Literal["none", "gaussian", "mean", "median", "minimum"])
+LightMode = TypeAliasType("LightMode", Literal["z", "slant_tilt", "estimate"])
+Axis = TypeAliasType("Axis", Literal["x", "y", "both"])
+
+
+class _Model(BaseModel):
+    # requests with unknown fields are refused (a typo must not be silently ignored); in the
+    # generated types a field with a default is still required: the server always sends it
+    model_config = ConfigDict(extra="forbid", json_schema_serialization_defaults_required=True)
+
+
+class FilterParams(_Model):
+    """Smoothing before the solve (:func:`shadeform.preprocess.parse_filter`)."""
+
+    kind: FilterKind = "none"
+    size: float = Field(
+        default=0.0, ge=0,
+        description="Gaussian sigma, or the window radius (whole number) of mean, median and minimum.",
+    )
+
+
+class LightParams(_Model):
+    """Where the light is: +z, slant/tilt in degrees (``docs/conventions.md``), or estimated."""
+
+    mode: LightMode = "z"
+    slant: float = 0.0
+    tilt: float = 0.0
+
+
+class ConcaveRegion(_Model):
+    """One concave region: polygon ``[[x, y], ...]`` (x = column, y = row, input pixels)."""
+
+    polygon: list[tuple[float, float]]
+    axis: Axis
+
+
+class ConcaveRegions(_Model):
+    """The CLI's regions JSON, exactly: ``{"regions": [...]}``."""
+
+    regions: list[ConcaveRegion] = Field(default_factory=list)
+
+
+class ReconstructParams(_Model):
+    """Everything the user sets for one reconstruction."""
+
+    channel: Channel = "luma"
+    filter: FilterParams = Field(default_factory=FilterParams)
+    light: LightParams = Field(default_factory=LightParams)
+    method: str = Field(default="propagation", description="One of ``Options.methods``.")
+    integrator: str | None = Field(
+        default=None,
+        description="One of ``Options.integrators``, or null for the method's own.",
+    )
+    refine: int = Field(
+        default=3, ge=0, le=100,
+        description="Integrability refinement iterations (propagation only).",
+    )
+    step: int = Field(
+        default=2, ge=1,
+        description="Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve.",
+    )
+    references: list[tuple[int, int]] = Field(
+        default_factory=list,
+        description="Reference pixels ``[row, col]`` chosen by the user; the automatic ones are added.",
+    )
+    concave: ConcaveRegions = Field(default_factory=ConcaveRegions)
+
+
+class ReconstructRequest(_Model):
+    """A reconstruction (or export) of a stored image with these parameters."""
+
+    image_id: str
+    params: ReconstructParams = Field(default_factory=ReconstructParams)
+    request_id: int = Field(
+        default=0,
+        description="Chosen by the client, echoed in the result: a response older than the newest is stale.",
+    )
+
+
+class FormatInfo(_Model):
+    """A mesh format the export endpoint writes (:func:`shadeform.available_formats`)."""
+
+    suffix: str
+    description: str
+
+
+class ExampleInfo(_Model):
+    """A shipped example (:data:`shadeform.examples.EXAMPLES`)."""
+
+    name: str
+    title: str
+
+
+class Limits(_Model):
+    """What an upload may be."""
+
+    max_upload_bytes: int
+    max_pixels: int
+
+
+class ImageInfo(_Model):
+    """A stored image; ``image_id`` names it in every later request."""
+
+    image_id: str
+    name: str
+    width: int
+    height: int
+    channels: int = Field(description="1 for a gray file, 3 for colour.")
+    suggested: ReconstructParams | None = Field(
+        default=None,
+        description="Settings the image is best reconstructed with (the examples have them), else null.",
+    )
+
+
+class Options(_Model):
+    """What the library offers, the upload limits and the default parameters."""
+
+    methods: list[str]
+    integrators: list[str]
+    channels: list[str]
+    filters: list[str]
+    formats: list[FormatInfo]
+    examples: list[ExampleInfo]
+    limits: Limits
+    defaults: ReconstructParams
+    initial_image: ImageInfo | None = Field(
+        default=None,
+        description="The image the server was started with (``shadeform app IMAGE``), else null.",
+    )
+
+
+class MeshData(_Model):
+    """A triangle mesh in the convention of ``docs/conventions.md`` ("Meshes"), as base64."""
+
+    vertex_count: int
+    triangle_count: int
+    positions: str = Field(
+        description="float32 little-endian, 3 per vertex: (x, y, z) = (col, -row, depth)",
+    )
+    normals: str = Field(description="float32 little-endian, 3 per vertex, unit length")
+    uvs: str = Field(
+        description="float32 little-endian, 2 per vertex: u = (col + 0.5) / W, v = 1 - (row + 0.5) / H",
+    )
+    indices: str = Field(
+        description="uint32 little-endian, 3 per triangle, counter-clockwise seen from +z",
+    )
+
+
+class ReconstructResult(_Model):
+    """One reconstruction: the mesh, and what the library used and found."""
+
+    request_id: int
+    mesh: MeshData
+    mask_png: str = Field(
+        description="The object mask as a base64 8-bit grey PNG (255 = object), the image's size.",
+    )
+    light: tuple[float, float, float] = Field(
+        description="Unit vector toward the light that was used (given or estimated).",
+    )
+    references: list[tuple[int, int]] = Field(
+        description="Reference pixels used, ``[row, col]``: the user's, then the automatic ones.",
+    )
+    depth_range: tuple[float, float] = Field(
+        description="Smallest and largest depth on the object, pixel units.",
+    )
+    timings: dict[str, float] = Field(
+        description="Seconds per stage: the library's stages, then mesh, encode, total.",
+    )
+    info: dict[str, Any] = Field(
+        description="What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused).",
+    )
+
+
+class ErrorBody(_Model):
+    """Every error response: one line saying what was wrong and what to do."""
+
+    detail: str
+
+
+#: Models written to the TypeScript file, in this order.
+_EXPORTED = (
+    FilterParams,
+    LightParams,
+    ConcaveRegion,
+    ConcaveRegions,
+    ReconstructParams,
+    ReconstructRequest,
+    FormatInfo,
+    ExampleInfo,
+    Limits,
+    ImageInfo,
+    Options,
+    MeshData,
+    ReconstructResult,
+    ErrorBody,
+)
+
+
+def typescript() -> str:
+    """The TypeScript declarations of the schema: the text of ``web/src/api.gen.ts``.
+
+    Built from pydantic's JSON schema (serialization mode, so every field the server sends is
+    required): objects become interfaces, string enums union types of literals, fixed-length
+    arrays tuples.
+
+    Returns
+    -------
+    str
+        The whole file, ending with a newline.
+    """
+    _, schema = models_json_schema([(model, "serialization") for model in _EXPORTED])
+    definitions = schema["$defs"]
+    # aliases (Channel, ...) first, then the models in _EXPORTED order
+    order = [name for name in definitions if "properties" not in definitions[name]]
+    order += [model.__name__ for model in _EXPORTED]
+    lines = [
+        "// Generated from shadeform.app.schema by `python -m shadeform.app.schema`; do not edit.",
+        "// A test (tests/test_app_api.py) fails when this file and the schema disagree.",
+        "",
+    ]
+    for name in order:
+        definition = definitions[name]
+        if "properties" not in definition:
+            lines += [f"export type {name} = {_ts_type(definition)};", ""]
+            continue
+        doc = definition.get("description")
+        if doc:
+            lines.append(f"/** {' '.join(doc.split())} */")
+        lines.append(f"export interface {name} {{")
+        required = set(definition.get("required", ()))
+        for field, spec in definition["properties"].items():
+            if spec.get("description"):
+                lines.append(f"  /** {spec['description']} */")
+            optional = "" if field in required else "?"
+            lines.append(f"  {field}{optional}: {_ts_type(spec)};")
+        lines += ["}", ""]
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _ts_type(spec: dict) -> str:
+    """A TypeScript type expression for one JSON-schema node."""
+    if "$ref" in spec:
+        return spec["$ref"].rsplit("/", 1)[-1]
+    if "enum" in spec:
+        return " | ".join(json.dumps(value) for value in spec["enum"])
+    if "const" in spec:
+        return json.dumps(spec["const"])
+    if "anyOf" in spec:
+        return " | ".join(_ts_type(option) for option in spec["anyOf"])
+    kind = spec.get("type")
+    if kind == "array":
+        if "prefixItems" in spec:
+            return "[" + ", ".join(_ts_type(item) for item in spec["prefixItems"]) + "]"
+        item = _ts_type(spec.get("items", {}))
+        return f"({item})[]" if " | " in item else f"{item}[]"
+    if kind == "object":
+        values = spec.get("additionalProperties", True)
+        return f"Record<string, {'unknown' if values is True else _ts_type(values)}>"
+    return {"string": "string", "number": "number", "integer": "number", "boolean": "boolean",
+            "null": "null"}.get(kind, "unknown")
+
+
+if __name__ == "__main__":
+    sys.stdout.write(typescript())

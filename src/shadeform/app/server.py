@@ -1,0 +1,703 @@
+"""The app's HTTP server: a thin FastAPI shell over the library, and the built web client.
+
+Every endpoint is input checking, a library call and encoding; no algorithm lives here. The API
+(all under ``/api``, JSON unless said; types in :mod:`shadeform.app.schema`):
+
+==========================================  ===================================================
+``GET  /api/options``                       methods, integrators, formats, examples, limits
+``POST /api/images`` (multipart ``file``)   store an uploaded photo -> ``ImageInfo``
+``POST /api/examples/{name}[?size=N]``      store a shipped example -> ``ImageInfo``
+``GET  /api/images/{id}/photo.png``         the photo, 8-bit PNG
+``GET  /api/images/{id}/channel.png``       one channel, filtered (``?channel=&filter=``)
+``POST /api/reconstruct``                   ``ReconstructRequest`` -> ``ReconstructResult``
+``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
+==========================================  ===================================================
+
+Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a library
+:class:`~shadeform.InputError` is 422 (413 for an image with too many pixels), an unknown image
+id 404, malformed requests 4xx; nothing else of an exception (no traceback) reaches the client.
+
+Safety: the server binds to loopback unless told otherwise (``shadeform app --allow-remote``);
+requests whose ``Host`` (or ``Origin``) names another machine are refused, which stops DNS
+rebinding and other sites' pages from driving it; request bodies are capped before they are
+read; uploads are decoded from memory, never from a path a client sent; downloads are named by
+the server (a registry suffix and a sanitised stem).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import io
+import json
+import re
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fastapi import FastAPI, File, Query, Request, UploadFile
+from fastapi.exceptions import RequestValidationError
+from fastapi.routing import APIRoute
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+
+from shadeform.app.schema import (
+    ExampleInfo,
+    FilterParams,
+    FormatInfo,
+    ImageInfo,
+    LightParams,
+    Limits,
+    MeshData,
+    Options,
+    ReconstructParams,
+    ReconstructRequest,
+    ReconstructResult,
+)
+from shadeform.app.store import LRU, StoredImage, new_image_id
+from shadeform.errors import InputError
+
+__all__ = ["AppLimits", "LOOPBACK_HOSTS", "STATIC_DIR", "create_app", "warm_up"]
+
+#: Where ``make web`` (and the package build) put the built client.
+STATIC_DIR = Path(__file__).with_name("static")
+
+#: Host names that mean this machine; the default ``allowed_hosts``.
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+_NO_CLIENT_PAGE = (
+    "<!doctype html><title>shadeform</title><p>The web client is not built: run "
+    "<code>make web</code> in the shadeform source folder, then reload this page.</p>"
+)
+
+# media types of the exported formats; anything else is sent as bytes
+_MEDIA_TYPES = {
+    ".wrl": "model/vrml",
+    ".obj": "model/obj",
+    ".stl": "model/stl",
+    ".glb": "model/gltf-binary",
+}
+
+
+@dataclass(frozen=True)
+class AppLimits:
+    """How much the server accepts and keeps in memory.
+
+    Attributes
+    ----------
+    max_upload_bytes : int
+        Largest image file accepted (413 beyond).
+    max_pixels : int
+        Most pixels an image may have (413 beyond), checked before decoding.
+    max_images, max_image_bytes : int
+        Images kept in memory; the least recently used go first.
+    max_results, max_result_bytes : int
+        Reconstructions kept for re-meshing (a change of ``step`` only) and exports.
+    max_json_bytes : int
+        Largest JSON request body (regions with many points still fit).
+    """
+
+    max_upload_bytes: int = 64 * 2**20
+    max_pixels: int = 4096 * 4096
+    max_images: int = 16
+    max_image_bytes: int = 1024 * 2**20
+    max_results: int = 4
+    max_result_bytes: int = 1024 * 2**20
+    max_json_bytes: int = 4 * 2**20
+
+
+def create_app(
+    *,
+    initial_image: str | Path | None = None,
+    limits: AppLimits = AppLimits(),
+    allowed_hosts: Sequence[str] | None = LOOPBACK_HOSTS,
+    warm: bool = False,
+    static_dir: Path | None = None,
+) -> FastAPI:
+    """Build the app's ASGI application.
+
+    Parameters
+    ----------
+    initial_image : str or Path, optional, keyword-only
+        Opened at once and listed as ``Options.initial_image``: a :class:`~pathlib.Path` to an
+        image file (the command line's own argument, never a client's), or the name of a shipped
+        example (``"coin"``, ``"synth:bowl"``, ...).
+    limits : AppLimits
+        Upload and memory limits.
+    allowed_hosts : sequence of str or None
+        Host names a request's ``Host`` and ``Origin`` may name; None allows any (for
+        ``--allow-remote``).
+    warm : bool
+        Compile (or load from numba's cache) the solvers' kernels in a background thread at
+        start-up, so that the first reconstruction does not wait for them.
+    static_dir : Path, optional
+        The built client; :data:`STATIC_DIR` by default. Looked up per request, so a client
+        built while the server runs is served without a restart.
+
+    Returns
+    -------
+    FastAPI
+
+    Raises
+    ------
+    InputError
+        If ``initial_image`` cannot be read or is not an example.
+    """
+    static_dir = STATIC_DIR if static_dir is None else Path(static_dir)
+    state = _State(limits)
+    initial = _store_initial(state, initial_image) if initial_image is not None else None
+
+    app = FastAPI(title="shadeform", docs_url=None, redoc_url=None, openapi_url="/api/openapi.json",
+                  lifespan=_lifespan(warm))
+    _add_error_handlers(app)
+    app.add_middleware(_Guard, allowed_hosts=allowed_hosts, limits=limits)
+
+    options = _options(limits, initial)
+
+    @app.get("/api/options", response_model=Options)
+    def get_options() -> Response:
+        return _json(options)
+
+    @app.post("/api/images", response_model=ImageInfo, status_code=201)
+    def post_image(file: UploadFile = File(..., description="The image file.")) -> Response:
+        from shadeform.io.images import ImageTooLargeError, load_pixels
+
+        data = file.file.read(limits.max_upload_bytes + 1)
+        if len(data) > limits.max_upload_bytes:
+            raise HTTPException(413, _file_too_large(limits))
+        if not data:
+            raise HTTPException(400, "the uploaded file is empty (0 bytes); choose an image file")
+        try:
+            pixels = load_pixels(data, max_pixels=limits.max_pixels)
+        except ImageTooLargeError as err:
+            raise HTTPException(413, str(err)) from None
+        except InputError as err:
+            raise HTTPException(415, str(err)) from None
+        entry = state.add(_display_name(file.filename), pixels)
+        return _json(_image_info(entry), status_code=201)
+
+    @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
+    def post_example(name: str, size: int | None = Query(None, description="Side of a synth: example.")) -> Response:
+        entry = state.example(name, size)
+        return _json(_image_info(entry), status_code=201)
+
+    @app.get("/api/images/{image_id}/photo.png", response_class=Response)
+    def get_photo(image_id: str) -> Response:
+        entry = state.image(image_id)
+        png = state.pngs.get((image_id, "photo"))
+        if png is None:
+            png = _png(entry.pixels[:, :, 0] if entry.pixels.shape[2] == 1 else entry.pixels)
+            state.pngs.put((image_id, "photo"), png, len(png))
+        return Response(png, media_type="image/png", headers={"Cache-Control": "no-cache"})
+
+    @app.get("/api/images/{image_id}/channel.png", response_class=Response)
+    def get_channel(
+        image_id: str,
+        channel: str = Query("luma", description="luma, r, g, b or max."),
+        filter: str = Query("none", description="none, or KIND:SIZE (e.g. gaussian:2, median:1)."),
+    ) -> Response:
+        from shadeform.io.images import select_channel
+        from shadeform.preprocess import apply_filter, object_mask, parse_filter
+
+        entry = state.image(image_id)
+        spec = parse_filter(filter)
+        image = select_channel(entry.pixels, channel)
+        if spec.kind != "none":
+            mask = entry.mask if entry.mask is not None else object_mask(image)
+            image = apply_filter(image, mask, spec)
+        return Response(_png(image), media_type="image/png", headers={"Cache-Control": "no-cache"})
+
+    @app.post("/api/reconstruct", response_model=ReconstructResult)
+    async def post_reconstruct(body: ReconstructRequest, request: Request) -> Response:
+        entry = state.image(body.image_id)
+        async with state.solve_lock:
+            # a client that gave up on this request (a newer one superseded it) gets no solve
+            if await request.is_disconnected():
+                return Response(status_code=204)
+            result = await run_in_threadpool(_reconstruct_result, state, entry, body)
+        return Response(result.model_dump_json(), media_type="application/json")
+
+    @app.post("/api/export", response_class=Response)
+    async def post_export(
+        body: ReconstructRequest,
+        format: str = Query(..., description="A suffix from Options.formats, e.g. .wrl."),
+    ) -> Response:
+        from shadeform.io.exporters import available_formats
+
+        suffix = _format_suffix(format, available_formats())
+        entry = state.image(body.image_id)
+        async with state.solve_lock:
+            data = await run_in_threadpool(_export_bytes, state, entry, body.params, suffix)
+        filename = _safe_stem(entry.name) + suffix
+        return Response(data, media_type=_MEDIA_TYPES.get(suffix, "application/octet-stream"),
+                        headers={"Content-Disposition": f'attachment; filename="{filename}"'})
+
+    @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
+    def index() -> Response:
+        page = static_dir / "index.html"
+        if page.is_file():
+            return FileResponse(page, headers={"Cache-Control": "no-cache"})
+        return HTMLResponse(_NO_CLIENT_PAGE)
+
+    # the client's scripts, styles and pictures; looked up per request (the client may be built
+    # while the server runs); StaticFiles refuses any path that resolves outside the folder
+    client_files = StaticFiles(directory=static_dir, check_dir=False)
+
+    @app.api_route("/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"],
+                   include_in_schema=False)
+    async def static_file(path: str, request: Request) -> Response:
+        # reached by every request no other route took, whatever its method
+        if path == "api" or path.startswith("api/"):
+            if any(route.path_regex.match("/" + path) for route in app.router.routes
+                   if isinstance(route, APIRoute) and route is not static_route):
+                raise HTTPException(405)
+            raise HTTPException(404, "no such API endpoint; the endpoints are listed in /api/openapi.json")
+        if request.method not in ("GET", "HEAD"):
+            raise HTTPException(405)
+        return await client_files.get_response(path, request.scope)
+
+    static_route = app.router.routes[-1]
+    return app
+
+
+# --- state -------------------------------------------------------------------------------------
+
+
+class _State:
+    """What one app holds: images, recent reconstructions, encoded PNGs, the solver lock."""
+
+    def __init__(self, limits: AppLimits) -> None:
+        self.limits = limits
+        self.images = LRU(max_items=limits.max_images, max_bytes=limits.max_image_bytes)
+        self.results = LRU(max_items=limits.max_results, max_bytes=limits.max_result_bytes)
+        self.pngs = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
+        self._examples: dict[tuple[str, int | None], str] = {}
+        # one solve at a time: two would only share the cores and both arrive late
+        self.solve_lock = asyncio.Lock()
+
+    def add(self, name: str, pixels: np.ndarray, *, mask=None, suggested=None, pinned=False) -> StoredImage:
+        entry = StoredImage(new_image_id(), name, pixels, mask, suggested)
+        self.images.put(entry.image_id, entry, entry.nbytes, pinned=pinned)
+        return entry
+
+    def image(self, image_id: str) -> StoredImage:
+        entry = self.images.get(image_id)
+        if entry is None:
+            shown = image_id if len(image_id) <= 40 else image_id[:37] + "..."
+            raise HTTPException(404, f"unknown image id {shown!r}: the server does not have it (it was "
+                                     "restarted or forgot older images); reload the page or open the image again")
+        return entry
+
+    def example(self, name: str, size: int | None, *, pinned: bool = False) -> StoredImage:
+        from shadeform.examples import EXAMPLES, load_example
+
+        if name not in EXAMPLES:
+            shown = name if len(name) <= 40 else name[:37] + "..."
+            raise HTTPException(404, f"unknown example {shown!r}; choose one of: {', '.join(EXAMPLES)}")
+        if size is not None and size * size > self.limits.max_pixels:
+            raise HTTPException(413, f"size {size} gives {size * size:,} pixels, more than the limit of "
+                                     f"{self.limits.max_pixels:,}; choose a smaller size")
+        known = self._examples.get((name, size))
+        if known is not None and self.images.get(known) is not None:
+            return self.images.get(known)
+        image, info = load_example(name, size=size)
+        entry = self.add(name, image[:, :, None], mask=info["mask"], suggested=_suggested(info), pinned=pinned)
+        self._examples[(name, size)] = entry.image_id
+        return entry
+
+
+def _store_initial(state: _State, source: str | Path) -> StoredImage:
+    """The image given on the command line: a file (a Path) or an example name (a str)."""
+    if isinstance(source, Path):
+        from shadeform.io.images import load_pixels
+
+        pixels = load_pixels(source, max_pixels=state.limits.max_pixels)
+        return state.add(_display_name(source.name), pixels, pinned=True)
+    try:
+        return state.example(source, None, pinned=True)
+    except HTTPException as err:
+        raise InputError(err.detail) from None
+
+
+def _lifespan(warm: bool):
+    from contextlib import asynccontextmanager
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        if warm:
+            threading.Thread(target=warm_up, name="shadeform-warm-up", daemon=True).start()
+        yield
+
+    return lifespan
+
+
+def warm_up() -> None:
+    """Run every method and integrator once on a tiny scene: compiles (or loads) numba kernels."""
+    from shadeform import reconstruct, synth, to_mesh
+    from shadeform.pipeline import INTEGRATORS, METHODS
+
+    scene = synth.scene("sphere", size=24)
+    for method in METHODS:
+        for integrator in (None, *INTEGRATORS):
+            to_mesh(reconstruct(scene.image, mask=scene.mask, method=method, integrator=integrator), step=2)
+
+
+# --- the work ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Solved:
+    """A cached reconstruction with what every response about it repeats."""
+
+    reconstruction: Any
+    mask_png: str
+    depth_range: tuple[float, float]
+
+
+def _solve(state: _State, entry: StoredImage, params: ReconstructParams) -> tuple[_Solved, bool]:
+    """The reconstruction for these parameters, from the cache when only ``step`` changed."""
+    from shadeform import reconstruct
+    from shadeform.io.images import select_channel
+    from shadeform.light import light_from_slant_tilt
+    from shadeform.preprocess import Filter
+
+    key = (entry.image_id, params.model_dump_json(exclude={"step"}))
+    solved = state.results.get(key)
+    if solved is not None:
+        return solved, True
+    if params.light.mode == "estimate":
+        light: Any = "estimate"
+    elif params.light.mode == "slant_tilt":
+        light = light_from_slant_tilt(params.light.slant, params.light.tilt)
+    else:
+        light = (0.0, 0.0, 1.0)
+    regions = params.concave.model_dump()
+    rec = reconstruct(
+        select_channel(entry.pixels, params.channel),
+        light=light,
+        method=params.method,
+        mask=entry.mask,
+        filter=Filter(params.filter.kind, params.filter.size) if params.filter.kind != "none" else None,
+        references=[tuple(ref) for ref in params.references],
+        concave=regions if regions["regions"] else None,
+        integrator=params.integrator,
+        refine=params.refine,
+    )
+    depth = rec.depth[rec.mask]
+    solved = _Solved(rec, base64.b64encode(_png(rec.mask.astype(np.float32))).decode("ascii"),
+                     (float(np.nanmin(depth)), float(np.nanmax(depth))))
+    nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
+    state.results.put(key, solved, nbytes)
+    return solved, False
+
+
+def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequest) -> ReconstructResult:
+    from shadeform import to_mesh
+
+    start = time.perf_counter()
+    solved, cached = _solve(state, entry, body.params)
+    rec = solved.reconstruction
+    timings = {} if cached else dict(rec.info["timings"])
+    lap = time.perf_counter()
+    mesh = to_mesh(rec, step=body.params.step)
+    timings["mesh"] = time.perf_counter() - lap
+    lap = time.perf_counter()
+    mesh_data = MeshData(
+        vertex_count=mesh.n_vertices,
+        triangle_count=mesh.n_faces,
+        positions=_base64(mesh.vertices, "<f4"),
+        normals=_base64(mesh.normals, "<f4"),
+        uvs=_base64(mesh.uv, "<f4"),
+        indices=_base64(mesh.faces, "<u4"),
+    )
+    timings["encode"] = time.perf_counter() - lap
+    timings["total"] = time.perf_counter() - start
+    return ReconstructResult(
+        request_id=body.request_id,
+        mesh=mesh_data,
+        mask_png=solved.mask_png,
+        light=tuple(float(v) for v in rec.light),
+        references=[(int(r), int(c)) for r, c in rec.info["references"]],
+        depth_range=solved.depth_range,
+        timings=timings,
+        info={**_plain(rec.info), "cached": cached},
+    )
+
+
+def _export_bytes(state: _State, entry: StoredImage, params: ReconstructParams, suffix: str) -> bytes:
+    from shadeform import export, to_mesh
+
+    solved, _ = _solve(state, entry, params)
+    mesh = to_mesh(solved.reconstruction, step=params.step)
+    with tempfile.TemporaryDirectory(prefix="shadeform-export-") as folder:
+        # the file name is ours: a fixed stem and a suffix from the registry
+        path = export(mesh, Path(folder) / f"model{suffix}")
+        return path.read_bytes()
+
+
+# --- encoding ----------------------------------------------------------------------------------
+
+
+def _json(model, status_code: int = 200) -> Response:
+    return Response(model.model_dump_json(), status_code=status_code, media_type="application/json")
+
+
+def _base64(array: np.ndarray, dtype: str) -> str:
+    """An array's values as base64 of the packed little-endian ``dtype`` (a typed array's bytes)."""
+    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
+
+
+def _png(image: np.ndarray) -> bytes:
+    """An (H, W) or (H, W, 3) image in [0, 1] as an 8-bit PNG (fast compression: it is local)."""
+    from PIL import Image
+
+    samples = np.rint(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
+    buffer = io.BytesIO()
+    Image.fromarray(samples).save(buffer, format="PNG", compress_level=1)
+    return buffer.getvalue()
+
+
+def _plain(value: Any) -> Any:
+    """JSON types only (numpy scalars and arrays, tuples -> numbers and lists)."""
+    if isinstance(value, dict):
+        return {str(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+# --- the parameters ----------------------------------------------------------------------------
+
+
+def _suggested(info: dict[str, Any]) -> dict[str, Any]:
+    """An example's settings (:func:`shadeform.examples.load_example`) as ReconstructParams."""
+    from shadeform.light import slant_tilt
+    from shadeform.preprocess import parse_filter
+
+    light = np.asarray(info["light"], dtype=np.float64)
+    if np.allclose(light, (0.0, 0.0, 1.0)):
+        light_params = LightParams()
+    else:
+        slant, tilt = slant_tilt(light)
+        light_params = LightParams(mode="slant_tilt", slant=slant, tilt=tilt)
+    spec = parse_filter(info["filter"])
+    return ReconstructParams(
+        filter=FilterParams(kind=spec.kind, size=spec.size), light=light_params, step=int(info["step"])
+    ).model_dump()
+
+
+def _image_info(entry: StoredImage) -> ImageInfo:
+    height, width, channels = entry.pixels.shape
+    suggested = None if entry.suggested is None else ReconstructParams(**entry.suggested)
+    return ImageInfo(image_id=entry.image_id, name=entry.name, width=width, height=height,
+                     channels=channels, suggested=suggested)
+
+
+def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
+    from shadeform.examples import EXAMPLES
+    from shadeform.io.exporters import available_formats
+    from shadeform.io.images import CHANNELS
+    from shadeform.pipeline import INTEGRATORS, METHODS
+    from shadeform.preprocess import FILTER_KINDS
+
+    return Options(
+        methods=list(METHODS),
+        integrators=list(INTEGRATORS),
+        channels=list(CHANNELS),
+        filters=list(FILTER_KINDS),
+        formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],
+        examples=[ExampleInfo(name=name, title=title) for name, title in EXAMPLES.items()],
+        limits=Limits(max_upload_bytes=limits.max_upload_bytes, max_pixels=limits.max_pixels),
+        defaults=ReconstructParams(),
+        initial_image=None if initial is None else _image_info(initial),
+    )
+
+
+def _format_suffix(text: str, formats: dict[str, str]) -> str:
+    suffix = text.strip().lower()
+    suffix = suffix if suffix.startswith(".") else "." + suffix
+    if suffix not in formats:
+        shown = text if len(text) <= 20 else text[:17] + "..."
+        raise HTTPException(422, f"unknown export format {shown!r}; choose one of: {', '.join(formats)}")
+    return suffix
+
+
+def _display_name(filename: str | None) -> str:
+    """A file name to show: no folders, no control characters, at most 100 characters."""
+    name = re.split(r"[/\\]", filename or "")[-1]
+    name = "".join(ch for ch in name if ch.isprintable()).strip()
+    return name[:100] or "image"
+
+
+def _safe_stem(name: str) -> str:
+    """A download's file stem: letters, digits, ``-`` and ``_`` only, never empty."""
+    stem = name.rsplit(".", 1)[0] if "." in name.lstrip(".") else name
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "_", stem).strip("_")
+    return stem[:60] or "model"
+
+
+def _size(nbytes: int) -> str:
+    return f"{nbytes / 2**20:.3g} MiB" if nbytes >= 2**20 else f"{nbytes / 2**10:.3g} KiB"
+
+
+def _file_too_large(limits: AppLimits) -> str:
+    return f"the file is larger than {_size(limits.max_upload_bytes)}; open a smaller image (crop or downscale it)"
+
+
+# --- errors ------------------------------------------------------------------------------------
+
+
+def _add_error_handlers(app: FastAPI) -> None:
+    async def http_error(request: Request, err: HTTPException) -> Response:
+        detail = err.detail if isinstance(err.detail, str) else json.dumps(err.detail)
+        if err.status_code == 404 and detail == "Not Found":
+            detail = f"nothing at {request.url.path}; open / for the app"
+        elif err.status_code == 405:
+            detail = f"{request.method} is not allowed on {request.url.path}; see /api/openapi.json"
+        return _error(err.status_code, detail, getattr(err, "headers", None))
+
+    async def validation_error(request: Request, err: RequestValidationError) -> Response:
+        return _error(422, _validation_message(err.errors()))
+
+    async def input_error(request: Request, err: InputError) -> Response:
+        from shadeform.io.images import ImageTooLargeError
+
+        return _error(413 if isinstance(err, ImageTooLargeError) else 422, str(err))
+
+    async def server_error(request: Request, err: Exception) -> Response:
+        return _error(500, f"internal error ({type(err).__name__}) in shadeform; please report it with "
+                           "the steps that led here")
+
+    app.add_exception_handler(HTTPException, http_error)
+    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(InputError, input_error)
+    app.add_exception_handler(Exception, server_error)
+
+
+def _error(status: int, detail: str, headers: dict | None = None) -> Response:
+    return JSONResponse({"detail": " ".join(str(detail).split())}, status_code=status, headers=headers)
+
+
+def _validation_message(errors: Sequence[dict]) -> str:
+    """pydantic's error list as one line: the first problem, where it is, and how many more."""
+    first = errors[0]
+    kind = first.get("type", "")
+    where = ".".join(str(part) for part in first.get("loc", ()) if part not in ("body", "query", "path"))
+    if kind == "json_invalid":
+        reason = first.get("ctx", {}).get("error", "")
+        message = f"the request body is not valid JSON ({reason}); send a JSON object"
+    elif kind == "missing":
+        if where == "file":
+            message = "no file in the upload; send the image as the multipart form field 'file'"
+        else:
+            message = f"{where or 'body'}: missing; it is required"
+    elif kind == "extra_forbidden":
+        message = f"{where}: unknown field; remove it (see /api/openapi.json for the fields)"
+    else:
+        text = first.get("msg", "invalid value")
+        text = re.sub(r"^Input should be", "must be", text)
+        text = re.sub(r"^Value error, ", "", text)
+        message = f"{where or 'body'}: {text}"
+    more = len(errors) - 1
+    return message + (f" (and {more} more problem{'s' * (more > 1)})" if more else "")
+
+
+# --- the guard: hosts, origins, body sizes -----------------------------------------------------
+
+
+class _Guard:
+    """ASGI middleware run before anything else sees a request.
+
+    - ``Host`` (and ``Origin``, when a browser sends one) must name an allowed host: a page from
+      another site, or a DNS name rebound to 127.0.0.1, cannot use the app.
+    - Request bodies are read here up to their limit (the upload limit plus form overhead for
+      ``/api/images``, the JSON limit elsewhere) and refused with 413 beyond it, before any parser
+      runs or anything is spooled to disk.
+    """
+
+    _FORM_OVERHEAD = 64 * 1024
+
+    def __init__(self, app, *, allowed_hosts: Iterable[str] | None, limits: AppLimits) -> None:
+        self.app = app
+        self.allowed = None if allowed_hosts is None else {h.lower().strip("[]") for h in allowed_hosts}
+        self.limits = limits
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        headers = {key.decode("latin-1").lower(): value.decode("latin-1") for key, value in scope["headers"]}
+        refusal = self._refusal(headers)
+        if refusal is not None:
+            return await _send_error(send, 403, refusal)
+        if scope["method"] not in ("POST", "PUT", "PATCH"):
+            return await self.app(scope, receive, send)
+
+        limit = self.limits.max_json_bytes
+        if scope["path"] == "/api/images":
+            limit = self.limits.max_upload_bytes + self._FORM_OVERHEAD
+        if scope["path"] == "/api/images":
+            too_large = _file_too_large(self.limits)
+        else:
+            too_large = f"the request body is larger than {_size(limit)}; send fewer or simpler regions"
+        declared = headers.get("content-length", "")
+        if declared.isdigit() and int(declared) > limit:
+            return await _send_error(send, 413, too_large)
+        chunks, total = [], 0
+        while True:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return
+            chunk = message.get("body", b"")
+            total += len(chunk)
+            if total > limit:
+                return await _send_error(send, 413, too_large)
+            chunks.append(chunk)
+            if not message.get("more_body", False):
+                break
+        body = b"".join(chunks)
+        replayed = False
+
+        async def replay():
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()  # after the body: the disconnect, when the client leaves
+
+        return await self.app(scope, replay, send)
+
+    def _refusal(self, headers: dict[str, str]) -> str | None:
+        if self.allowed is None:
+            return None
+        host = _host_name(headers.get("host", ""))
+        if host not in self.allowed:
+            return (f"this server only answers requests addressed to {', '.join(sorted(self.allowed))}; "
+                    "open it at the address it printed (or start it with --host and --allow-remote)")
+        origin = headers.get("origin")
+        if origin and origin != "null" and _host_name(origin.split("://", 1)[-1]) not in self.allowed:
+            return "requests from other sites' pages are refused; open the app at the address it printed"
+        return None
+
+
+def _host_name(authority: str) -> str:
+    """The host of ``host[:port]`` or ``[v6]:port``, lower case, without brackets."""
+    authority = authority.strip().lower().split("/", 1)[0]
+    if authority.startswith("["):
+        return authority[1:].split("]", 1)[0]
+    return authority.rsplit(":", 1)[0] if authority.count(":") == 1 else authority
+
+
+async def _send_error(send: Callable, status: int, detail: str) -> None:
+    body = json.dumps({"detail": detail}).encode()
+    await send({"type": "http.response.start", "status": status,
+                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+    await send({"type": "http.response.body", "body": body})
