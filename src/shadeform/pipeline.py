@@ -21,10 +21,11 @@ from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
 
-METHODS = ("propagation", "eikonal")
+METHODS = ("propagation", "eikonal", "oblique")
 INTEGRATORS = ("paths", "poisson", "fourier", "bilateral")
 #: What turns each method's normals into depth when ``integrator`` is not given.
-DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)"}
+DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)",
+                      "oblique": "oblique (chord-equation descent depth)"}
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -59,10 +60,13 @@ def reconstruct(
         Direction toward the light in the camera frame (``docs/conventions.md``), or
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
-    method : {"propagation", "eikonal"}
-        Solver: the 2002 convexity-guided propagation (any light), or fast marching of the
+    method : {"propagation", "eikonal", "oblique"}
+        Solver: the 2002 convexity-guided propagation (any light), fast marching of the
         eikonal equation from the singular points (light at +z only; concave regions and
-        references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`).
+        references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`), or the
+        oblique-light solver (any light, attached shadows as ``N . L <= 0``; marching from the
+        brightest pixels, then descent on chord equations: :mod:`shadeform.solvers.oblique`).
+        With "oblique" the first reference, if given, only sets where ``z = 0``.
     mask : (H, W) bool, optional
         Object pixels; by default found automatically (dark background).
     filter : str, optional
@@ -78,7 +82,7 @@ def reconstruct(
     integrator : {"paths", "poisson", "fourier", "bilateral"}, optional
         Depth from normals: the report's path averaging, masked least squares, its DCT solve on
         the bounding rectangle, or discontinuity-preserving (:func:`shadeform.integration.integrate`). By default
-        "paths" for propagation, and the eikonal solver's own depth for "eikonal".
+        "paths" for propagation, and the solver's own depth for "eikonal" and "oblique".
     refine : int
         Iterations of the integrability refinement of the propagated field
         (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
@@ -138,7 +142,10 @@ def reconstruct(
     cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
     lap("references")
 
-    if method == "eikonal":
+    if method == "oblique":
+        normals, depth, method_info = _oblique(shading, mask, light, k, refs, concave_x, concave_y,
+                                               integrator, lap)
+    elif method == "eikonal":
         normals, depth, method_info = _eikonal(shading, mask, light, k, references, concave_x, concave_y,
                                                integrator, lap)
     else:
@@ -214,6 +221,22 @@ def _eikonal(shading, mask, light, k, references, concave_x, concave_y, integrat
     lap("depth")
     sources_info = [{"row": s.row, "col": s.col, "kind": s.kind, "height": float(s.height)} for s in result.sources]
     return result.normals.copy(), depth, {"sources": sources_info}
+
+
+def _oblique(shading, mask, light, k, refs, concave_x, concave_y, integrator, lap):
+    """Any light: marching from the brightest pixels, shadow fill, descent; its own depth."""
+    from shadeform.solvers.oblique import oblique_depth
+
+    result = oblique_depth(shading, mask, light=light, k=k, concave=(concave_x, concave_y))
+    lap("normals")
+    main = refs[0][0]
+    depth = result.depth - result.depth[main]
+    if integrator is not None:
+        depth = _integrate(result.normals, mask, main, integrator)
+    lap("depth")
+    info = {"sources": len(result.info["sources"]), "sweeps": result.info["sweeps"],
+            "shadowed": int(np.count_nonzero(mask & ~result.lit))}
+    return result.normals.copy(), depth, info
 
 
 def _integrate(normals, mask, origin, integrator):
