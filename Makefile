@@ -5,8 +5,14 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 JS     := tests/js
 JSSTAMP := $(JS)/node_modules/.installed-stamp
+# The browser client (TypeScript + three.js in web/), built into the package that serves it.
+WEB      := web
+WEBDEPS  := $(WEB)/node_modules/.installed-stamp
+STATIC   := src/shadeform/app/static
+WEBSTAMP := $(STATIC)/.built-stamp
+WEBSRC   := $(WEB)/index.html $(WEB)/vite.config.ts $(WEB)/tsconfig.json $(wildcard $(WEB)/src/*.ts $(WEB)/src/*.css)
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test bench clean web app
 
 venv: $(STAMP)
 
@@ -21,10 +27,25 @@ $(JSSTAMP): $(JS)/package.json $(JS)/package-lock.json
 	npm ci --prefix $(JS) --no-audit --no-fund --silent
 	@touch $@
 
+$(WEBDEPS): $(WEB)/package.json $(WEB)/package-lock.json
+	npm ci --prefix $(WEB) --no-audit --no-fund --silent
+	@touch $@
+
+# rebuilt only when a source under web/ changed (vite empties static/, the stamp comes back last)
+$(WEBSTAMP): $(WEBDEPS) $(WEBSRC)
+	npm run --prefix $(WEB) --silent build
+	@touch $@
+
+web: $(WEBSTAMP)
+
+# the app on a shipped example: a synthetic bowl (draw a concave region over it to flip it)
+app: $(STAMP) $(WEBSTAMP)
+	$(VENV)/bin/shadeform app synth:bowl
+
 demo: $(STAMP)
 	$(VENV)/bin/shadeform demo --out out/demo
 
-test: $(STAMP) $(JSSTAMP)
+test: $(STAMP) $(JSSTAMP) $(WEBSTAMP)
 	$(PY) -m pytest -n 2 -q
 
 bench: $(STAMP)
@@ -33,6 +54,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_eikonal.py
 	$(PY) benchmarks/bench_light.py
 	$(PY) benchmarks/bench_diligent.py
+	$(PY) benchmarks/bench_methods.py
 
 clean:
-	rm -rf $(VENV) $(JS)/node_modules out
+	rm -rf $(VENV) $(JS)/node_modules $(WEB)/node_modules $(STATIC) out

@@ -1,0 +1,447 @@
+"""End-to-end tests of ``shadeform app`` in a real browser: the server, the built client, Chromium.
+
+The real server (:func:`shadeform.app.server.create_app` under uvicorn, in a thread, on a free
+loopback port) serves the client built into ``src/shadeform/app/static/`` (``make web``), and
+Playwright drives Debian's Chromium (``/usr/bin/chromium``) with mouse clicks and key presses as
+a person would. Facts are read from the page's read-only test hook ``window.shadeform`` (the
+parameters, the mesh on screen) and from the files the export buttons download, which are
+validated by the same independent readers as the exporter tests (``ivinfo``/``ivcat``,
+three.js's ``VRMLLoader``).
+
+Without ``/usr/bin/chromium`` these tests skip, saying so; when ``CI`` is set they fail instead.
+A full-page screenshot of the app is kept in ``tests/artifacts/app.png``.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import socket
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shadeform.mesh import Mesh, to_mesh
+from test_exporters import check_inventor, check_vrml, inventor_numbers, require, run_tool
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
+# a cold start compiles the numba kernels (up to a minute on 2 cores); warm solves take < 1 s
+FIRST_RESULT_MS = 180_000
+RESULT_MS = 60_000
+
+# the synthetic bowl at its default size (256 px): its object is a disk of radius ~108 px
+BOWL = "synth:bowl"
+CENTRE = (128, 128)
+RING_RADIUS = 70  # inside the disk, inside the polygon drawn below
+
+
+# ---------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def server():
+    """The app's real server on a free loopback port; yields its address."""
+    import uvicorn
+
+    from shadeform.app.server import STATIC_DIR, create_app
+
+    if not (STATIC_DIR / "index.html").is_file():
+        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    config = uvicorn.Config(create_app(warm=True), host="127.0.0.1", port=port, log_level="warning")
+    uvicorn_server = uvicorn.Server(config)
+    thread = threading.Thread(target=uvicorn_server.run, name="app-under-test", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not uvicorn_server.started:
+        assert thread.is_alive() and time.monotonic() < deadline, "the app server did not start"
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}/"
+    uvicorn_server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    require(CHROMIUM.is_file(), f"{CHROMIUM} not installed (Debian package chromium): cannot run the browser tests")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=["--no-sandbox"])
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def page(browser, server):
+    """A fresh browser profile (empty storage) on the app's page, ready to use."""
+    context = browser.new_context(viewport={"width": 1440, "height": 860}, accept_downloads=True)
+    page = context.new_page()
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(server)
+    page.evaluate("window.shadeform.ready")
+    yield page
+    context.close()
+    assert not errors, f"uncaught errors in the page: {errors}"
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def applied(page) -> int:
+    return page.evaluate("window.shadeform.applied()")
+
+
+def wait_for_result(page, after: int, timeout=RESULT_MS) -> None:
+    """Wait until a result newer than the ``after``-th is on screen and nothing is pending."""
+    page.wait_for_function(
+        f"window.shadeform.applied() > {after} && !window.shadeform.state().busy", timeout=timeout
+    )
+
+
+def open_example(page, name: str) -> None:
+    before = applied(page)
+    page.click("#examples-menu > button")
+    page.click(f'#examples-menu [data-example="{name}"]')
+    wait_for_result(page, before, timeout=FIRST_RESULT_MS)
+    assert page.evaluate("window.shadeform.state().image.name") == name
+
+
+def depth(page, row: int, col: int) -> float:
+    value = page.evaluate(f"window.shadeform.depthAt({row}, {col})")
+    assert value is not None, f"no mesh vertex near pixel ({row}, {col})"
+    return value
+
+
+def ring_points(radius: float, count: int = 8):
+    """(row, col) pixels on a circle about the bowl's centre."""
+    angles = np.linspace(0, 2 * np.pi, count, endpoint=False)
+    return [(round(CENTRE[0] + radius * np.sin(a)), round(CENTRE[1] + radius * np.cos(a))) for a in angles]
+
+
+def centre_minus_ring(zs_at) -> float:
+    """Height of the centre above the mean of a ring inside the object: > 0 bulges toward the viewer."""
+    return zs_at(*CENTRE) - float(np.mean([zs_at(r, c) for r, c in ring_points(RING_RADIUS)]))
+
+
+def click_image(page, x: float, y: float) -> None:
+    """Click image pixel (x = column, y = row) on the image pane's canvas."""
+    at = page.evaluate(f"window.shadeform.pagePoint({x}, {y})")
+    page.mouse.click(at["x"], at["y"])
+
+
+def shown_mesh(page) -> Mesh:
+    """The mesh the 3D view shows, as the library's Mesh (float32 values widened)."""
+    data = page.evaluate("window.shadeform.mesh()")
+    return Mesh(
+        vertices=np.array(data["positions"], dtype=np.float64).reshape(-1, 3),
+        faces=np.array(data["indices"], dtype=np.int64).reshape(-1, 3),
+        normals=np.array(data["normals"], dtype=np.float64).reshape(-1, 3),
+        uv=np.array(data["uvs"], dtype=np.float64).reshape(-1, 2),
+    )
+
+
+def download(page, selector: str, menu: str, folder: Path) -> Path:
+    """Open ``menu``, click ``selector`` in it and save the download it starts under ``folder``."""
+    page.click(f"{menu} > button")
+    with page.expect_download(timeout=RESULT_MS) as started:
+        page.click(selector)
+    done = started.value
+    assert done.failure() is None, done.failure()
+    target = folder / done.suggested_filename
+    done.save_as(target)
+    return target
+
+
+def nearest_z(points: np.ndarray, row: int, col: int) -> float:
+    """z of the vertex in (V, 3) ``points`` nearest pixel (row, col) (mesh convention: y = -row)."""
+    return float(points[np.argmin((points[:, 0] - col) ** 2 + (points[:, 1] + row) ** 2), 2])
+
+
+# ------------------------------------------------------------------------------- tests
+
+
+def test_bowl_flips_after_drawing_a_concave_region_and_exports_it(page, tmp_path):
+    open_example(page, BOWL)
+    # the convexity assumption makes the bowl a dome: the centre bulges toward the viewer
+    assert centre_minus_ring(lambda r, c: depth(page, r, c)) > 10
+
+    # draw an octagon over the bowl, corner by corner, and close it on its first corner
+    before = applied(page)
+    page.click('#tools [data-tool="polygon"]')
+    page.click('#axis [data-axis="both"]')
+    corners = [(CENTRE[1] + 90 * math.cos(a), CENTRE[0] + 90 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)]
+    for x, y in corners:
+        click_image(page, x, y)
+    click_image(page, *corners[0])
+    wait_for_result(page, before)
+    regions = page.evaluate("window.shadeform.state().params.concave.regions")
+    assert len(regions) == 1 and regions[0]["axis"] == "both"
+    np.testing.assert_allclose(regions[0]["polygon"], corners, atol=0.6)  # clicks land on the pixel grid
+
+    # inside the region the depth flips: the centre is now the lowest part
+    assert centre_minus_ring(lambda r, c: depth(page, r, c)) < -10
+    mesh = shown_mesh(page)
+
+    wrl = download(page, '[data-format=".wrl"]', "#export-menu", tmp_path)
+    iv = download(page, '[data-format=".iv"]', "#export-menu", tmp_path)
+    assert (wrl.suffix, iv.suffix) == (".wrl", ".iv")
+    check_vrml(wrl, mesh)
+    check_inventor(iv, mesh)
+    # and read back from the exported file itself: the centre is lower than the ring
+    points = inventor_numbers(run_tool("ivcat", str(iv)).stdout, "Coordinate3", "point").reshape(-1, 3)
+    assert centre_minus_ring(lambda r, c: nearest_z(points, r, c)) < -10
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "app.png"), full_page=True)
+
+
+def test_regions_file_load_move_delete_and_save(page, tmp_path):
+    from shadeform.regions import parse_regions
+
+    open_example(page, BOWL)
+    octagon = [[round(CENTRE[1] + 90 * math.cos(a), 2), round(CENTRE[0] + 90 * math.sin(a), 2)]
+               for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)]
+    regions_file = tmp_path / "bowl.regions.json"
+    regions_file.write_text(json.dumps({"regions": [{"polygon": octagon, "axis": "both"}]}))
+    before = applied(page)
+    page.set_input_files("#file-regions", str(regions_file))
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.concave.regions") == [{"polygon": octagon, "axis": "both"}]
+    assert centre_minus_ring(lambda r, c: depth(page, r, c)) < -10
+
+    # select it and drag it 10 pixels to the right
+    before = applied(page)
+    page.click('#tools [data-tool="select"]')
+    start = page.evaluate(f"window.shadeform.pagePoint({CENTRE[1]}, {CENTRE[0]})")
+    end = page.evaluate(f"window.shadeform.pagePoint({CENTRE[1] + 10}, {CENTRE[0]})")
+    page.mouse.move(start["x"], start["y"])
+    page.mouse.down()
+    page.mouse.move(end["x"], end["y"], steps=5)
+    page.mouse.up()
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().selectedRegion") == 0
+    moved = np.array(page.evaluate("window.shadeform.state().params.concave.regions[0].polygon"))
+    np.testing.assert_allclose(moved - np.array(octagon), [[10, 0]] * 8, atol=0.5)
+
+    # the saved file is the CLI's format: the library's own parser reads it back
+    saved = download(page, '[data-action="save-regions"]', "#project-menu", tmp_path)
+    (region,) = parse_regions(saved)
+    np.testing.assert_allclose(region.polygon, moved)
+    assert region.axis == "both"
+
+    # Delete removes the selected region: the bowl is a dome again
+    before = applied(page)
+    page.keyboard.press("Delete")
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.concave.regions") == []
+    assert centre_minus_ring(lambda r, c: depth(page, r, c)) > 10
+
+
+def test_reference_clicks_add_and_remove_the_depth_origin(page):
+    open_example(page, BOWL)
+    auto = page.evaluate("window.shadeform.lastResult().references")
+    assert len(auto) == 1  # the brightest pixel, chosen automatically
+
+    before = applied(page)
+    page.click('#tools [data-tool="reference"]')
+    click_image(page, 128, 60)  # x = col, y = row
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.references") == [[60, 128]]
+    assert page.evaluate("window.shadeform.lastResult().references")[0] == [60, 128]
+    # the main reference is the depth origin (docs/conventions.md)
+    assert depth(page, 60, 128) == pytest.approx(0, abs=1e-4)
+
+    before = applied(page)
+    click_image(page, 128, 60)  # clicking it again removes it
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.references") == []
+    assert page.evaluate("window.shadeform.lastResult().references") == auto
+
+
+def test_a_newer_request_supersedes_older_ones(page, server):
+    open_example(page, BOWL)
+    before = applied(page)
+    # six step changes in quick succession, as a fast slider drag sends them
+    page.evaluate(
+        """() => {
+            const step = document.getElementById('step');
+            for (const value of [1, 2, 3, 4, 5, 6]) {
+                step.value = String(value);
+                step.dispatchEvent(new Event('change'));
+            }
+        }"""
+    )
+    wait_for_result(page, before)
+    page.wait_for_timeout(300)  # a stale response would land here
+    assert page.evaluate("window.shadeform.state().params.step") == 6
+    result = page.evaluate("window.shadeform.lastResult()")
+    assert result["request_id"] == page.evaluate("window.shadeform.requests()")  # the newest one sent
+    # the mesh on screen is the step-6 mesh of the library's own reconstruction
+    from shadeform import reconstruct
+    from shadeform.examples import load_example
+
+    image, info = load_example(BOWL)
+    expected_rec = reconstruct(image, mask=info["mask"], light=info["light"])
+    expected = to_mesh(expected_rec, step=6)
+    assert result["vertex_count"] == expected.n_vertices
+    assert result["triangle_count"] == expected.n_faces
+
+    # a drag: moves 6 -> 1 (input events), then the release on 3 (a change event)
+    before = applied(page)
+    page.evaluate(
+        """async () => {
+            const step = document.getElementById('step');
+            for (const value of [5, 4, 3, 2, 1]) {
+                step.value = String(value);
+                step.dispatchEvent(new Event('input'));
+                await new Promise((resolve) => setTimeout(resolve, 15));
+            }
+            step.value = '3';
+            step.dispatchEvent(new Event('change'));
+        }"""
+    )
+    wait_for_result(page, before)
+    page.wait_for_timeout(300)
+    result = page.evaluate("window.shadeform.lastResult()")
+    assert page.evaluate("window.shadeform.state().params.step") == 3
+    assert result["request_id"] == page.evaluate("window.shadeform.requests()")
+    assert result["vertex_count"] == to_mesh(expected_rec, step=3).n_vertices
+
+
+def test_reload_keeps_the_image_parameters_and_regions_even_when_the_server_forgot(page, tmp_path):
+    # an upload, so a reload must send the bytes again once the server has forgotten the image
+    from PIL import Image
+
+    from shadeform.examples import load_example
+
+    image, _ = load_example("synth:sphere", size=96)
+    png = tmp_path / "ball.png"
+    Image.fromarray((image * 255).round().astype(np.uint8)).save(png)
+    before = applied(page)
+    page.set_input_files("#file-image", str(png))
+    wait_for_result(page, before, timeout=FIRST_RESULT_MS)
+
+    before = applied(page)
+    page.select_option("#filter-kind", "gaussian")
+    wait_for_result(page, before)
+    before = applied(page)
+    page.click('#tools [data-tool="polygon"]')
+    page.click('#axis [data-axis="x"]')
+    for x, y in [(30, 30), (60, 30), (45, 60)]:
+        click_image(page, x, y)
+    page.keyboard.press("Enter")
+    wait_for_result(page, before)
+    saved = page.evaluate("window.shadeform.state()")
+    page.wait_for_timeout(400)  # the session is written shortly after the last change
+
+    # make the stored image id unknown to the server, as after a restart
+    page.evaluate(
+        """() => {
+            const key = 'shadeform.session.v1';
+            const session = JSON.parse(localStorage.getItem(key));
+            session.image.image_id = 'forgotten';
+            localStorage.setItem(key, JSON.stringify(session));
+        }"""
+    )
+    page.reload()
+    page.evaluate("window.shadeform.ready")
+    wait_for_result(page, 0)
+    state = page.evaluate("window.shadeform.state()")
+    assert state["image"]["name"] == "ball.png"
+    assert state["image"]["image_id"] not in ("forgotten", saved["image"]["image_id"])
+    assert state["params"] == saved["params"]
+    assert state["params"]["filter"]["kind"] == "gaussian"
+    assert state["params"]["concave"]["regions"][0]["axis"] == "x"
+
+
+def test_project_file_round_trip(page, browser, server, tmp_path):
+    open_example(page, BOWL)
+    before = applied(page)
+    page.click("#light-mode [data-mode=slant_tilt]")
+    wait_for_result(page, before)
+    before = applied(page)
+    page.fill("#slant", "20")  # a range input: fill sets the value and fires input + change
+    wait_for_result(page, before)
+    project = download(page, '[data-action="save-project"]', "#project-menu", tmp_path)
+    document = json.loads(project.read_text())
+    assert document["format"] == "shadeform-project"
+    assert document["image"]["example"] == BOWL
+    assert document["params"]["light"] == {"mode": "slant_tilt", "slant": 20, "tilt": 0}
+
+    # a new profile (empty storage) opens the project file and gets the same session
+    context = browser.new_context(viewport={"width": 1440, "height": 860})
+    try:
+        other = context.new_page()
+        other.goto(server)
+        other.evaluate("window.shadeform.ready")
+        other.set_input_files("#file-project", str(project))
+        wait_for_result(other, 0)
+        state = other.evaluate("window.shadeform.state()")
+        assert state["image"]["name"] == BOWL
+        assert state["params"] == page.evaluate("window.shadeform.state().params")
+        light = other.evaluate("window.shadeform.lastResult().light")
+        np.testing.assert_allclose(light, [math.sin(math.radians(20)), 0, math.cos(math.radians(20))], atol=1e-6)
+    finally:
+        context.close()
+
+
+def test_view_keys_and_buttons_turn_zoom_and_recenter(page):
+    open_example(page, BOWL)
+    front = page.evaluate("window.shadeform.cameraOffset()")
+    assert front[0] == pytest.approx(0, abs=1e-6) and front[2] > 0  # looking down -z at the front
+
+    page.click("#view-host canvas")  # focus the view; a click without a drag does not turn it
+    page.keyboard.press("ArrowRight")
+    turned = page.evaluate("window.shadeform.cameraOffset()")
+    assert math.degrees(math.atan2(turned[0], turned[2])) == pytest.approx(15, abs=0.5)
+    page.keyboard.press("+")
+    zoomed = page.evaluate("window.shadeform.cameraOffset()")
+    assert np.linalg.norm(zoomed) == pytest.approx(np.linalg.norm(turned) / 1.2, rel=1e-3)
+    page.click('.nav [data-nav="zoom-out"]')
+    assert np.linalg.norm(page.evaluate("window.shadeform.cameraOffset()")) == pytest.approx(np.linalg.norm(turned), rel=1e-3)
+    page.keyboard.press("r")
+    np.testing.assert_allclose(page.evaluate("window.shadeform.cameraOffset()"), front, atol=1e-6)
+
+
+def drop_file(page, name: str, mime: str, data: bytes) -> None:
+    """Drop a file on the app's window, as dragging one from the desktop does."""
+    page.evaluate(
+        """([name, mime, base64]) => {
+            const bytes = Uint8Array.from(atob(base64), (ch) => ch.charCodeAt(0));
+            const transfer = new DataTransfer();
+            transfer.items.add(new File([bytes], name, { type: mime }));
+            document.getElementById('image-host').dispatchEvent(
+                new DragEvent('drop', { dataTransfer: transfer, bubbles: true, cancelable: true }));
+        }""",
+        [name, mime, base64.b64encode(data).decode()],
+    )
+
+
+def test_a_dropped_image_opens_and_a_dropped_non_image_shows_the_servers_message(page, tmp_path):
+    from PIL import Image
+
+    from shadeform.examples import load_example
+
+    image, _ = load_example("synth:ellipsoid", size=64)
+    png = tmp_path / "egg.png"
+    Image.fromarray((image * 255).round().astype(np.uint8)).save(png)
+    drop_file(page, "egg.png", "image/png", png.read_bytes())
+    wait_for_result(page, 0, timeout=FIRST_RESULT_MS)
+    assert page.evaluate("window.shadeform.state().image") | {"image_id": None} == {
+        "image_id": None, "name": "egg.png", "width": 64, "height": 64, "channels": 1, "suggested": None}
+
+    drop_file(page, "notes.png", "image/png", b"not a picture")
+    toast = page.locator("#toast")
+    toast.wait_for(state="visible", timeout=RESULT_MS)
+    assert "not an image" in toast.inner_text()
+    # the open image and its model stay
+    assert page.evaluate("window.shadeform.state().image.name") == "egg.png"

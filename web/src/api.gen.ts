@@ -1,0 +1,142 @@
+// Generated from shadeform.app.schema by `python -m shadeform.app.schema`; do not edit.
+// A test (tests/test_app_api.py) fails when this file and the schema disagree.
+
+export type Axis = "x" | "y" | "both";
+
+export type Channel = "luma" | "r" | "g" | "b" | "max";
+
+export type FilterKind = "none" | "gaussian" | "mean" | "median" | "minimum";
+
+export type LightMode = "z" | "slant_tilt" | "estimate";
+
+/** Smoothing before the solve (:func:`shadeform.preprocess.parse_filter`). */
+export interface FilterParams {
+  kind: FilterKind;
+  /** Gaussian sigma, or the window radius (whole number) of mean, median and minimum. */
+  size: number;
+}
+
+/** Where the light is: +z, slant/tilt in degrees (``docs/conventions.md``), or estimated. */
+export interface LightParams {
+  mode: LightMode;
+  slant: number;
+  tilt: number;
+}
+
+/** One concave region: polygon ``[[x, y], ...]`` (x = column, y = row, input pixels). */
+export interface ConcaveRegion {
+  polygon: [number, number][];
+  axis: Axis;
+}
+
+/** The CLI's regions JSON, exactly: ``{"regions": [...]}``. */
+export interface ConcaveRegions {
+  regions: ConcaveRegion[];
+}
+
+/** Everything the user sets for one reconstruction. */
+export interface ReconstructParams {
+  channel: Channel;
+  filter: FilterParams;
+  light: LightParams;
+  /** One of ``Options.methods``. */
+  method: string;
+  /** One of ``Options.integrators``, or null for the method's own. */
+  integrator: string | null;
+  /** Integrability refinement iterations (propagation only). */
+  refine: number;
+  /** Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve. */
+  step: number;
+  /** Reference pixels ``[row, col]`` chosen by the user; the automatic ones are added. */
+  references: [number, number][];
+  concave: ConcaveRegions;
+}
+
+/** A reconstruction (or export) of a stored image with these parameters. */
+export interface ReconstructRequest {
+  image_id: string;
+  params: ReconstructParams;
+  /** Chosen by the client, echoed in the result: a response older than the newest is stale. */
+  request_id: number;
+}
+
+/** A mesh format the export endpoint writes (:func:`shadeform.available_formats`). */
+export interface FormatInfo {
+  suffix: string;
+  description: string;
+}
+
+/** A shipped example (:data:`shadeform.examples.EXAMPLES`). */
+export interface ExampleInfo {
+  name: string;
+  title: string;
+}
+
+/** What an upload may be. */
+export interface Limits {
+  max_upload_bytes: number;
+  max_pixels: number;
+}
+
+/** A stored image; ``image_id`` names it in every later request. */
+export interface ImageInfo {
+  image_id: string;
+  name: string;
+  width: number;
+  height: number;
+  /** 1 for a gray file, 3 for colour. */
+  channels: number;
+  /** Settings the image is best reconstructed with (the examples have them), else null. */
+  suggested: ReconstructParams | null;
+}
+
+/** What the library offers, the upload limits and the default parameters. */
+export interface Options {
+  methods: string[];
+  integrators: string[];
+  channels: string[];
+  filters: string[];
+  formats: FormatInfo[];
+  examples: ExampleInfo[];
+  limits: Limits;
+  defaults: ReconstructParams;
+  /** The image the server was started with (``shadeform app IMAGE``), else null. */
+  initial_image: ImageInfo | null;
+}
+
+/** A triangle mesh in the convention of ``docs/conventions.md`` ("Meshes"), as base64. */
+export interface MeshData {
+  vertex_count: number;
+  triangle_count: number;
+  /** float32 little-endian, 3 per vertex: (x, y, z) = (col, -row, depth) */
+  positions: string;
+  /** float32 little-endian, 3 per vertex, unit length */
+  normals: string;
+  /** float32 little-endian, 2 per vertex: u = (col + 0.5) / W, v = 1 - (row + 0.5) / H */
+  uvs: string;
+  /** uint32 little-endian, 3 per triangle, counter-clockwise seen from +z */
+  indices: string;
+}
+
+/** One reconstruction: the mesh, and what the library used and found. */
+export interface ReconstructResult {
+  request_id: number;
+  mesh: MeshData;
+  /** The object mask as a base64 8-bit grey PNG (255 = object), the image's size. */
+  mask_png: string;
+  /** Unit vector toward the light that was used (given or estimated). */
+  light: [number, number, number];
+  /** Reference pixels used, ``[row, col]``: the user's, then the automatic ones. */
+  references: [number, number][];
+  /** Smallest and largest depth on the object, pixel units. */
+  depth_range: [number, number];
+  /** Seconds per stage: the library's stages, then mesh, encode, total. */
+  timings: Record<string, number>;
+  /** What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused). */
+  info: Record<string, unknown>;
+}
+
+/** Every error response: one line saying what was wrong and what to do. */
+export interface ErrorBody {
+  detail: string;
+}

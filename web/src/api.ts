@@ -1,0 +1,158 @@
+// The HTTP API of `shadeform app` (all under /api), typed with the generated schema.
+//
+// Every error body is {"detail": "<one line>"}; ApiError carries that line and the status so
+// the UI can show it as it is and react to 404 (the server forgot an image) specially.
+import type {
+  ImageInfo,
+  MeshData,
+  Options,
+  ReconstructParams,
+  ReconstructRequest,
+  ReconstructResult,
+} from './api.gen';
+
+export type FilterSpec = ReconstructParams['filter'];
+
+export class ApiError extends Error {
+  constructor(readonly status: number, message: string) {
+    super(message);
+    this.name = 'ApiError';
+  }
+}
+
+/** A mesh with its arrays decoded from base64 into typed arrays (shared with WebGL as is). */
+export interface DecodedMesh {
+  vertexCount: number;
+  triangleCount: number;
+  positions: Float32Array;
+  normals: Float32Array;
+  uvs: Float32Array;
+  indices: Uint32Array;
+}
+
+async function failure(response: Response): Promise<ApiError> {
+  let detail = `${response.status} ${response.statusText}`.trim();
+  try {
+    const body = await response.json();
+    if (body && typeof body.detail === 'string') detail = body.detail;
+  } catch {
+    // not JSON (e.g. a proxy's page): keep the status line
+  }
+  return new ApiError(response.status, detail);
+}
+
+async function json<T>(response: Promise<Response>): Promise<T> {
+  const done = await response;
+  if (!done.ok) throw await failure(done);
+  return (await done.json()) as T;
+}
+
+function postJson(url: string, body: unknown, signal?: AbortSignal): Promise<Response> {
+  return fetch(url, {
+    method: 'POST',
+    headers: { 'Content-Type': 'application/json' },
+    body: JSON.stringify(body),
+    signal,
+  });
+}
+
+export function getOptions(): Promise<Options> {
+  return json<Options>(fetch('/api/options'));
+}
+
+export function uploadImage(file: Blob, name: string): Promise<ImageInfo> {
+  const form = new FormData();
+  form.append('file', file, name);
+  return json<ImageInfo>(fetch('/api/images', { method: 'POST', body: form }));
+}
+
+export function openExample(name: string): Promise<ImageInfo> {
+  return json<ImageInfo>(fetch(`/api/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+}
+
+export function photoUrl(imageId: string): string {
+  return `/api/images/${encodeURIComponent(imageId)}/photo.png`;
+}
+
+/** The filter in the server's text form: "none" or "kind:size". */
+export function filterText(filter: FilterSpec): string {
+  return filter.kind === 'none' ? 'none' : `${filter.kind}:${filter.size}`;
+}
+
+export function channelUrl(imageId: string, channel: string, filter: FilterSpec): string {
+  const query = new URLSearchParams({ channel, filter: filterText(filter) });
+  return `/api/images/${encodeURIComponent(imageId)}/channel.png?${query}`;
+}
+
+/** Whether the server still holds the image (it keeps a bounded number, and forgets on restart). */
+export async function imageKnown(imageId: string): Promise<boolean> {
+  const response = await fetch(photoUrl(imageId), { method: 'GET', cache: 'no-store' });
+  if (response.status === 404) return false;
+  if (!response.ok) throw await failure(response);
+  return true;
+}
+
+export function reconstruct(request: ReconstructRequest, signal?: AbortSignal): Promise<ReconstructResult> {
+  return json<ReconstructResult>(postJson('/api/reconstruct', request, signal));
+}
+
+/** The exported file and the name the server gave it (Content-Disposition). */
+export async function exportMesh(
+  request: ReconstructRequest,
+  suffix: string,
+  signal?: AbortSignal,
+): Promise<{ blob: Blob; filename: string }> {
+  const response = await postJson(`/api/export?format=${encodeURIComponent(suffix)}`, request, signal);
+  if (!response.ok) throw await failure(response);
+  const disposition = response.headers.get('Content-Disposition') ?? '';
+  const named = /filename="?([^";]+)"?/i.exec(disposition);
+  return { blob: await response.blob(), filename: named ? named[1] : `model${suffix}` };
+}
+
+// Chromium 140+ and Firefox 133+ decode base64 natively, several times faster than atob.
+type Base64Decoder = (text: string) => Uint8Array;
+const nativeFromBase64 = (Uint8Array as unknown as { fromBase64?: Base64Decoder }).fromBase64;
+
+export function base64ToBytes(text: string): Uint8Array {
+  if (nativeFromBase64) return nativeFromBase64(text);
+  const binary = atob(text);
+  const bytes = new Uint8Array(binary.length);
+  for (let i = 0; i < binary.length; i++) bytes[i] = binary.charCodeAt(i);
+  return bytes;
+}
+
+export function bytesToBase64(bytes: Uint8Array): string {
+  const native = (bytes as unknown as { toBase64?: () => string }).toBase64;
+  if (native) return native.call(bytes);
+  let binary = '';
+  const chunk = 0x8000; // String.fromCharCode takes its arguments on the stack
+  for (let i = 0; i < bytes.length; i += chunk) {
+    binary += String.fromCharCode(...bytes.subarray(i, i + chunk));
+  }
+  return btoa(binary);
+}
+
+// The server sends little-endian arrays; every platform a browser runs on is little-endian,
+// so the bytes are viewed in place. A fresh Uint8Array from base64 is 0-offset, so aligned.
+function floats(text: string, expected: number, what: string): Float32Array {
+  const bytes = base64ToBytes(text);
+  const values = new Float32Array(bytes.buffer, bytes.byteOffset, bytes.byteLength / 4);
+  if (values.length !== expected) throw new ApiError(500, `mesh ${what}: expected ${expected} values, got ${values.length}`);
+  return values;
+}
+
+export function decodeMesh(mesh: MeshData): DecodedMesh {
+  const v = mesh.vertex_count;
+  const t = mesh.triangle_count;
+  const indexBytes = base64ToBytes(mesh.indices);
+  const indices = new Uint32Array(indexBytes.buffer, indexBytes.byteOffset, indexBytes.byteLength / 4);
+  if (indices.length !== 3 * t) throw new ApiError(500, `mesh indices: expected ${3 * t} values, got ${indices.length}`);
+  return {
+    vertexCount: v,
+    triangleCount: t,
+    positions: floats(mesh.positions, 3 * v, 'positions'),
+    normals: floats(mesh.normals, 3 * v, 'normals'),
+    uvs: floats(mesh.uvs, 2 * v, 'uvs'),
+    indices,
+  };
+}

@@ -1,0 +1,209 @@
+// The side panel of parameters. It only shows values and reports edits; main.ts owns the state.
+//
+// Sliders report while dragging ("drag", debounced by the caller) and once more on release
+// ("now"); selects and buttons report "now".
+import type { Options, ReconstructResult } from './api.gen';
+import { AXIS_COLOURS } from './imagePane';
+import type { Axis, Params, Region } from './state';
+
+export type Urgency = 'now' | 'drag';
+
+export interface PanelEvents {
+  change(patch: Partial<Params>, urgency: Urgency): void;
+  axis(axis: Axis): void;
+  selectRegion(index: number): void;
+  removeRegion(index: number): void;
+  removeReference(index: number): void;
+  clearReferences(): void;
+  drawRegion(): void;
+  editReferences(): void;
+  loadRegions(): void;
+  saveRegions(): void;
+  clearRegions(): void;
+}
+
+const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+
+function fillSelect(select: HTMLSelectElement, entries: Array<[string, string]>): void {
+  select.replaceChildren(...entries.map(([value, text]) => new Option(text, value)));
+}
+
+const CHANNEL_NAMES: Record<string, string> = { luma: 'Luma (Rec. 601)', r: 'Red', g: 'Green', b: 'Blue', max: 'Max of R, G, B' };
+const FILTER_NAMES: Record<string, string> = { none: 'None', gaussian: 'Gaussian', mean: 'Mean', median: 'Median', minimum: 'Minimum' };
+
+function capitalised(text: string): string {
+  return text.charAt(0).toUpperCase() + text.slice(1);
+}
+
+export class Panel {
+  private params: Params;
+  private readonly channel = $<HTMLSelectElement>('channel');
+  private readonly filterKind = $<HTMLSelectElement>('filter-kind');
+  private readonly filterSize = $<HTMLInputElement>('filter-size');
+  private readonly slant = $<HTMLInputElement>('slant');
+  private readonly tilt = $<HTMLInputElement>('tilt');
+  private readonly method = $<HTMLSelectElement>('method');
+  private readonly integrator = $<HTMLSelectElement>('integrator');
+  private readonly refine = $<HTMLInputElement>('refine');
+  private readonly step = $<HTMLInputElement>('step');
+
+  constructor(options: Options, private readonly events: PanelEvents) {
+    this.params = structuredClone(options.defaults);
+    fillSelect(this.channel, options.channels.map((c) => [c, CHANNEL_NAMES[c] ?? c]));
+    fillSelect(this.filterKind, options.filters.map((f) => [f, FILTER_NAMES[f] ?? capitalised(f)]));
+    fillSelect(this.method, options.methods.map((m) => [m, capitalised(m)]));
+    fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i, capitalised(i)])]);
+
+    this.channel.addEventListener('change', () => this.emit({ channel: this.channel.value as Params['channel'] }));
+    this.filterKind.addEventListener('change', () => {
+      const kind = this.filterKind.value as Params['filter']['kind'];
+      // gaussian takes any sigma > 0; the window filters a whole-number radius >= 1
+      const size = kind === 'gaussian' ? this.params.filter.size || 1 : Math.max(1, Math.round(this.params.filter.size));
+      this.emit({ filter: { kind, size } });
+    });
+    this.slider(this.filterSize, (v) => ({ filter: { ...this.params.filter, size: v } }));
+    // touching slant or tilt means "this direction": switch to that mode
+    this.slider(this.slant, (v) => ({ light: { ...this.params.light, mode: 'slant_tilt', slant: v } }));
+    this.slider(this.tilt, (v) => ({ light: { ...this.params.light, mode: 'slant_tilt', tilt: v } }));
+    this.method.addEventListener('change', () => this.emit({ method: this.method.value }));
+    this.integrator.addEventListener('change', () => this.emit({ integrator: this.integrator.value || null }));
+    this.slider(this.refine, (v) => ({ refine: v }));
+    this.slider(this.step, (v) => ({ step: v }));
+
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#light-mode button')) {
+      button.addEventListener('click', () =>
+        this.emit({ light: { ...this.params.light, mode: button.dataset.mode as Params['light']['mode'] } }),
+      );
+    }
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#axis button')) {
+      button.addEventListener('click', () => events.axis(button.dataset.axis as Axis));
+    }
+    $('refs-clear').addEventListener('click', () => events.clearReferences());
+    $('refs-tool').addEventListener('click', () => events.editReferences());
+    $('regions-tool').addEventListener('click', () => events.drawRegion());
+    $('regions-load').addEventListener('click', () => events.loadRegions());
+    $('regions-save').addEventListener('click', () => events.saveRegions());
+    $('regions-clear').addEventListener('click', () => events.clearRegions());
+  }
+
+  private slider(input: HTMLInputElement, patch: (value: number) => Partial<Params>): void {
+    input.addEventListener('input', () => {
+      this.showOutputs(input);
+      this.emit(patch(Number(input.value)), 'drag');
+    });
+    input.addEventListener('change', () => this.emit(patch(Number(input.value)), 'now'));
+  }
+
+  private emit(patch: Partial<Params>, urgency: Urgency = 'now'): void {
+    this.events.change(patch, urgency);
+  }
+
+  private showOutputs(...inputs: HTMLInputElement[]): void {
+    for (const input of inputs) {
+      const out = document.getElementById(`${input.id}-out`);
+      if (!out) continue;
+      const value = Number(input.value);
+      out.textContent = input === this.slant || input === this.tilt ? `${value}°` : input === this.step ? `${value} px` : String(value);
+    }
+  }
+
+  /** Show ``params`` in every control. */
+  show(params: Params): void {
+    this.params = structuredClone(params);
+    this.channel.value = params.channel;
+    this.filterKind.value = params.filter.kind;
+    this.slant.value = String(params.light.slant);
+    this.tilt.value = String(params.light.tilt);
+    this.method.value = params.method;
+    this.integrator.value = params.integrator ?? '';
+    this.refine.value = String(params.refine);
+    this.step.value = String(params.step);
+    this.showOutputs(this.filterSize, this.slant, this.tilt, this.refine, this.step);
+    $('filter-size-row').classList.toggle('disabled', params.filter.kind === 'none');
+    const gaussian = params.filter.kind === 'gaussian';
+    this.filterSize.step = gaussian ? '0.5' : '1';
+    this.filterSize.min = gaussian ? '0.5' : '1';
+    $('filter-size-row').querySelector('span')!.textContent = gaussian ? 'Sigma' : 'Radius';
+    this.filterSize.value = String(params.filter.size);
+    this.showOutputs(this.filterSize);
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#light-mode button')) {
+      button.classList.toggle('on', button.dataset.mode === params.light.mode);
+    }
+    for (const id of ['slant', 'tilt']) {
+      $(id).closest('.row')!.classList.toggle('dimmed', params.light.mode !== 'slant_tilt');
+    }
+  }
+
+  /** The light the result was solved with (the estimate, when estimated). */
+  showResult(result: ReconstructResult | null): void {
+    const out = $('light-readout');
+    if (!result) {
+      out.textContent = '';
+      return;
+    }
+    const [x, y, z] = result.light;
+    const slant = (Math.acos(Math.max(-1, Math.min(1, z))) * 180) / Math.PI;
+    const tilt = (Math.atan2(y, x) * 180) / Math.PI;
+    const estimated = this.params.light.mode === 'estimate' ? 'Estimated: ' : 'Used: ';
+    const angles = slant < 0.05 ? 'frontal' : `slant ${slant.toFixed(1)}°, tilt ${tilt.toFixed(1)}°`;
+    out.textContent = `${estimated}L = (${x.toFixed(2)}, ${y.toFixed(2)}, ${z.toFixed(2)}) · ${angles}`;
+  }
+
+  showReferences(user: Array<[number, number]>, used: Array<[number, number]>): void {
+    const list = $('refs-list');
+    const isUser = (r: number, c: number) => user.some(([ur, uc]) => ur === r && uc === c);
+    const items: HTMLLIElement[] = user.map(([r, c], i) => {
+      const li = document.createElement('li');
+      li.innerHTML = `<span class="swatch" style="background:#22d3ee;border-radius:50%"></span><span class="what">${i === 0 ? 'Main' : `#${i + 1}`}</span><span class="meta">row ${r}, col ${c}</span>`;
+      const remove = document.createElement('button');
+      remove.textContent = '×';
+      remove.title = 'Remove this reference';
+      remove.addEventListener('click', () => this.events.removeReference(i));
+      li.append(remove);
+      return li;
+    });
+    for (const [r, c] of used) {
+      if (isUser(r, c)) continue;
+      const li = document.createElement('li');
+      li.title = 'Chosen automatically: the brightest pixel of a part of the object without a reference';
+      li.innerHTML = `<span class="swatch" style="border:1.5px solid #fde047;transform:rotate(45deg);width:8px;height:8px"></span><span class="what">Automatic</span><span class="meta">row ${r}, col ${c}</span>`;
+      items.push(li);
+    }
+    list.replaceChildren(...items);
+    $('refs-note').textContent = user.length
+      ? 'The first is the main one: depth 0 there, its normal along the light.'
+      : 'None set: the brightest pixel is used, its normal along the light.';
+    ($('refs-clear') as HTMLButtonElement).disabled = user.length === 0;
+  }
+
+  showRegions(regions: Region[], selected: number | null, newAxis: Axis): void {
+    const items = regions.map((region, i) => {
+      const li = document.createElement('li');
+      li.classList.toggle('selected', i === selected);
+      li.innerHTML = `<span class="swatch" style="background:${AXIS_COLOURS[region.axis]}"></span><span class="what">Region ${i + 1}</span><span class="meta">${region.axis === 'both' ? 'x and y' : region.axis} · ${region.polygon.length} corners</span>`;
+      li.addEventListener('click', () => this.events.selectRegion(i));
+      const remove = document.createElement('button');
+      remove.textContent = '×';
+      remove.title = 'Delete this region (Del)';
+      remove.addEventListener('click', (event) => {
+        event.stopPropagation();
+        this.events.removeRegion(i);
+      });
+      li.append(remove);
+      return li;
+    });
+    $('regions-list').replaceChildren(...items);
+    const axis = selected !== null && regions[selected] ? regions[selected].axis : newAxis;
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#axis button')) {
+      button.classList.toggle('on', button.dataset.axis === axis);
+    }
+    $('axis-note').textContent =
+      selected !== null
+        ? `Region ${selected + 1} selected: the axis applies to it.`
+        : regions.length
+          ? 'Axis for new regions. Select a region to change its own.'
+          : 'Mark where the surface curves away from you: a dent, a bowl, a groove.';
+    ($('regions-save') as HTMLButtonElement).disabled = regions.length === 0;
+    ($('regions-clear') as HTMLButtonElement).disabled = regions.length === 0;
+  }
+}

@@ -1,0 +1,619 @@
+// The left pane: the photo (or its preprocessed channel, or both split before/after), the mask
+// overlay, the reference pixels and the concave-region editor, on one canvas.
+//
+// Image coordinates follow docs/conventions.md: x = column, y = row, pixel centres at whole
+// numbers, so pixel (r, c) covers [c - 0.5, c + 0.5] x [r - 0.5, r + 0.5] (the same grid the
+// library rasterises region polygons on).
+import { insidePolygon, outlineDistance, tidy, type Point } from './geometry';
+import type { Axis, Region } from './state';
+
+export type Tool = 'select' | 'polygon' | 'reference';
+export type Display = 'photo' | 'channel' | 'filtered' | 'split';
+
+export const AXIS_COLOURS: Record<Axis, string> = { x: '#ff9f43', y: '#38bdf8', both: '#c084fc' };
+
+export interface PaneEvents {
+  /** The regions changed; ``final`` is false while a drag is still going on. */
+  regions(regions: Region[], final: boolean): void;
+  references(references: Array<[number, number]>): void;
+  selection(index: number | null): void;
+  /** Pointer over the image (pixel under it) or null when it leaves. */
+  hover(pixel: { row: number; col: number } | null): void;
+  /** A short hint about what the current tool does next. */
+  hint(text: string): void;
+}
+
+export interface Sources {
+  photo: string;
+  before: string; // channel, no filter
+  after: string; // channel, filtered
+}
+
+const HANDLE = 5; // px: vertex handle half-size
+const SNAP = 10; // px: distance at which a click hits a point or closes a polygon
+const DRAG_START = 3; // px: movement before a press becomes a drag
+
+type Drag =
+  | { kind: 'pan'; x: number; y: number; offX: number; offY: number }
+  | { kind: 'move'; index: number; x: number; y: number; original: Point[]; moved: boolean }
+  | { kind: 'vertex'; index: number; vertex: number; moved: boolean }
+  | { kind: 'split' };
+
+export class ImagePane {
+  readonly canvas: HTMLCanvasElement;
+  private readonly context: CanvasRenderingContext2D;
+  private width = 0;
+  private height = 0;
+  private scale = 1;
+  private offX = 0;
+  private offY = 0;
+  private fitted = false;
+  private sources: Sources | null = null;
+  private readonly images = new Map<string, HTMLImageElement>();
+  private maskLayer: HTMLCanvasElement | null = null;
+  private regionList: Region[] = [];
+  private selected: number | null = null;
+  private draft: Point[] = [];
+  private pointer: Point | null = null; // image coordinates of the pointer
+  private userRefs: Array<[number, number]> = [];
+  private usedRefs: Array<[number, number]> = [];
+  private drag: Drag | null = null;
+  private pressAt: Point = [0, 0];
+  private split = 0.5;
+  private frame = 0;
+  tool: Tool = 'select';
+  display: Display = 'photo';
+  showMask = true;
+  newAxis: Axis = 'both';
+
+  constructor(private readonly host: HTMLElement, private readonly events: PaneEvents) {
+    this.canvas = document.createElement('canvas');
+    this.canvas.className = 'image-canvas';
+    this.canvas.tabIndex = 0;
+    this.canvas.setAttribute('aria-label', 'Image: references and concave regions');
+    host.append(this.canvas);
+    this.context = this.canvas.getContext('2d')!;
+    new ResizeObserver(() => this.resize()).observe(host);
+    this.canvas.addEventListener('pointerdown', (e) => this.onDown(e));
+    this.canvas.addEventListener('pointermove', (e) => this.onMove(e));
+    this.canvas.addEventListener('pointerup', (e) => this.onUp(e));
+    this.canvas.addEventListener('pointerleave', () => {
+      this.pointer = null;
+      this.events.hover(null);
+      this.redraw();
+    });
+    this.canvas.addEventListener('wheel', (e) => this.onWheel(e), { passive: false });
+    this.canvas.addEventListener('dblclick', () => this.tool === 'select' && this.fit());
+    this.canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+  }
+
+  // ---------------------------------------------------------------------------- inputs
+
+  setImage(width: number, height: number, sources: Sources): void {
+    const sameSize = width === this.width && height === this.height;
+    this.width = width;
+    this.height = height;
+    this.sources = sources;
+    this.draft = [];
+    if (!sameSize) {
+      this.maskLayer = null;
+      this.fitted = false;
+    }
+    this.resize();
+  }
+
+  /** New preview addresses (channel or filter changed); images load when first shown. */
+  setSources(sources: Sources): void {
+    this.sources = sources;
+    this.redraw();
+  }
+
+  setRegions(regions: Region[]): void {
+    this.regionList = regions.map((r) => ({ polygon: r.polygon.map(([x, y]): Point => [x, y]), axis: r.axis }));
+    if (this.selected !== null && this.selected >= regions.length) this.select(null);
+    this.redraw();
+  }
+
+  get regions(): Region[] {
+    return this.regionList;
+  }
+
+  setReferences(user: Array<[number, number]>, used: Array<[number, number]>): void {
+    this.userRefs = user.map(([r, c]) => [r, c]);
+    this.usedRefs = used.map(([r, c]) => [r, c]);
+    this.redraw();
+  }
+
+  /** The mask from a result (a PNG, object pixels bright) as a tinted overlay with an outline. */
+  setMask(pngBase64: string | null): void {
+    if (!pngBase64) {
+      this.maskLayer = null;
+      this.redraw();
+      return;
+    }
+    const image = new Image();
+    image.onload = () => {
+      this.maskLayer = tintedMask(image);
+      this.redraw();
+    };
+    image.src = `data:image/png;base64,${pngBase64}`;
+  }
+
+  setTool(tool: Tool): void {
+    if (tool !== 'polygon') this.draft = [];
+    this.tool = tool;
+    this.canvas.dataset.tool = tool;
+    this.events.hint(this.hintText());
+    this.redraw();
+  }
+
+  get selection(): number | null {
+    return this.selected;
+  }
+
+  select(index: number | null): void {
+    this.selected = index;
+    this.events.selection(index);
+    this.redraw();
+  }
+
+  /** Page coordinates of image point (x, y): lets the end-to-end test click on pixels. */
+  pagePoint(x: number, y: number): { x: number; y: number } {
+    const rect = this.canvas.getBoundingClientRect();
+    return { x: rect.left + (x + 0.5) * this.scale + this.offX, y: rect.top + (y + 0.5) * this.scale + this.offY };
+  }
+
+  // -------------------------------------------------------------------------- commands
+
+  /** Enter closes the polygon being drawn, Escape cancels it, Delete removes the selection. */
+  key(event: KeyboardEvent): boolean {
+    if (this.tool === 'polygon' && this.draft.length) {
+      if (event.key === 'Enter') return this.closeDraft(), true;
+      if (event.key === 'Escape') return (this.draft = []), this.hintAndDraw(), true;
+      if (event.key === 'Backspace') return this.draft.pop(), this.hintAndDraw(), true;
+    }
+    if ((event.key === 'Delete' || event.key === 'Backspace') && this.selected !== null) {
+      this.removeRegion(this.selected);
+      return true;
+    }
+    if (event.key === 'Escape' && this.selected !== null) return this.select(null), true;
+    return false;
+  }
+
+  removeRegion(index: number): void {
+    this.regionList.splice(index, 1);
+    this.select(null);
+    this.events.regions(this.regionList, true);
+  }
+
+  setAxis(index: number, axis: Axis): void {
+    const region = this.regionList[index];
+    if (!region || region.axis === axis) return;
+    region.axis = axis;
+    this.events.regions(this.regionList, true);
+    this.redraw();
+  }
+
+  fit(): void {
+    const rect = this.host.getBoundingClientRect();
+    if (!this.width || !rect.width || !rect.height) return;
+    const margin = 24;
+    this.scale = Math.max(0.01, Math.min((rect.width - 2 * margin) / this.width, (rect.height - 2 * margin) / this.height));
+    this.offX = (rect.width - this.width * this.scale) / 2;
+    this.offY = (rect.height - this.height * this.scale) / 2;
+    this.fitted = true;
+    this.redraw();
+  }
+
+  zoom(factor: number, atX?: number, atY?: number): void {
+    const rect = this.host.getBoundingClientRect();
+    const cx = atX ?? rect.width / 2;
+    const cy = atY ?? rect.height / 2;
+    const scale = Math.min(64, Math.max(0.05, this.scale * factor));
+    // keep the point under the cursor where it is
+    this.offX = cx - ((cx - this.offX) * scale) / this.scale;
+    this.offY = cy - ((cy - this.offY) * scale) / this.scale;
+    this.scale = scale;
+    this.redraw();
+  }
+
+  // --------------------------------------------------------------------------- pointer
+
+  private toImage(event: MouseEvent): Point {
+    const rect = this.canvas.getBoundingClientRect();
+    return [(event.clientX - rect.left - this.offX) / this.scale - 0.5, (event.clientY - rect.top - this.offY) / this.scale - 0.5];
+  }
+
+  private toScreen([x, y]: Point): Point {
+    return [(x + 0.5) * this.scale + this.offX, (y + 0.5) * this.scale + this.offY];
+  }
+
+  private screenDistance(a: Point, b: Point): number {
+    return Math.hypot(a[0] - b[0], a[1] - b[1]) * this.scale;
+  }
+
+  private clampToImage([x, y]: Point): Point {
+    return [tidy(Math.min(this.width - 0.5, Math.max(-0.5, x))), tidy(Math.min(this.height - 0.5, Math.max(-0.5, y)))];
+  }
+
+  private onDown(event: PointerEvent): void {
+    if (!this.width) return;
+    this.canvas.focus();
+    const at = this.toImage(event);
+    this.pressAt = [event.clientX, event.clientY];
+    this.canvas.setPointerCapture(event.pointerId);
+    if (event.button === 1 || event.button === 2 || (event.button === 0 && event.shiftKey)) {
+      this.drag = { kind: 'pan', x: event.clientX, y: event.clientY, offX: this.offX, offY: this.offY };
+      return;
+    }
+    if (event.button !== 0) return;
+    if (this.display === 'split' && Math.abs(this.toScreen(at)[0] - this.toScreen([this.split * this.width - 0.5, 0])[0]) < 6) {
+      this.drag = { kind: 'split' };
+      return;
+    }
+    if (this.tool === 'polygon') return this.polygonClick(at);
+    if (this.tool === 'reference') return this.referenceClick(at);
+    this.selectPress(at, event);
+  }
+
+  private polygonClick(at: Point): void {
+    if (this.draft.length >= 3 && this.screenDistance(at, this.draft[0]) <= SNAP) return this.closeDraft();
+    this.draft.push(this.clampToImage(at));
+    this.hintAndDraw();
+  }
+
+  private closeDraft(): void {
+    if (this.draft.length < 3) return;
+    this.regionList.push({ polygon: this.draft, axis: this.newAxis });
+    this.draft = [];
+    this.select(this.regionList.length - 1);
+    this.events.regions(this.regionList, true);
+    this.hintAndDraw();
+  }
+
+  private referenceClick(at: Point): void {
+    const hit = this.userRefs.findIndex(([r, c]) => this.screenDistance(at, [c, r]) <= SNAP);
+    if (hit >= 0) {
+      this.userRefs.splice(hit, 1);
+    } else {
+      const row = Math.round(at[1]);
+      const col = Math.round(at[0]);
+      if (row < 0 || col < 0 || row >= this.height || col >= this.width) return;
+      this.userRefs.push([row, col]);
+    }
+    this.events.references(this.userRefs.map(([r, c]) => [r, c]));
+    this.redraw();
+  }
+
+  private selectPress(at: Point, event: PointerEvent): void {
+    const selected = this.selected !== null ? this.regionList[this.selected] : null;
+    if (selected) {
+      const vertex = selected.polygon.findIndex((p) => this.screenDistance(at, p) <= HANDLE + 3);
+      if (vertex >= 0) {
+        this.drag = { kind: 'vertex', index: this.selected!, vertex, moved: false };
+        return;
+      }
+    }
+    // topmost region under the pointer, or whose outline is within a few screen pixels
+    for (let i = this.regionList.length - 1; i >= 0; i--) {
+      const polygon = this.regionList[i].polygon;
+      if (insidePolygon(at[0], at[1], polygon) || outlineDistance(at[0], at[1], polygon) * this.scale <= 4) {
+        this.select(i);
+        this.drag = { kind: 'move', index: i, x: at[0], y: at[1], original: polygon.map(([x, y]): Point => [x, y]), moved: false };
+        return;
+      }
+    }
+    this.select(null);
+    this.drag = { kind: 'pan', x: event.clientX, y: event.clientY, offX: this.offX, offY: this.offY };
+  }
+
+  private onMove(event: PointerEvent): void {
+    if (!this.width) return;
+    const at = this.toImage(event);
+    this.pointer = at;
+    const row = Math.round(at[1]);
+    const col = Math.round(at[0]);
+    const onImage = row >= 0 && col >= 0 && row < this.height && col < this.width;
+    this.events.hover(onImage ? { row, col } : null);
+    const drag = this.drag;
+    const travelled = Math.hypot(event.clientX - this.pressAt[0], event.clientY - this.pressAt[1]);
+    if (drag?.kind === 'pan') {
+      this.offX = drag.offX + event.clientX - drag.x;
+      this.offY = drag.offY + event.clientY - drag.y;
+    } else if (drag?.kind === 'split') {
+      this.split = Math.min(1, Math.max(0, (at[0] + 0.5) / this.width));
+    } else if (drag?.kind === 'move' && (drag.moved || travelled >= DRAG_START)) {
+      drag.moved = true;
+      const dx = at[0] - drag.x;
+      const dy = at[1] - drag.y;
+      this.regionList[drag.index].polygon = drag.original.map(([x, y]): Point => [tidy(x + dx), tidy(y + dy)]);
+      this.events.regions(this.regionList, false);
+    } else if (drag?.kind === 'vertex' && (drag.moved || travelled >= DRAG_START)) {
+      drag.moved = true;
+      this.regionList[drag.index].polygon[drag.vertex] = this.clampToImage(at);
+      this.events.regions(this.regionList, false);
+    }
+    this.updateCursor(at);
+    this.redraw();
+  }
+
+  private onUp(event: PointerEvent): void {
+    const drag = this.drag;
+    this.drag = null;
+    if (this.canvas.hasPointerCapture(event.pointerId)) this.canvas.releasePointerCapture(event.pointerId);
+    if ((drag?.kind === 'move' || drag?.kind === 'vertex') && drag.moved) this.events.regions(this.regionList, true);
+  }
+
+  private onWheel(event: WheelEvent): void {
+    if (!this.width) return;
+    event.preventDefault();
+    const rect = this.canvas.getBoundingClientRect();
+    this.zoom(Math.exp(-event.deltaY * 0.0015), event.clientX - rect.left, event.clientY - rect.top);
+  }
+
+  private updateCursor(at: Point): void {
+    let cursor = 'default';
+    if (this.drag?.kind === 'pan') cursor = 'grabbing';
+    else if (this.display === 'split' && Math.abs(this.toScreen(at)[0] - this.toScreen([this.split * this.width - 0.5, 0])[0]) < 6) cursor = 'ew-resize';
+    else if (this.tool === 'polygon') cursor = this.draft.length >= 3 && this.screenDistance(at, this.draft[0]) <= SNAP ? 'pointer' : 'crosshair';
+    else if (this.tool === 'reference') cursor = 'crosshair';
+    else if (this.drag) cursor = 'move';
+    else if (this.regionList.some((r) => insidePolygon(at[0], at[1], r.polygon))) cursor = 'move';
+    this.canvas.style.cursor = cursor;
+  }
+
+  private hintText(): string {
+    if (this.tool === 'polygon') {
+      if (!this.draft.length) return 'Click to place the first corner of a concave region';
+      if (this.draft.length < 3) return 'Click to add corners · Esc cancels';
+      return 'Click the first corner or press Enter to close · Backspace removes a corner · Esc cancels';
+    }
+    if (this.tool === 'reference') return 'Click to add a reference pixel · click one to remove it';
+    return 'Click a region to select it · drag to move · drag empty space to pan · wheel zooms';
+  }
+
+  private hintAndDraw(): void {
+    this.events.hint(this.hintText());
+    this.redraw();
+  }
+
+  // ----------------------------------------------------------------------------- drawing
+
+  private resize(): void {
+    const rect = this.host.getBoundingClientRect();
+    const dpr = window.devicePixelRatio || 1;
+    this.canvas.width = Math.max(1, Math.round(rect.width * dpr));
+    this.canvas.height = Math.max(1, Math.round(rect.height * dpr));
+    this.canvas.style.width = `${rect.width}px`;
+    this.canvas.style.height = `${rect.height}px`;
+    if (!this.fitted) this.fit();
+    this.redraw();
+  }
+
+  private image(url: string): HTMLImageElement | null {
+    let image = this.images.get(url);
+    if (!image) {
+      image = new Image();
+      image.onload = () => this.redraw();
+      image.src = url;
+      this.images.set(url, image);
+      if (this.images.size > 12) this.images.delete(this.images.keys().next().value!); // oldest
+    }
+    return image.complete && image.naturalWidth ? image : null;
+  }
+
+  redraw(): void {
+    if (this.frame) return;
+    this.frame = requestAnimationFrame(() => {
+      this.frame = 0;
+      this.draw();
+    });
+  }
+
+  private draw(): void {
+    const ctx = this.context;
+    const dpr = window.devicePixelRatio || 1;
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.clearRect(0, 0, this.canvas.width, this.canvas.height);
+    if (!this.width || !this.sources) return;
+    const w = this.width * this.scale;
+    const h = this.height * this.scale;
+    // big pixels stay crisp: this is a tool for picking pixels
+    ctx.imageSmoothingEnabled = this.scale < 2;
+    ctx.fillStyle = '#000';
+    ctx.fillRect(this.offX, this.offY, w, h);
+    if (this.display === 'split') {
+      const cut = this.split * w;
+      this.drawClipped(this.sources.before, this.offX, cut);
+      this.drawClipped(this.sources.after, this.offX + cut, w - cut);
+    } else {
+      const url = this.display === 'photo' ? this.sources.photo : this.display === 'channel' ? this.sources.before : this.sources.after;
+      const image = this.image(url);
+      if (image) ctx.drawImage(image, this.offX, this.offY, w, h);
+    }
+    if (this.showMask && this.maskLayer) {
+      ctx.imageSmoothingEnabled = false;
+      ctx.drawImage(this.maskLayer, this.offX, this.offY, w, h);
+    }
+    ctx.strokeStyle = 'rgba(255,255,255,0.18)';
+    ctx.lineWidth = 1;
+    ctx.strokeRect(this.offX - 0.5, this.offY - 0.5, w + 1, h + 1);
+    this.regionList.forEach((region, i) => this.drawRegion(region, i === this.selected));
+    this.drawDraft();
+    this.drawReferences();
+    if (this.display === 'split') this.drawSplit();
+  }
+
+  private drawClipped(url: string, left: number, width: number): void {
+    const image = this.image(url);
+    if (!image || width <= 0) return;
+    const ctx = this.context;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(left, this.offY, width, this.height * this.scale);
+    ctx.clip();
+    ctx.drawImage(image, this.offX, this.offY, this.width * this.scale, this.height * this.scale);
+    ctx.restore();
+  }
+
+  private path(points: Point[], close: boolean): void {
+    const ctx = this.context;
+    ctx.beginPath();
+    points.forEach((p, i) => {
+      const [sx, sy] = this.toScreen(p);
+      if (i === 0) ctx.moveTo(sx, sy);
+      else ctx.lineTo(sx, sy);
+    });
+    if (close) ctx.closePath();
+  }
+
+  private drawRegion(region: Region, selected: boolean): void {
+    const ctx = this.context;
+    const colour = AXIS_COLOURS[region.axis];
+    this.path(region.polygon, true);
+    ctx.fillStyle = colour + (selected ? '40' : '2a');
+    ctx.fill();
+    ctx.lineWidth = selected ? 2.5 : 1.75;
+    ctx.strokeStyle = colour;
+    ctx.setLineDash([]);
+    ctx.stroke();
+    // axis tag just above the topmost corner, clear of the references inside
+    const top = region.polygon.reduce((best, p) => (p[1] < best[1] ? p : best));
+    const [tx, ty] = this.toScreen(top);
+    label(ctx, region.axis === 'both' ? 'concave x·y' : `concave ${region.axis}`, tx, ty - 13, colour);
+    if (!selected) return;
+    for (const p of region.polygon) {
+      const [sx, sy] = this.toScreen(p);
+      ctx.fillStyle = '#fff';
+      ctx.strokeStyle = colour;
+      ctx.lineWidth = 1.5;
+      ctx.fillRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
+      ctx.strokeRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
+    }
+  }
+
+  private drawDraft(): void {
+    if (this.tool !== 'polygon' || !this.draft.length) return;
+    const ctx = this.context;
+    const colour = AXIS_COLOURS[this.newAxis];
+    const points = this.pointer ? [...this.draft, this.pointer] : this.draft;
+    this.path(points, false);
+    ctx.strokeStyle = colour;
+    ctx.lineWidth = 1.75;
+    ctx.setLineDash([6, 4]);
+    ctx.stroke();
+    ctx.setLineDash([]);
+    const closable = this.draft.length >= 3 && this.pointer !== null && this.screenDistance(this.pointer, this.draft[0]) <= SNAP;
+    this.draft.forEach((p, i) => {
+      const [sx, sy] = this.toScreen(p);
+      ctx.beginPath();
+      ctx.arc(sx, sy, i === 0 ? (closable ? 7 : 5) : 3.5, 0, 2 * Math.PI);
+      ctx.fillStyle = i === 0 ? '#fff' : colour;
+      ctx.fill();
+      ctx.strokeStyle = colour;
+      ctx.lineWidth = 2;
+      ctx.stroke();
+    });
+  }
+
+  private drawReferences(): void {
+    const ctx = this.context;
+    const isUser = (r: number, c: number) => this.userRefs.some(([ur, uc]) => ur === r && uc === c);
+    // automatic references (the brightest pixel of each part): a hollow diamond
+    for (const [r, c] of this.usedRefs) {
+      if (isUser(r, c)) continue;
+      const [sx, sy] = this.toScreen([c, r]);
+      ctx.save();
+      ctx.translate(sx, sy);
+      ctx.rotate(Math.PI / 4);
+      ctx.lineWidth = 3.5;
+      ctx.strokeStyle = 'rgba(0,0,0,0.65)';
+      ctx.strokeRect(-5, -5, 10, 10);
+      ctx.lineWidth = 1.75;
+      ctx.strokeStyle = '#fde047';
+      ctx.strokeRect(-5, -5, 10, 10);
+      ctx.restore();
+      label(ctx, 'auto', sx + 10, sy - 10, '#fde047');
+    }
+    // the user's: a filled dot with a ring, numbered (the first is the main one: z = 0 there)
+    this.userRefs.forEach(([r, c], i) => {
+      const [sx, sy] = this.toScreen([c, r]);
+      ctx.beginPath();
+      ctx.arc(sx, sy, 6, 0, 2 * Math.PI);
+      ctx.fillStyle = '#22d3ee';
+      ctx.fill();
+      ctx.lineWidth = 2;
+      ctx.strokeStyle = '#0b1220';
+      ctx.stroke();
+      label(ctx, String(i + 1), sx + 11, sy - 10, '#22d3ee');
+    });
+  }
+
+  private drawSplit(): void {
+    const ctx = this.context;
+    const x = this.offX + this.split * this.width * this.scale;
+    const top = this.offY;
+    const bottom = this.offY + this.height * this.scale;
+    ctx.strokeStyle = '#fff';
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    ctx.moveTo(x, top);
+    ctx.lineTo(x, bottom);
+    ctx.stroke();
+    ctx.beginPath();
+    ctx.arc(x, (top + bottom) / 2, 9, 0, 2 * Math.PI);
+    ctx.fillStyle = '#fff';
+    ctx.fill();
+    ctx.fillStyle = '#111';
+    ctx.font = '600 10px system-ui, sans-serif';
+    ctx.textAlign = 'center';
+    ctx.textBaseline = 'middle';
+    ctx.fillText('↔', x, (top + bottom) / 2 + 0.5);
+    label(ctx, 'before', x - 34, top + 14, '#e5e7eb');
+    label(ctx, 'after', x + 30, top + 14, '#e5e7eb');
+  }
+}
+
+/** A small text tag with a dark halo, readable on any photo. */
+function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number, colour: string): void {
+  ctx.font = '600 11px system-ui, sans-serif';
+  ctx.textAlign = 'center';
+  ctx.textBaseline = 'middle';
+  ctx.lineWidth = 3;
+  ctx.strokeStyle = 'rgba(0,0,0,0.75)';
+  ctx.strokeText(text, x, y);
+  ctx.fillStyle = colour;
+  ctx.fillText(text, x, y);
+}
+
+/** Object pixels tinted, the silhouette's edge drawn bright; one pixel of the canvas per image pixel. */
+function tintedMask(image: HTMLImageElement): HTMLCanvasElement {
+  const w = image.naturalWidth;
+  const h = image.naturalHeight;
+  const layer = document.createElement('canvas');
+  layer.width = w;
+  layer.height = h;
+  const ctx = layer.getContext('2d', { willReadFrequently: true })!;
+  ctx.drawImage(image, 0, 0);
+  const pixels = ctx.getImageData(0, 0, w, h);
+  const data = pixels.data;
+  const inside = new Uint8Array(w * h);
+  for (let i = 0; i < w * h; i++) inside[i] = data[4 * i] > 127 && data[4 * i + 3] > 127 ? 1 : 0;
+  for (let r = 0; r < h; r++) {
+    for (let c = 0; c < w; c++) {
+      const i = r * w + c;
+      const o = 4 * i;
+      if (!inside[i]) {
+        data[o + 3] = 0;
+        continue;
+      }
+      const edge = c === 0 || r === 0 || c === w - 1 || r === h - 1 || !inside[i - 1] || !inside[i + 1] || !inside[i - w] || !inside[i + w];
+      data[o] = edge ? 94 : 56;
+      data[o + 1] = edge ? 234 : 189;
+      data[o + 2] = edge ? 212 : 248;
+      data[o + 3] = edge ? 230 : 46;
+    }
+  }
+  ctx.putImageData(pixels, 0, 0);
+  return layer;
+}

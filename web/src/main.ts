@@ -1,0 +1,754 @@
+// The app's controller: owns the session (image, parameters, regions, view), talks to the
+// server, and wires the image pane, the side panel and the 3D view together.
+//
+// Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
+// time); a newer request aborts the one in flight, and a response whose request_id is not the
+// newest is dropped, so a stale model never arrives last.
+import './style.css';
+import * as api from './api';
+import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
+import { Panel, type Urgency } from './controls';
+import { ImagePane, type Display, type Tool } from './imagePane';
+import {
+  download,
+  loadImageBytes,
+  loadSession,
+  projectDocument,
+  readJsonFile,
+  readProject,
+  readRegions,
+  regionsDocument,
+  saveSession,
+  storeImageBytes,
+  type Axis,
+  type ImageSource,
+  type Params,
+  type Region,
+  type ViewSettings,
+} from './state';
+import { Viewer } from './viewer';
+
+const DRAG_DEBOUNCE_MS = 40;
+const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+
+/** Timestamps (performance.now()) of the last applied result: where the time went. */
+interface Timeline {
+  requestId: number;
+  changed: number;
+  sent: number;
+  received: number;
+  decoded: number;
+  rendered: number;
+  serverTimings: Record<string, number>;
+}
+
+class App {
+  private image: ImageInfo | null = null;
+  private source: ImageSource | null = null;
+  private imageBytes: Blob | null = null; // an upload's original bytes (for re-upload and projects)
+  private params: Params;
+  private view: ViewSettings;
+  private requestCounter = 0;
+  private latestSent = 0;
+  private inFlight: AbortController | null = null;
+  private debounce = 0;
+  private changedAt: number | null = null;
+  private refitNext = true;
+  private result: ReconstructResult | null = null;
+  private mesh: api.DecodedMesh | null = null;
+  private appliedCount = 0;
+  private timeline: Timeline | null = null;
+  private saveTimer = 0;
+  private solving = false;
+  private dragWaiting = false; // a drag moved on while a request was out
+  private readonly tasks: string[] = [];
+  private initialId: string | null = null;
+  private readonly pane: ImagePane;
+  private readonly viewer: Viewer;
+  private readonly panel: Panel;
+
+  constructor(private readonly options: Options) {
+    const session = loadSession();
+    this.params = structuredClone(options.defaults);
+    this.view = session.view;
+    this.pane = new ImagePane($('image-host'), {
+      regions: (regions, final) => this.regionsEdited(regions, final),
+      references: (refs) => this.change({ references: refs }, 'now'),
+      selection: () => this.showRegions(),
+      hover: (pixel) => ($('pixel').textContent = pixel ? `row ${pixel.row}, col ${pixel.col}` : ''),
+      hint: (text) => ($('hint').textContent = text),
+    });
+    this.viewer = new Viewer($('view-host'));
+    this.panel = new Panel(options, {
+      change: (patch, urgency) => this.change(patch, urgency),
+      axis: (axis) => this.setAxis(axis),
+      selectRegion: (i) => this.pane.select(i),
+      removeRegion: (i) => this.pane.removeRegion(i),
+      removeReference: (i) => this.change({ references: this.params.references.filter((_, k) => k !== i) }, 'now'),
+      clearReferences: () => this.change({ references: [] }, 'now'),
+      drawRegion: () => this.setTool('polygon'),
+      editReferences: () => this.setTool('reference'),
+      loadRegions: () => $<HTMLInputElement>('file-regions').click(),
+      saveRegions: () => this.saveRegions(),
+      clearRegions: () => this.regionsEdited([], true),
+    });
+    this.buildMenus();
+    this.bindToolbar();
+    this.bindFiles();
+    this.bindKeys();
+    this.applyView();
+    this.setTool('select');
+    this.panel.show(this.params);
+    this.showReferences();
+    this.showRegions();
+  }
+
+  /** Reopen what the last visit had open: the server may have forgotten the image. */
+  async restore(): Promise<void> {
+    const session = loadSession();
+    const initial = this.options.initial_image;
+    this.initialId = session.initialId;
+    if (initial && initial.image_id !== session.initialId) {
+      this.initialId = initial.image_id;
+      return this.showImage(initial, { kind: 'initial', name: initial.name }, null);
+    }
+    if (!session.image || !session.source) return;
+    try {
+      let info = session.image;
+      if (!(await api.imageKnown(info.image_id))) {
+        const reopened = await this.reopen(session.source);
+        if (!reopened) return this.toast(`${session.image.name} is no longer on the server; open it again`, 'info');
+        info = reopened;
+      } else if (session.source.kind === 'upload') {
+        this.imageBytes = await loadImageBytes();
+      }
+      // defaults first: a session saved by an older client may lack newer fields
+      this.showImage(info, session.source, session.params ? { ...this.options.defaults, ...session.params } : null);
+    } catch (err) {
+      this.toast(`Could not reopen the last image: ${(err as Error).message}`);
+    }
+  }
+
+  /** A fresh id for the same image: by example name, or by re-sending the stored bytes. */
+  private async reopen(source: ImageSource): Promise<ImageInfo | null> {
+    if (source.kind === 'example') return api.openExample(source.name);
+    if (source.kind === 'initial') return (await api.getOptions()).initial_image;
+    const bytes = this.imageBytes ?? (await loadImageBytes());
+    if (!bytes) return null;
+    this.imageBytes = bytes;
+    return api.uploadImage(bytes, source.name);
+  }
+
+  // ------------------------------------------------------------------------- opening
+
+  async openFile(file: File): Promise<void> {
+    if (file.name.toLowerCase().endsWith('.json') || file.type === 'application/json') return this.openJson(file);
+    const limit = this.options.limits.max_upload_bytes;
+    if (file.size > limit) {
+      this.toast(`${file.name} is ${(file.size / 1e6).toFixed(1)} MB; the limit is ${(limit / 1e6).toFixed(1)} MB — use a smaller image`);
+      return;
+    }
+    await this.busy('Uploading…', async () => {
+      const info = await api.uploadImage(file, file.name);
+      this.imageBytes = file;
+      await storeImageBytes(file);
+      this.showImage(info, { kind: 'upload', name: file.name, type: file.type }, null);
+    });
+  }
+
+  async openExample(name: string): Promise<void> {
+    await this.busy('Opening example…', async () => {
+      const info = await api.openExample(name);
+      this.imageBytes = null;
+      await storeImageBytes(null);
+      this.showImage(info, { kind: 'example', name }, null);
+    });
+  }
+
+  /** A JSON file: a project or a regions file, told apart by their content. */
+  private async openJson(file: File): Promise<void> {
+    try {
+      const document = await readJsonFile(file);
+      if ((document as { format?: string })?.format === 'shadeform-project') return await this.openProject(document);
+      this.loadRegions(readRegions(document));
+    } catch (err) {
+      this.toast((err as Error).message);
+    }
+  }
+
+  private async openProject(document: unknown): Promise<void> {
+    const { project, bytes } = readProject(document);
+    await this.busy('Opening project…', async () => {
+      const example = project.image.example;
+      let info: ImageInfo;
+      let source: ImageSource;
+      if (example && this.options.examples.some((e) => e.name === example)) {
+        info = await api.openExample(example);
+        source = { kind: 'example', name: example };
+        this.imageBytes = null;
+        await storeImageBytes(null);
+      } else {
+        info = await api.uploadImage(bytes, project.image.name);
+        source = { kind: 'upload', name: project.image.name, type: bytes.type };
+        this.imageBytes = bytes;
+        await storeImageBytes(bytes);
+      }
+      this.view = { ...this.view, ...project.view };
+      this.applyView();
+      this.showImage(info, source, { ...this.options.defaults, ...project.params });
+    });
+  }
+
+  /** Make ``info`` the current image, with ``params`` or else its suggested settings. */
+  private showImage(info: ImageInfo, source: ImageSource, params: Params | null): void {
+    this.image = info;
+    this.source = source;
+    this.result = null;
+    this.mesh = null;
+    this.refitNext = true;
+    this.params = structuredClone(params ?? { ...this.options.defaults, ...(info.suggested ?? {}) });
+    $('image-empty').hidden = true;
+    $('image-title').innerHTML = '';
+    const name = document.createElement('b');
+    name.textContent = info.name;
+    $('image-title').append(name, ` ${info.width} × ${info.height} · ${info.channels === 1 ? 'grey' : `${info.channels} channels`}`);
+    this.pane.setImage(info.width, info.height, this.sources());
+    this.pane.setMask(null);
+    this.pane.setRegions(this.params.concave.regions);
+    this.viewer.setPhoto(api.photoUrl(info.image_id));
+    this.panel.show(this.params);
+    this.panel.showResult(null);
+    this.showReferences();
+    this.showRegions();
+    this.persist();
+    this.solve();
+  }
+
+  private sources() {
+    const id = this.image!.image_id;
+    return {
+      photo: api.photoUrl(id),
+      before: api.channelUrl(id, this.params.channel, { kind: 'none', size: this.params.filter.size }),
+      after: api.channelUrl(id, this.params.channel, this.params.filter),
+    };
+  }
+
+  // ------------------------------------------------------------------------- editing
+
+  private change(patch: Partial<Params>, urgency: Urgency): void {
+    const before = this.params;
+    this.params = { ...this.params, ...structuredClone(patch) };
+    this.panel.show(this.params);
+    if ('references' in patch) this.showReferences();
+    if (this.image && (patch.channel !== undefined || patch.filter !== undefined)) {
+      if (patch.channel !== before.channel || JSON.stringify(patch.filter) !== JSON.stringify(before.filter)) {
+        this.pane.setSources(this.sources());
+      }
+    }
+    this.persist();
+    this.schedule(urgency);
+  }
+
+  private regionsEdited(regions: Region[], final: boolean): void {
+    this.params = { ...this.params, concave: { regions: structuredClone(regions) } };
+    this.showRegions();
+    if (final) {
+      this.persist();
+      this.schedule('now');
+    }
+  }
+
+  private loadRegions(regions: Region[]): void {
+    this.pane.setRegions(regions);
+    this.pane.select(null);
+    this.regionsEdited(regions, true);
+    this.toast(`Loaded ${regions.length} region${regions.length === 1 ? '' : 's'}`, 'info');
+  }
+
+  private setAxis(axis: Axis): void {
+    this.pane.newAxis = axis;
+    const selected = this.pane.selection;
+    if (selected !== null) this.pane.setAxis(selected, axis);
+    this.showRegions();
+    this.pane.redraw();
+  }
+
+  private setTool(tool: Tool): void {
+    this.pane.setTool(tool);
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#tools button')) {
+      button.classList.toggle('on', button.dataset.tool === tool);
+    }
+  }
+
+  private showRegions(): void {
+    this.panel.showRegions(this.params.concave.regions, this.pane.selection, this.pane.newAxis);
+  }
+
+  private showReferences(): void {
+    const used = this.result?.references ?? [];
+    this.pane.setReferences(this.params.references, used);
+    this.panel.showReferences(this.params.references, used);
+  }
+
+  // ------------------------------------------------------------------------- solving
+
+  /**
+   * Send the current parameters: at once for a click or a slider's release; during a drag after
+   * a short pause, and not while a request is out (the server cannot stop a solve it started,
+   * so aborting one per drag step would queue solves nobody waits for): the drag's newest state
+   * goes as soon as the answer is in.
+   */
+  private schedule(urgency: Urgency): void {
+    if (!this.image) return;
+    this.changedAt ??= performance.now();
+    clearTimeout(this.debounce);
+    if (urgency === 'now') {
+      this.dragWaiting = false;
+      this.solve();
+    } else if (this.solving) {
+      this.dragWaiting = true;
+    } else {
+      this.debounce = window.setTimeout(() => this.solve(), DRAG_DEBOUNCE_MS);
+    }
+  }
+
+  private request(requestId: number): ReconstructRequest {
+    return { image_id: this.image!.image_id, params: structuredClone(this.params), request_id: requestId };
+  }
+
+  private async solve(retried = false): Promise<void> {
+    if (!this.image) return;
+    clearTimeout(this.debounce);
+    this.inFlight?.abort();
+    const controller = new AbortController();
+    this.inFlight = controller;
+    const id = ++this.requestCounter;
+    this.latestSent = id;
+    const changed = this.changedAt ?? performance.now();
+    this.changedAt = null;
+    const sent = performance.now();
+    this.setSolving(true);
+    try {
+      const result = await api.reconstruct(this.request(id), controller.signal);
+      const received = performance.now();
+      if (result.request_id !== this.latestSent) return; // superseded while on the wire
+      const mesh = api.decodeMesh(result.mesh);
+      const decoded = performance.now();
+      this.applyResult(result, mesh);
+      const rendered = await this.viewer.rendered();
+      if (id !== this.latestSent) return;
+      this.appliedCount += 1;
+      this.timeline = { requestId: id, changed, sent, received, decoded, rendered, serverTimings: result.timings };
+      $('timing').textContent = this.timingText(result, rendered - changed);
+    } catch (err) {
+      if ((err as Error).name === 'AbortError' || id !== this.latestSent) return;
+      if (err instanceof api.ApiError && err.status === 404 && !retried && this.source) {
+        // the server forgot the image (restart, or its store is full): send it again
+        const info = await this.reopen(this.source).catch(() => null);
+        if (info) {
+          this.image = info;
+          this.persist();
+          return this.solve(true);
+        }
+      }
+      this.toast((err as Error).message);
+    } finally {
+      if (id === this.latestSent) {
+        this.setSolving(false);
+        if (this.dragWaiting) {
+          this.dragWaiting = false;
+          this.solve();
+        }
+      }
+    }
+  }
+
+  private applyResult(result: ReconstructResult, mesh: api.DecodedMesh): void {
+    this.result = result;
+    this.mesh = mesh;
+    this.viewer.setMesh(mesh, { refit: this.refitNext });
+    this.refitNext = false;
+    this.viewer.setLight(result.light);
+    $('view-empty').hidden = true;
+    $('view-host').classList.add('has-model');
+    $<HTMLButtonElement>('export-button').disabled = false;
+    this.pane.setMask(result.mask_png);
+    this.showReferences();
+    this.panel.showResult(result);
+    const [low, high] = result.depth_range;
+    $('mesh-info').textContent =
+      `${mesh.vertexCount.toLocaleString()} vertices · ${mesh.triangleCount.toLocaleString()} triangles · ` +
+      `depth ${low.toFixed(1)} … ${high.toFixed(1)} px`;
+  }
+
+  private timingText(result: ReconstructResult, total: number): string {
+    const server = (result.timings.total ?? 0) * 1000;
+    const cached = result.info.cached ? ' (cached solve)' : '';
+    return `server ${server.toFixed(0)} ms${cached} · view updated in ${total.toFixed(0)} ms`;
+  }
+
+  // --------------------------------------------------------------------------- files
+
+  private async exportFormat(suffix: string): Promise<void> {
+    if (!this.image) return this.toast('Open an image first, then export its model');
+    await this.busy(`Exporting ${suffix}…`, async () => {
+      const { blob, filename } = await api.exportMesh(this.request(++this.requestCounter), suffix);
+      download(blob, filename);
+    });
+  }
+
+  private stem(): string {
+    const name = this.image?.name ?? 'shadeform';
+    return name.replace(/\.[^.]+$/, '').replace(/[^\w.-]+/g, '_') || 'shadeform';
+  }
+
+  private async saveProject(): Promise<void> {
+    if (!this.image || !this.source) return this.toast('Open an image first; a project holds the image with its settings');
+    await this.busy('Saving project…', async () => {
+      let bytes = this.imageBytes;
+      if (!bytes) {
+        const photo = await fetch(api.photoUrl(this.image!.image_id));
+        if (!photo.ok) throw new Error('the server no longer has this image; open it again, then save');
+        bytes = await photo.blob();
+      }
+      const project = await projectDocument(this.source!, bytes, this.params, this.view);
+      download(new Blob([JSON.stringify(project)], { type: 'application/json' }), `${this.stem()}.shadeform.json`);
+    });
+  }
+
+  private saveRegions(): void {
+    const text = JSON.stringify(regionsDocument(this.params.concave.regions), null, 2);
+    download(new Blob([text + '\n'], { type: 'application/json' }), `${this.stem()}.regions.json`);
+  }
+
+  // ---------------------------------------------------------------------- view, UI
+
+  private applyView(): void {
+    $<HTMLInputElement>('wire-toggle').checked = this.view.wireframe;
+    $<HTMLInputElement>('normals-toggle').checked = this.view.normalColours;
+    $<HTMLInputElement>('texture-toggle').checked = this.view.texture;
+    $<HTMLInputElement>('arrow-toggle').checked = this.view.lightArrow;
+    $<HTMLInputElement>('mask-toggle').checked = this.view.maskOverlay;
+    this.viewer.setOptions(this.view);
+    this.pane.showMask = this.view.maskOverlay;
+    this.pane.redraw();
+  }
+
+  private toggleView(key: keyof ViewSettings): void {
+    this.view = { ...this.view, [key]: !this.view[key] };
+    this.applyView();
+    this.persist();
+  }
+
+  private persist(): void {
+    clearTimeout(this.saveTimer);
+    this.saveTimer = window.setTimeout(
+      () => saveSession({
+          image: this.image,
+          source: this.source,
+          params: this.image ? this.params : null,
+          view: this.view,
+          initialId: this.initialId,
+        }),
+      150,
+    );
+  }
+
+  /** The progress indicator: on while a solve or another task (upload, export, ...) runs. */
+  private showProgress(): void {
+    const on = this.solving || this.tasks.length > 0;
+    $('busy').hidden = !on;
+    $('progress').hidden = !on;
+    $('busy-text').textContent = this.tasks.at(-1) ?? 'Solving…';
+  }
+
+  private setSolving(on: boolean): void {
+    this.solving = on;
+    this.showProgress();
+  }
+
+  private async busy(text: string, work: () => Promise<void>): Promise<void> {
+    this.tasks.push(text);
+    this.showProgress();
+    try {
+      await work();
+    } catch (err) {
+      this.toast((err as Error).message);
+    } finally {
+      this.tasks.splice(this.tasks.indexOf(text), 1);
+      this.showProgress();
+    }
+  }
+
+  private toastTimer = 0;
+  toast(message: string, kind: 'error' | 'info' = 'error'): void {
+    const toast = $('toast');
+    toast.textContent = message;
+    toast.className = `toast ${kind === 'info' ? 'info' : ''}`;
+    toast.hidden = false;
+    clearTimeout(this.toastTimer);
+    this.toastTimer = window.setTimeout(() => (toast.hidden = true), kind === 'info' ? 2500 : 7000);
+  }
+
+  private buildMenus(): void {
+    const examples = $('examples-menu').querySelector('.menu-items')!;
+    const photos = this.options.examples.filter((e) => !e.name.startsWith('synth:'));
+    const synthetic = this.options.examples.filter((e) => e.name.startsWith('synth:'));
+    const group = (heading: string, entries: typeof photos) => {
+      if (!entries.length) return;
+      const title = document.createElement('div');
+      title.className = 'heading';
+      title.textContent = heading;
+      examples.append(title);
+      for (const example of entries) {
+        const button = document.createElement('button');
+        button.dataset.example = example.name;
+        button.className = 'example';
+        button.innerHTML = '<b></b><small></small>';
+        button.querySelector('b')!.textContent = example.name.replace(/^synth:/, '');
+        button.querySelector('small')!.textContent = example.title;
+        button.addEventListener('click', () => this.openExample(example.name));
+        examples.append(button);
+      }
+    };
+    group('Photographs', photos);
+    group('Synthetic scenes (known shape)', synthetic);
+    for (const example of this.options.examples) {
+      const button = document.createElement('button');
+      button.className = 'btn small';
+      button.textContent = example.name.replace(/^synth:/, '');
+      button.title = example.title;
+      button.addEventListener('click', () => this.openExample(example.name));
+      $('empty-examples').append(button);
+    }
+
+    const exports = $('export-menu').querySelector('.menu-items')!;
+    for (const format of this.options.formats) {
+      const button = document.createElement('button');
+      button.dataset.format = format.suffix;
+      button.title = `Download the mesh as ${format.suffix}`;
+      button.innerHTML = `<span class="format"></span><span class="desc"></span>`;
+      button.querySelector('.format')!.textContent = format.suffix;
+      button.querySelector('.desc')!.textContent = format.description;
+      button.addEventListener('click', () => this.exportFormat(format.suffix));
+      exports.append(button);
+    }
+
+    for (const menu of document.querySelectorAll<HTMLElement>('.menu')) {
+      menu.querySelector(':scope > button')!.addEventListener('click', (event) => {
+        event.stopPropagation();
+        const open = !menu.classList.contains('open');
+        document.querySelectorAll('.menu.open').forEach((m) => m.classList.remove('open'));
+        menu.classList.toggle('open', open);
+      });
+      menu.querySelector('.menu-items')!.addEventListener('click', () => menu.classList.remove('open'));
+    }
+    document.addEventListener('click', () => document.querySelectorAll('.menu.open').forEach((m) => m.classList.remove('open')));
+  }
+
+  private bindToolbar(): void {
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#tools button')) {
+      button.addEventListener('click', () => this.setTool(button.dataset.tool as Tool));
+    }
+    $<HTMLSelectElement>('display').addEventListener('change', (event) => {
+      this.pane.display = (event.target as HTMLSelectElement).value as Display;
+      this.pane.redraw();
+    });
+    $('fit-image').addEventListener('click', () => this.pane.fit());
+    const toggles: Array<[string, keyof ViewSettings]> = [
+      ['wire-toggle', 'wireframe'],
+      ['normals-toggle', 'normalColours'],
+      ['texture-toggle', 'texture'],
+      ['arrow-toggle', 'lightArrow'],
+      ['mask-toggle', 'maskOverlay'],
+    ];
+    for (const [id, key] of toggles) $(id).addEventListener('change', () => this.toggleView(key));
+    const nav: Record<string, () => void> = {
+      left: () => this.viewer.rotate(-15, 0),
+      right: () => this.viewer.rotate(15, 0),
+      up: () => this.viewer.rotate(0, 10),
+      down: () => this.viewer.rotate(0, -10),
+      'zoom-in': () => this.viewer.zoom(1.2),
+      'zoom-out': () => this.viewer.zoom(1 / 1.2),
+      recenter: () => this.viewer.recenter(),
+    };
+    for (const button of document.querySelectorAll<HTMLButtonElement>('.nav button')) {
+      button.addEventListener('click', () => nav[button.dataset.nav!]());
+    }
+    $('help').addEventListener('click', () => $<HTMLDialogElement>('help-dialog').showModal());
+    $('project-menu').addEventListener('click', (event) => {
+      const action = (event.target as HTMLElement).closest<HTMLElement>('[data-action]')?.dataset.action;
+      if (action === 'save-project') this.saveProject();
+      if (action === 'open-project') $<HTMLInputElement>('file-project').click();
+      if (action === 'save-regions') this.saveRegions();
+      if (action === 'load-regions') $<HTMLInputElement>('file-regions').click();
+    });
+  }
+
+  private bindFiles(): void {
+    const picked = (id: string, use: (file: File) => void) => {
+      const input = $<HTMLInputElement>(id);
+      input.addEventListener('change', () => {
+        const file = input.files?.[0];
+        input.value = ''; // choosing the same file again must fire again
+        if (file) use(file);
+      });
+    };
+    $('open-image').addEventListener('click', () => $<HTMLInputElement>('file-image').click());
+    picked('file-image', (file) => this.openFile(file));
+    picked('file-project', (file) => this.openJson(file));
+    picked('file-regions', (file) => this.openJson(file));
+
+    // drag and drop anywhere on the window
+    const overlay = $('drop-overlay');
+    let depth = 0;
+    const hasFiles = (event: DragEvent) => event.dataTransfer?.types.includes('Files') ?? false;
+    window.addEventListener('dragenter', (event) => {
+      if (!hasFiles(event)) return;
+      depth += 1;
+      overlay.hidden = false;
+    });
+    window.addEventListener('dragleave', () => {
+      depth = Math.max(0, depth - 1);
+      if (!depth) overlay.hidden = true;
+    });
+    window.addEventListener('dragover', (event) => hasFiles(event) && event.preventDefault());
+    window.addEventListener('drop', (event) => {
+      event.preventDefault();
+      depth = 0;
+      overlay.hidden = true;
+      const file = event.dataTransfer?.files[0];
+      if (file) this.openFile(file);
+    });
+  }
+
+  private bindKeys(): void {
+    document.addEventListener('keydown', (event) => {
+      const target = event.target as HTMLElement;
+      if ($<HTMLDialogElement>('help-dialog').open) return;
+      if (target.closest('input, select, textarea')) return;
+      const openMenus = document.querySelectorAll('.menu.open');
+      if (event.key === 'Escape' && openMenus.length) {
+        openMenus.forEach((menu) => menu.classList.remove('open'));
+        return;
+      }
+      if ((event.ctrlKey || event.metaKey) && event.key.toLowerCase() === 's') {
+        event.preventDefault();
+        this.saveProject();
+        return;
+      }
+      if (event.ctrlKey || event.metaKey || event.altKey) return;
+      if (this.pane.key(event)) {
+        event.preventDefault();
+        return;
+      }
+      const actions: Record<string, () => void> = {
+        o: () => $<HTMLInputElement>('file-image').click(),
+        v: () => this.setTool('select'),
+        p: () => this.setTool('polygon'),
+        f: () => this.setTool('reference'),
+        x: () => this.setAxis('x'),
+        y: () => this.setAxis('y'),
+        b: () => this.setAxis('both'),
+        m: () => this.toggleView('maskOverlay'),
+        w: () => this.toggleView('wireframe'),
+        n: () => this.toggleView('normalColours'),
+        t: () => this.toggleView('texture'),
+        l: () => this.toggleView('lightArrow'),
+        r: () => this.viewer.recenter(),
+        ArrowLeft: () => this.viewer.rotate(-15, 0),
+        ArrowRight: () => this.viewer.rotate(15, 0),
+        ArrowUp: () => this.viewer.rotate(0, 10),
+        ArrowDown: () => this.viewer.rotate(0, -10),
+        '+': () => this.viewer.zoom(1.2),
+        '=': () => this.viewer.zoom(1.2),
+        '-': () => this.viewer.zoom(1 / 1.2),
+        '?': () => $<HTMLDialogElement>('help-dialog').showModal(),
+      };
+      const act = actions[event.key] ?? actions[event.key.toLowerCase()];
+      if (act) {
+        event.preventDefault();
+        act();
+      }
+    });
+  }
+
+  // ------------------------------------------------------------------ test hook
+
+  /** Read-only views for the end-to-end tests and the benchmark (window.shadeform). */
+  hook() {
+    return {
+      state: () => ({
+        image: this.image ? { ...this.image } : null,
+        params: structuredClone(this.params),
+        view: { ...this.view },
+        tool: this.pane.tool,
+        selectedRegion: this.pane.selection,
+        busy: !$('busy').hidden,
+      }),
+      lastResult: () => {
+        const r = this.result;
+        if (!r) return null;
+        return {
+          request_id: r.request_id,
+          vertex_count: r.mesh.vertex_count,
+          triangle_count: r.mesh.triangle_count,
+          light: r.light,
+          references: r.references,
+          depth_range: r.depth_range,
+          timings: r.timings,
+          info: r.info,
+        };
+      },
+      /** The id of the newest reconstruct request sent. */
+      requests: () => this.latestSent,
+      /** How many results have been drawn in the 3D view so far. */
+      applied: () => this.appliedCount,
+      timeline: () => (this.timeline ? { ...this.timeline } : null),
+      depthAt: (row: number, col: number) => this.viewer.depthAt(row, col),
+      cameraOffset: () => this.viewer.cameraOffset(),
+      mesh: () =>
+        this.mesh && {
+          positions: Array.from(this.mesh.positions),
+          normals: Array.from(this.mesh.normals),
+          uvs: Array.from(this.mesh.uvs),
+          indices: Array.from(this.mesh.indices),
+        },
+      pagePoint: (x: number, y: number) => this.pane.pagePoint(x, y),
+    };
+  }
+}
+
+type Hook = ReturnType<App['hook']>;
+
+declare global {
+  interface Window {
+    /** Read-only test hook; ``ready`` settles once the last session is restored. */
+    shadeform?: Partial<Hook> & { ready: Promise<void> };
+  }
+}
+
+async function start(): Promise<void> {
+  let resolveReady!: () => void;
+  let rejectReady!: (err: unknown) => void;
+  const ready = new Promise<void>((resolve, reject) => {
+    resolveReady = resolve;
+    rejectReady = reject;
+  });
+  ready.catch(() => undefined); // reported on the page below; a test awaiting it sees the error
+  const hook: Partial<Hook> & { ready: Promise<void> } = { ready };
+  window.shadeform = hook; // at once, so a test can wait on ready before the options arrive
+  try {
+    const app = new App(await api.getOptions());
+    Object.assign(hook, app.hook());
+    await app.restore();
+    resolveReady();
+  } catch (err) {
+    const toast = $('toast');
+    toast.textContent = `Cannot reach the shadeform server: ${(err as Error).message}. Start it with \`shadeform app\`, then reload.`;
+    toast.hidden = false;
+    rejectReady(err);
+  }
+}
+
+start();

@@ -1,0 +1,285 @@
+// The right pane: the reconstructed mesh in three.js.
+//
+// Positions arrive in the mesh convention of docs/conventions.md, (x, y, z) = (col, -row,
+// depth) in pixels, so +z points at the viewer exactly as in the photo. Smooth shading: the
+// reconstruction's per-vertex normals are interpolated across each triangle. The viewer's own
+// lights ride with the camera (a key light from the upper left, a weak fill), so the relief reads
+// from any angle; the reconstruction's light is drawn as an arrow in the corner inset (gizmo.ts).
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import type { DecodedMesh } from './api';
+import { Gizmo } from './gizmo';
+
+export interface ViewOptions {
+  wireframe: boolean;
+  normalColours: boolean;
+  texture: boolean;
+  lightArrow: boolean;
+}
+
+const BASE_COLOUR = 0xd8d2c8; // warm clay: shading reads better than on pure white
+
+export class Viewer {
+  readonly renderer: THREE.WebGLRenderer;
+  private readonly scene = new THREE.Scene();
+  private readonly camera = new THREE.PerspectiveCamera(32, 1, 0.1, 1e5);
+  private readonly controls: OrbitControls;
+  private readonly model = new THREE.Group();
+  private readonly keyLight = new THREE.DirectionalLight(0xffffff, 2.6);
+  private readonly fillLight = new THREE.DirectionalLight(0xdfe8ff, 0.6);
+  private readonly gizmo = new Gizmo();
+  private readonly shaded = new THREE.MeshStandardMaterial({
+    color: BASE_COLOUR,
+    roughness: 0.9,
+    metalness: 0,
+    side: THREE.DoubleSide,
+    polygonOffset: true, // keeps the wireframe overlay in front of the surface
+    polygonOffsetFactor: 1,
+    polygonOffsetUnits: 1,
+  });
+  private readonly normalMaterial = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+  private readonly wireMaterial = new THREE.LineBasicMaterial({ color: 0x0f172a, transparent: true, opacity: 0.45 });
+  private surface: THREE.Mesh | null = null;
+  private wire: THREE.LineSegments | null = null;
+  private texture: THREE.Texture | null = null;
+  private textureUrl = '';
+  private positions: Float32Array | null = null;
+  private size = 1;
+  private options: ViewOptions = { wireframe: false, normalColours: false, texture: false, lightArrow: true };
+  private frame = 0;
+  private renderWaiters: Array<(t: number) => void> = [];
+
+  constructor(private readonly host: HTMLElement) {
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, alpha: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
+    this.renderer.setClearColor(0x000000, 0);
+    this.renderer.domElement.className = 'viewer-canvas';
+    this.renderer.domElement.tabIndex = 0;
+    this.renderer.domElement.setAttribute('aria-label', '3D view: drag to rotate, wheel to zoom, right-drag to pan');
+    host.append(this.renderer.domElement);
+
+    this.camera.up.set(0, 1, 0);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.enableDamping = false; // render only on change: no animation loop on idle
+    this.controls.zoomToCursor = true;
+    this.controls.addEventListener('change', () => this.requestRender());
+
+    this.scene.add(new THREE.HemisphereLight(0xe8eefc, 0x1b1e24, 0.7));
+    // lights in the camera's frame (a directional light shines from its position to its target)
+    this.keyLight.position.set(-0.5, 0.6, 1);
+    this.fillLight.position.set(0.7, -0.2, 0.6);
+    for (const light of [this.keyLight, this.fillLight]) {
+      this.camera.add(light, light.target);
+      light.target.position.set(0, 0, 0);
+    }
+    this.scene.add(this.camera);
+    this.scene.add(this.model);
+
+    new ResizeObserver(() => this.resize()).observe(host);
+    this.resize();
+  }
+
+  /** Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new parameter). */
+  setMesh(mesh: DecodedMesh, { refit }: { refit: boolean }): void {
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(mesh.positions, 3));
+    geometry.setAttribute('normal', new THREE.BufferAttribute(mesh.normals, 3));
+    geometry.setAttribute('uv', new THREE.BufferAttribute(mesh.uvs, 2));
+    geometry.setIndex(new THREE.BufferAttribute(mesh.indices, 1));
+    geometry.computeBoundingBox();
+    geometry.computeBoundingSphere();
+    const old = this.surface?.geometry;
+    if (this.surface) this.model.remove(this.surface);
+    if (this.wire) {
+      this.model.remove(this.wire);
+      this.wire.geometry.dispose();
+      this.wire = null;
+    }
+    old?.dispose();
+    this.positions = mesh.positions;
+    this.surface = new THREE.Mesh(geometry, this.shaded);
+    this.model.add(this.surface);
+    this.applyOptions();
+    const box = geometry.boundingBox!;
+    if (refit || !this.model.userData.centred) this.centre(box);
+    if (refit) this.recenter();
+    this.requestRender();
+  }
+
+  clear(): void {
+    if (this.surface) {
+      this.model.remove(this.surface);
+      this.surface.geometry.dispose();
+      this.surface = null;
+    }
+    if (this.wire) {
+      this.model.remove(this.wire);
+      this.wire.geometry.dispose();
+      this.wire = null;
+    }
+    this.positions = null;
+    this.requestRender();
+  }
+
+  setLight(light: number[]): void {
+    this.gizmo.setLight(new THREE.Vector3(light[0], light[1], light[2]));
+    this.requestRender();
+  }
+
+  setPhoto(url: string): void {
+    if (url === this.textureUrl) return;
+    this.textureUrl = url;
+    this.texture?.dispose();
+    this.texture = new THREE.TextureLoader().load(url, () => this.requestRender());
+    this.texture.colorSpace = THREE.SRGBColorSpace;
+    this.texture.anisotropy = 4;
+    if (this.options.texture) this.applyOptions();
+  }
+
+  setOptions(options: Partial<ViewOptions>): void {
+    this.options = { ...this.options, ...options };
+    this.applyOptions();
+    this.gizmo.setLightVisible(this.options.lightArrow);
+    this.requestRender();
+  }
+
+  /** Turn the camera about the target: yaw about the up axis, pitch about the screen's x axis. */
+  rotate(yawDegrees: number, pitchDegrees: number): void {
+    const target = this.controls.target;
+    const offset = this.camera.position.clone().sub(target);
+    offset.applyAxisAngle(this.camera.up, THREE.MathUtils.degToRad(yawDegrees));
+    const right = new THREE.Vector3().crossVectors(this.camera.up, offset).normalize();
+    const pitched = offset.clone().applyAxisAngle(right, THREE.MathUtils.degToRad(-pitchDegrees));
+    // stay off the poles, where the orbit would flip
+    if (Math.abs(pitched.clone().normalize().dot(this.camera.up)) < 0.985) offset.copy(pitched);
+    this.camera.position.copy(target).add(offset);
+    this.camera.lookAt(target);
+    this.controls.update();
+  }
+
+  zoom(factor: number): void {
+    const target = this.controls.target;
+    const offset = this.camera.position.clone().sub(target).divideScalar(factor);
+    const length = THREE.MathUtils.clamp(offset.length(), this.size * 0.05, this.size * 20);
+    this.camera.position.copy(target).add(offset.setLength(length));
+    this.controls.update();
+  }
+
+  /** Front view, the whole model in sight. */
+  recenter(): void {
+    const fov = THREE.MathUtils.degToRad(this.camera.fov);
+    const fitHeight = this.size / 2 / Math.tan(fov / 2);
+    const fitWidth = fitHeight / Math.max(this.camera.aspect, 1e-3);
+    const distance = 1.12 * Math.max(fitHeight, fitWidth, 1);
+    this.controls.target.set(0, 0, 0);
+    this.camera.position.set(0, 0, distance);
+    this.camera.near = distance / 200;
+    this.camera.far = distance * 50;
+    this.camera.updateProjectionMatrix();
+    this.camera.lookAt(0, 0, 0);
+    this.controls.update();
+    this.requestRender();
+  }
+
+  /** Where the camera is, relative to the point it orbits (model units). */
+  cameraOffset(): [number, number, number] {
+    const offset = this.camera.position.clone().sub(this.controls.target);
+    return [offset.x, offset.y, offset.z];
+  }
+
+  /** The mesh's z at the vertex nearest pixel (row, col), or null when there is no mesh there. */
+  depthAt(row: number, col: number, within = Infinity): number | null {
+    const p = this.positions;
+    if (!p) return null;
+    let best = Infinity;
+    let z: number | null = null;
+    for (let i = 0; i < p.length; i += 3) {
+      const d = (p[i] - col) ** 2 + (p[i + 1] + row) ** 2;
+      if (d < best) {
+        best = d;
+        z = p[i + 2];
+      }
+    }
+    return best <= within * within ? z : null;
+  }
+
+  /** Resolves with performance.now() once a frame showing the current scene has been drawn. */
+  rendered(): Promise<number> {
+    return new Promise((resolve) => {
+      this.renderWaiters.push(resolve);
+      this.requestRender();
+    });
+  }
+
+  requestRender(): void {
+    if (this.frame) return;
+    this.frame = requestAnimationFrame(() => {
+      this.frame = 0;
+      this.renderer.render(this.scene, this.camera);
+      if (this.surface) this.gizmo.render(this.renderer, this.camera);
+      const waiters = this.renderWaiters;
+      this.renderWaiters = [];
+      const now = performance.now();
+      waiters.forEach((resolve) => resolve(now));
+    });
+  }
+
+  // --------------------------------------------------------------------------------------
+
+  private centre(box: THREE.Box3): void {
+    const centre = box.getCenter(new THREE.Vector3());
+    const extent = box.getSize(new THREE.Vector3());
+    this.size = Math.max(extent.x, extent.y, extent.z, 1);
+    this.model.position.copy(centre).negate();
+    this.model.userData.centred = true;
+  }
+
+  private applyOptions(): void {
+    const surface = this.surface;
+    if (!surface) return;
+    const { wireframe, normalColours, texture } = this.options;
+    if (normalColours) {
+      normalColourAttribute(surface.geometry);
+      surface.material = this.normalMaterial;
+    } else {
+      surface.material = this.shaded;
+    }
+    const map = texture && this.texture ? this.texture : null;
+    if (this.shaded.map !== map) {
+      this.shaded.map = map;
+      this.shaded.color.set(map ? 0xffffff : BASE_COLOUR);
+      this.shaded.needsUpdate = true;
+    }
+    if (wireframe && !this.wire) {
+      this.wire = new THREE.LineSegments(new THREE.WireframeGeometry(surface.geometry), this.wireMaterial);
+      this.model.add(this.wire);
+    } else if (!wireframe && this.wire) {
+      this.model.remove(this.wire);
+      this.wire.geometry.dispose();
+      this.wire = null;
+    }
+  }
+
+  private resize(): void {
+    const rect = this.host.getBoundingClientRect();
+    if (!rect.width || !rect.height) return;
+    this.renderer.setSize(rect.width, rect.height, true);
+    this.camera.aspect = rect.width / rect.height;
+    this.camera.updateProjectionMatrix();
+    this.requestRender();
+  }
+}
+
+/** Per-vertex colours (n + 1) / 2: the OpenGL normal-map convention the library writes. */
+function normalColourAttribute(geometry: THREE.BufferGeometry): void {
+  if (geometry.getAttribute('color')) return;
+  const normals = geometry.getAttribute('normal');
+  const colours = new Float32Array(normals.count * 3);
+  const colour = new THREE.Color();
+  for (let i = 0; i < normals.count; i++) {
+    // a normal-map file's bytes are shown as sRGB: convert so the view shows the same colours
+    colour.setRGB((normals.getX(i) + 1) / 2, (normals.getY(i) + 1) / 2, (normals.getZ(i) + 1) / 2, THREE.SRGBColorSpace);
+    colours.set([colour.r, colour.g, colour.b], 3 * i);
+  }
+  geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+}
