@@ -141,7 +141,7 @@ class TestOptions:
 
     def test_defaults_are_the_library_defaults(self, client):
         defaults = schema.ReconstructParams(**client.get("/api/options").json()["defaults"])
-        assert defaults.method == "propagation" and defaults.refine == 3 and defaults.light.mode == "z"
+        assert defaults.method == "auto" and defaults.refine == 3 and defaults.light.mode == "z"
         assert defaults.integrator is None and defaults.references == [] and defaults.concave.regions == []
 
     def test_initial_example(self):
@@ -325,7 +325,7 @@ class TestReconstruct:
         assert result["references"] == [list(ref) for ref in rec.info["references"]]
         assert result["depth_range"] == [float(np.nanmin(rec.depth)), float(np.nanmax(rec.depth))]
         assert result["light"] == [0.0, 0.0, 1.0]
-        assert result["info"]["method"] == "propagation" and result["info"]["cached"] is False
+        assert result["info"]["method"] == rec.info["method"] == "eikonal" and result["info"]["cached"] is False
         assert {"normals", "mesh", "encode", "total"} <= set(result["timings"])
 
     def test_mesh_convention(self, client, bowl):

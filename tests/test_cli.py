@@ -360,7 +360,7 @@ class TestReconstruct:
         files = report["files"]
         assert {Path(files[key]).name for key in ("mesh", "depth", "normals")} == {"m.glb", "d.npy", "n.png"}
         assert sorted(p.name for p in out.iterdir()) == ["d.npy", "m.glb", "n.png"]
-        assert report["info"]["method"] == "propagation" and report["info"]["refine"] == 3
+        assert report["info"]["method_requested"] == "auto" and report["info"]["method"] == "eikonal"
         assert report["timings"]["total"] > 0
         assert report["mesh"]["vertices"] == len(trimesh.load(out / "m.glb", force="mesh").vertices)
 
@@ -395,7 +395,8 @@ class TestReconstruct:
         regions.write_text('{"regions": [{"polygon": [[0, 0], [8, 0], [8, 8]], "axis": "x"}]}')
         result = invoke("reconstruct", sphere["image"], "-o", out / "m.stl", "--filter", "gaussian:1",
                         "--slant", "10", "--tilt", "90", "--reference", "20,20", "--reference", "12,18,0,0.4,0.9",
-                        "--concave", regions, "--integrator", "poisson", "--refine", "1", "--json")
+                        "--concave", regions, "--integrator", "poisson", "--refine", "1", "--method", "propagation",
+                        "--json")
         assert result.exit_code == 0, result.output
         info = json.loads(result.stdout)["info"]
         assert info["references"] == [[20, 20], [12, 18]]

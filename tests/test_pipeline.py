@@ -51,8 +51,10 @@ class TestBars:
             return (metrics.angular_error(rec.normals, scene.normals, scene.mask),
                     metrics.depth_error(rec.depth, scene.depth, scene.mask))
 
-        singles = [errors(reconstruct(scene.image, mask=scene.mask, references=[r])) for r in refs]
-        combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs))
+        # eq. 7 of the 2002 report combines the propagated fields of several references
+        singles = [errors(reconstruct(scene.image, mask=scene.mask, references=[r], method="propagation"))
+                   for r in refs]
+        combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs, method="propagation"))
         assert combined[0] <= max(s[0] for s in singles) + 1e-9
         assert combined[1] <= max(s[1] for s in singles) + 1e-9
 
@@ -61,6 +63,17 @@ class TestBars:
         rec = reconstruct(scene.image, mask=scene.mask, refine=0)
         assert rec.info["refine"] == 0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 1.0
+
+
+class TestAutoMethod:
+    def test_picks_eikonal_at_plus_z_and_oblique_otherwise(self):
+        from shadeform.pipeline import best_method
+
+        assert best_method((0.0, 0.0, 1.0)) == "eikonal"
+        assert best_method((0.1, 0.0, 0.995)) == "oblique"
+        scene = synth.scene("sphere", size=32, light=(1, 0, 3))
+        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
+        assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
 
 
 class TestReconstruct:
@@ -73,7 +86,8 @@ class TestReconstruct:
         assert np.isfinite(rec.depth[rec.mask]).all()
         ref = rec.info["references"][0]
         assert rec.depth[ref] == 0  # offset rule: z = 0 at the main reference
-        assert rec.info["method"] == "propagation" and rec.info["integrator"] == "paths"
+        # the default picks the best measured solver for the light: eikonal at +z
+        assert rec.info["method_requested"] == "auto" and rec.info["method"] == "eikonal"
         assert set(rec.info["timings"]) >= {"mask", "normals", "depth"}
         assert rec.albedo == pytest.approx(scene.image.max())
         with pytest.raises(Exception):

@@ -330,8 +330,13 @@ def reconstruct(
     depth: Annotated[Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
-    method: Annotated[str, typer.Option(help="Normal-field solver.")] = "propagation",
-    integrator: Annotated[str, typer.Option(help="Depth from normals: paths or poisson.")] = "paths",
+    method: Annotated[
+        str, typer.Option(help="Solver: auto (the best measured for the light), propagation, eikonal or oblique.")
+    ] = "auto",
+    integrator: Annotated[
+        str | None,
+        typer.Option(help="Depth from normals: paths, poisson, fourier or bilateral (default: the method's own)."),
+    ] = None,
     refine: Annotated[int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")] = 3,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
@@ -360,7 +365,7 @@ def reconstruct(
         with _step(err, f"loading {escape(str(image))}", timings, "load"):
             pixels = shadeform.load_image(image, channel=channel)
             object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
-        with _step(err, f"reconstructing ({method}, {integrator})", timings, "reconstruct"):
+        with _step(err, f"reconstructing ({method})", timings, "reconstruct"):
             rec = shadeform.reconstruct(
                 pixels, light=light_vector, method=method, mask=object_mask, filter=filter,
                 references=references or None, concave=regions, integrator=integrator, refine=refine,
@@ -607,7 +612,8 @@ def demo(
     image, info = load_example(example, size=size)
     mesh_step = info["step"] if step is None else step
     with _step(err, f"reconstructing the example '{escape(example)}' (the very first run also compiles the numba kernels: about a minute)", timings, "reconstruct"):
-        rec = shadeform.reconstruct(image, light=info["light"], mask=info["mask"], filter=info["filter"])
+        rec = shadeform.reconstruct(image, light=info["light"], mask=info["mask"], filter=info["filter"],
+                                    method=info["method"])
     with _step(err, "building the mesh", timings, "mesh"):
         mesh = shadeform.to_mesh(rec, step=mesh_step)
     with _step(err, "drawing result.png", timings, "picture"):

@@ -21,7 +21,9 @@ from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
 
-METHODS = ("propagation", "eikonal", "oblique")
+#: The solvers, and "auto": the best measured one for the light (benchmarks/results/methods.md).
+SOLVERS = ("propagation", "eikonal", "oblique")
+METHODS = ("auto", *SOLVERS)
 INTEGRATORS = ("paths", "poisson", "fourier", "bilateral")
 #: What turns each method's normals into depth when ``integrator`` is not given.
 DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)",
@@ -37,7 +39,7 @@ def reconstruct(
     image: np.ndarray,
     *,
     light: Sequence[float] | str = (0.0, 0.0, 1.0),
-    method: str = "propagation",
+    method: str = "auto",
     mask: np.ndarray | None = None,
     filter: str | None = None,
     references: Sequence | None = None,
@@ -60,8 +62,9 @@ def reconstruct(
         Direction toward the light in the camera frame (``docs/conventions.md``), or
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
-    method : {"propagation", "eikonal", "oblique"}
-        Solver: the 2002 convexity-guided propagation (any light), fast marching of the
+    method : {"auto", "propagation", "eikonal", "oblique"}
+        Solver. "auto" (the default) picks the best measured one for the light
+        (:func:`best_method`): "eikonal" for a light at +z, else "oblique". The others: the 2002 convexity-guided propagation (any light), fast marching of the
         eikonal equation from the singular points (light at +z only; concave regions and
         references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`), or the
         oblique-light solver (any light, attached shadows as ``N . L <= 0``; marching from the
@@ -117,6 +120,7 @@ def reconstruct(
     light = None if estimate_wanted else as_light(light)
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
+    requested_method = method
     if integrator is not None and integrator not in INTEGRATORS:
         raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
@@ -134,6 +138,8 @@ def reconstruct(
         light_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
                                          "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
         lap("light")
+    if method == "auto":
+        method = best_method(light)
     concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
     refs = _references(references, shading, mask, labels, n_parts)
@@ -156,6 +162,7 @@ def reconstruct(
     lap("combine")
     info = {
         "method": method,
+        "method_requested": requested_method,
         "integrator": integrator or DEFAULT_INTEGRATOR[method],
         "refine": int(refine) if method == "propagation" else 0,
         "filter": parse_filter(filter).kind if filter else "none",
@@ -167,6 +174,31 @@ def reconstruct(
         **light_info,
     }
     return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
+
+
+def best_method(light) -> str:
+    """The solver ``method="auto"`` uses for a light direction: the best measured one.
+
+    On the synthetic scenes of ``benchmarks/results/methods.md`` (noise 0-3 %), "eikonal" has the
+    lowest errors with the light at +z and "oblique" under oblique light; "eikonal" only takes a
+    light at +z.
+
+    Parameters
+    ----------
+    light : (3,) float
+        Unit direction toward the light.
+
+    Returns
+    -------
+    str
+        "eikonal" or "oblique".
+    """
+    return "eikonal" if _is_frontal(light) else "oblique"
+
+
+def _is_frontal(light) -> bool:
+    """Whether the light is at +z (to rounding): the only light the eikonal solver takes."""
+    return bool(np.allclose(np.asarray(light, dtype=np.float64), (0.0, 0.0, 1.0), atol=1e-6))
 
 
 def _propagation(shading, mask, light, k, refs, labels, n_parts, cos_theta, concave_x, concave_y,
@@ -208,7 +240,7 @@ def _eikonal(shading, mask, light, k, references, concave_x, concave_y, integrat
     """Fast marching from the singular points (light at +z only); its own depth by default."""
     from shadeform.solvers.eikonal import eikonal_depth
 
-    if not np.allclose(light, (0.0, 0.0, 1.0), atol=1e-6):
+    if not _is_frontal(light):
         raise InputError("method 'eikonal' needs the light at (0, 0, 1); use method='propagation' for "
                          "other light directions")
     sources = [(int(item[0]), int(item[1])) for item in references or ()]

@@ -39,7 +39,7 @@ export interface ReconstructParams {
   channel: Channel;
   filter: FilterParams;
   light: LightParams;
-  /** One of ``Options.methods``. */
+  /** One of ``Options.methods``; "auto" is the best measured for the light. */
   method: string;
   /** One of ``Options.integrators``, or null for the method's own. */
   integrator: string | null;

@@ -51,7 +51,7 @@ export class Panel {
     this.params = structuredClone(options.defaults);
     fillSelect(this.channel, options.channels.map((c) => [c, CHANNEL_NAMES[c] ?? c]));
     fillSelect(this.filterKind, options.filters.map((f) => [f, FILTER_NAMES[f] ?? capitalised(f)]));
-    fillSelect(this.method, options.methods.map((m) => [m, capitalised(m)]));
+    fillSelect(this.method, options.methods.map((m) => [m, m === "auto" ? "Auto (best for the light)" : capitalised(m)]));
     fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i, capitalised(i)])]);
 
     this.channel.addEventListener('change', () => this.emit({ channel: this.channel.value as Params['channel'] }));

@@ -92,7 +92,7 @@ class ReconstructParams(_Model):
     channel: Channel = "luma"
     filter: FilterParams = Field(default_factory=FilterParams)
     light: LightParams = Field(default_factory=LightParams)
-    method: str = Field(default="propagation", description="One of ``Options.methods``.")
+    method: str = Field(default="auto", description="One of ``Options.methods``; \"auto\" is the best measured for the light.")
     integrator: str | None = Field(
         default=None,
         description="One of ``Options.integrators``, or null for the method's own.",

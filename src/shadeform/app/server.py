@@ -491,7 +491,8 @@ def _suggested(info: dict[str, Any]) -> dict[str, Any]:
         light_params = LightParams(mode="slant_tilt", slant=slant, tilt=tilt)
     spec = parse_filter(info["filter"])
     return ReconstructParams(
-        filter=FilterParams(kind=spec.kind, size=spec.size), light=light_params, step=int(info["step"])
+        filter=FilterParams(kind=spec.kind, size=spec.size), light=light_params, step=int(info["step"]),
+        method=info["method"],
     ).model_dump()
 
 
