@@ -266,7 +266,8 @@ def _oblique(shading, mask, light, k, refs, concave_x, concave_y, integrator, la
     if integrator is not None:
         depth = _integrate(result.normals, mask, main, integrator)
     lap("depth")
-    info = {"sources": len(result.info["sources"]), "sweeps": result.info["sweeps"],
+    info = {"sources": len(result.info["sources"]), "levels": result.info["levels"],
+            "sweeps": result.info["sweeps"],
             "shadowed": int(np.count_nonzero(mask & ~result.lit))}
     return result.normals.copy(), depth, info
 

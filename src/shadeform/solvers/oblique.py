@@ -33,11 +33,22 @@ The solver
    with ``w_ab = 1`` between lit pixels and ``shadow_weight`` where a shadowed pixel takes part.
    For fixed normals ``E`` is a pair-weighted Poisson problem in ``z`` (solved by the project's
    multigrid-preconditioned conjugate gradients, :class:`shadeform.integration._multigrid.
-   PairHierarchy`); for fixed ``z``, a red-black colouring makes the lit pixels of one colour
-   independent, each minimising a quadratic in ``n`` over its cone (dense sampling of ``phi``, then
-   golden section). The shadowed normals are refilled after each sweep. The small ``smooth`` term
-   removes the checkerboard that the pair sums cannot see and favours smooth surfaces over creased
-   ones.
+   PairHierarchy`, warm-started from the last depth); for fixed ``z``, a red-black colouring makes
+   the lit pixels of one colour independent, each minimising a quadratic in ``n`` over its cone,
+   which is a trigonometric polynomial of degree 2 in ``phi`` (a coarse grid of trials, then
+   safeguarded Newton steps). The shadowed normals are refilled after each sweep. The small
+   ``smooth`` term removes the checkerboard that the pair sums cannot see and favours smooth
+   surfaces over creased ones.
+
+**Coarse to fine** [6]_. An object longer than ``coarse`` pixels (default :data:`COARSE`) is solved
+first on the image halved (2x2 block means, recursively), and the full-size descent starts from
+that solution's normals, interpolated and put back on their cones, for at most
+:data:`REFINE_ITERATIONS` sweeps, instead of marching at full size: the marching's drift grows with
+the path length (sphere at 512 px: 1.41 % depth marched at full size, 0.22 % from the half-size
+start) and the descent moves long wavelengths slowly. The descent runs numba on one thread: its
+many small warm-started solves lose more to thread hand-offs than they gain, badly so on a
+shared machine. Speed and accuracy: ``benchmarks/results/oblique.md`` (about 2 s of CPU for a
+256x256 image on one core, 4-5 s at 512x512).
 
 Depth is in pixel units, ``z = 0`` at the main source (the brightest pixel). Normals of lit pixels
 lie exactly on their cones (``N . L = I / k``).
@@ -45,14 +56,22 @@ lie exactly on their cones (``N . L = I / k``).
 Limits. Uniform albedo, one distant light, no cast shadows, no interreflections. The marching
 decides the convex/concave choice once; the polish only refines within that basin. Where two
 singular points are joined by a ridge of nearly full brightness (the synthetic vase's belly and
-neck under the light (5, 5, 7)) the neck above the saddle can come out in the wrong basin. Noisy
+neck under the light (5, 5, 7)) the neck above the saddle can come out in the wrong basin (6.2 %
+depth at 256 px against a 4 % bar). The descent's energy does tell the basins apart there (0.02
+from the true normals, 9.6 from the marching's), but none of the starts tried reached the right
+one: marching from the sources inside or outside the marked region only, flipping the region's
+axes, other marching orders and weights, a half-size start, a smoothness continuation. Noisy
 images need a filter (``reconstruct(filter="gaussian:2")``) and a larger ``tol``.
 
 ``march_cone`` and ``cone_sweep`` are the compiled kernels; ``march_cone_reference`` and
 ``cone_sweep_reference`` are slow, plain-Python transcriptions kept for the tests.
 
 The constants below were chosen on the synthetic sphere and vase under the light (5, 5, 7) (the
-scenes of the accuracy bars), by hand and coarsely; see ``benchmarks/bench_oblique.py``.
+scenes of the accuracy bars), by hand and coarsely; see ``benchmarks/bench_oblique.py``. The
+speed constants (``SWEEP_SAMPLES``, ``REBUILD``, ``COARSE``, ``REFINE_ITERATIONS``) were set on
+the same two scenes by their time at 256 and 512 px with their errors unchanged at 256 px;
+``COARSE = 320`` keeps 256 px images on the marching at full size because the vase's depth error
+rose from 6.2 % to 7.3 % when a 128 px solution started it.
 
 References
 ----------
@@ -64,12 +83,15 @@ References
 .. [4] E. Prados and O. Faugeras, "Shape from shading: a well-posed problem?", CVPR 2005
    (oblique light, singular points).
 .. [5] Y. Queau, J.-D. Durou and J.-F. Aujol, "Normal integration: a survey", JMIV 60, 2018.
+.. [6] B. K. P. Horn, "Height and gradient from shading", IJCV 5(1), 37-75, 1990 (coarse-to-fine
+   start of the iterative scheme).
 """
 
 from __future__ import annotations
 
 import heapq
 import numbers
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -107,13 +129,23 @@ SHADOW_WEIGHT = 1e-2
 #: Block-coordinate descent sweeps at most, and the relative energy change that stops them.
 ITERATIONS = 30
 STOP = 1e-4
+#: CG iterations of a depth block past which the multigrid preconditioner is rebuilt.
+REBUILD = 10
 #: Lit normals keep ``n_z >= VISIBLE_NZ`` (they face the camera).
 VISIBLE_NZ = 0.02
-#: Trial azimuths per pixel before the golden-section refinement.
+#: Trial azimuths per pixel before the golden-section refinement (marching).
 SAMPLES = 72
+#: Trial azimuths per pixel before the Newton refinement (descent): its cost on the cone is a
+#: trigonometric polynomial of degree 2, with at most two minima, so a coarser grid suffices.
+SWEEP_SAMPLES = 24
+#: Objects longer than this (pixels) are first solved at half size (coarse to fine).
+COARSE = 320
+#: Descent sweeps at most at a size that starts from the half-size solution.
+REFINE_ITERATIONS = 10
 
 _GOLDEN = 0.3819660112501051
 _GOLDEN_STEPS = 24
+_NEWTON_STEPS = 8
 
 
 # --------------------------------------------------------------------------------------------
@@ -137,9 +169,11 @@ class ObliqueResult:
     main : (int, int)
         ``(row, col)`` of the main source (the brightest pixel), where ``z = 0``.
     info : dict
-        ``sources`` (pixels that started the marching), ``sweeps`` (descent sweeps done),
-        ``energy`` (per sweep), ``unreached`` (lit pixels the marching did not reach, filled like
-        the shadow) and ``timings`` (seconds per stage).
+        ``sources`` (the pixels that start the marching at this size), ``levels`` (sizes solved:
+        1, or more when the coarse-to-fine start was used, the marching then ran at the smallest),
+        ``sweeps`` (descent sweeps done at this size), ``energy`` (per sweep), ``unreached`` (lit
+        pixels the marching did not reach, filled like the shadow) and ``timings`` (seconds per
+        stage).
     """
 
     depth: np.ndarray
@@ -638,15 +672,80 @@ def fill_shadow_normals(normals, mask, shadow, *, light):
 
 
 @numba.njit(cache=True)
-def _sweep_cost(phi, a0, a1, a2, M, g):
-    cp = np.cos(phi)
-    sp_ = np.sin(phi)
-    n0 = a0[0] + a1[0] * cp + a2[0] * sp_
-    n1 = a0[1] + a1[1] * cp + a2[1] * sp_
-    n2 = a0[2] + a1[2] * cp + a2[2] * sp_
-    return (M[0, 0] * n0 * n0 + M[1, 1] * n1 * n1 + M[2, 2] * n2 * n2
-            + 2.0 * (M[0, 1] * n0 * n1 + M[0, 2] * n0 * n2 + M[1, 2] * n1 * n2)
-            + 2.0 * (g[0] * n0 + g[1] * n1 + g[2] * n2))
+def _trig_cost(t, coef):
+    """``coef[0] cos t + coef[1] sin t + coef[2] cos 2t + coef[3] sin 2t`` and its first two
+    derivatives."""
+    c = np.cos(t)
+    s = np.sin(t)
+    c2 = 2.0 * c * c - 1.0
+    s2 = 2.0 * s * c
+    value = coef[0] * c + coef[1] * s + coef[2] * c2 + coef[3] * s2
+    slope = -coef[0] * s + coef[1] * c - 2.0 * coef[2] * s2 + 2.0 * coef[3] * c2
+    bend = -coef[0] * c - coef[1] * s - 4.0 * coef[2] * c2 - 4.0 * coef[3] * s2
+    return value, slope, bend
+
+
+@numba.njit(cache=True)
+def _cone_coefficients(a0, a1, a2, M, g, coef):
+    """The quadratic ``n^T M n + 2 g . n`` on the cone ``n = a0 + a1 cos t + a2 sin t`` is, up to
+    a constant, ``coef . (cos t, sin t, cos 2t, sin 2t)`` (cos^2 = (1 + cos 2t) / 2, ...)."""
+    a1Ma0 = 0.0
+    a2Ma0 = 0.0
+    a1Ma1 = 0.0
+    a2Ma2 = 0.0
+    a1Ma2 = 0.0
+    for i in range(3):
+        for j in range(3):
+            a1Ma0 += a1[i] * M[i, j] * a0[j]
+            a2Ma0 += a2[i] * M[i, j] * a0[j]
+            a1Ma1 += a1[i] * M[i, j] * a1[j]
+            a2Ma2 += a2[i] * M[i, j] * a2[j]
+            a1Ma2 += a1[i] * M[i, j] * a2[j]
+    coef[0] = 2.0 * (a1Ma0 + g[0] * a1[0] + g[1] * a1[1] + g[2] * a1[2])
+    coef[1] = 2.0 * (a2Ma0 + g[0] * a2[0] + g[1] * a2[1] + g[2] * a2[2])
+    coef[2] = 0.5 * (a1Ma1 - a2Ma2)
+    coef[3] = a1Ma2  # M is symmetric
+
+
+@numba.njit(cache=True)
+def _cone_minimum(coef, limit, current, samples):
+    """Azimuth in ``[-limit, limit]`` minimising the trigonometric cost ``coef``: the best of
+    ``samples`` evenly spaced trials, refined by Newton steps kept inside the trial's bracket;
+    ``current`` is kept unless beaten (so a sweep never raises the energy)."""
+    step = 2.0 * limit / (samples - 1)
+    # the trial grid by rotation: one sine and cosine for all of it
+    cd = np.cos(step)
+    sd = np.sin(step)
+    c = np.cos(-limit)
+    s = np.sin(-limit)
+    found = -limit
+    found_cost = np.inf
+    for j in range(samples):
+        cost = coef[0] * c + coef[1] * s + coef[2] * (2.0 * c * c - 1.0) + coef[3] * (2.0 * s * c)
+        if cost < found_cost:
+            found_cost = cost
+            found = -limit + step * j
+        c, s = c * cd - s * sd, s * cd + c * sd
+    lo = max(found - step, -limit)
+    hi = min(found + step, limit)
+    t = found
+    for _ in range(_NEWTON_STEPS):
+        _, slope, bend = _trig_cost(t, coef)
+        if bend > 0.0:
+            trial = t - slope / bend
+        else:  # not convex here: move to the bracket's end the slope points to
+            trial = lo if slope > 0.0 else hi
+        trial = min(max(trial, lo), hi)
+        if abs(trial - t) < 1e-13:
+            t = trial
+            break
+        t = trial
+    cost, _, _ = _trig_cost(t, coef)
+    if cost < found_cost:
+        found = t
+        found_cost = cost
+    kept, _, _ = _trig_cost(current, coef)
+    return current if kept <= found_cost else found
 
 
 @numba.njit(cache=True)
@@ -691,6 +790,7 @@ def _sweep_kernel(z, normals, lit, wx, wy, cos_theta, limits, phi, light, e1, e2
     a0 = np.empty(3)
     a1 = np.empty(3)
     a2 = np.empty(3)
+    coef = np.empty(4)
     for r in range(height):
         for c in range(width):
             if not lit[r, c] or (r + c) % 2 != colour:
@@ -703,34 +803,8 @@ def _sweep_kernel(z, normals, lit, wx, wy, cos_theta, limits, phi, light, e1, e2
                 a1[i] = s * e1[i]
                 a2[i] = s * e2[i]
             limit = limits[r, c]
-            # never worse than the current azimuth: the sweep only lowers the energy
-            best = min(max(phi[r, c], -limit), limit)
-            best_cost = _sweep_cost(best, a0, a1, a2, M, g)
-            found = best
-            found_cost = np.inf
-            for j in range(samples):
-                t = -limit + 2.0 * limit * j / (samples - 1)
-                cost = _sweep_cost(t, a0, a1, a2, M, g)
-                if cost < found_cost:
-                    found_cost = cost
-                    found = t
-            step = 2.0 * limit / (samples - 1)
-            lo = max(found - step, -limit)
-            hi = min(found + step, limit)
-            for _ in range(_GOLDEN_STEPS):
-                m1 = lo + _GOLDEN * (hi - lo)
-                m2 = hi - _GOLDEN * (hi - lo)
-                if _sweep_cost(m1, a0, a1, a2, M, g) < _sweep_cost(m2, a0, a1, a2, M, g):
-                    hi = m2
-                else:
-                    lo = m1
-            t = 0.5 * (lo + hi)
-            cost = _sweep_cost(t, a0, a1, a2, M, g)
-            if cost < found_cost:
-                found_cost = cost
-                found = t
-            if found_cost < best_cost:
-                best = found
+            _cone_coefficients(a0, a1, a2, M, g, coef)
+            best = _cone_minimum(coef, limit, min(max(phi[r, c], -limit), limit), samples)
             phi[r, c] = best
             cp = np.cos(best)
             sp_ = np.sin(best)
@@ -744,12 +818,16 @@ def _sweep_setup(cos_theta, light):
     return light, e1, e2, _azimuth_limits(np.asarray(cos_theta, dtype=np.float64), light)
 
 
-def cone_sweep(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SMOOTH, samples=SAMPLES):
+def cone_sweep(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SMOOTH,
+               samples=SWEEP_SAMPLES):
     """One red-black sweep of the normal block of the descent (compiled), in place.
 
     Every lit pixel of one colour, then of the other, takes the azimuth on its cone that
     minimises its part of the energy (module docstring) with its neighbours fixed; it keeps its
-    current one unless that is beaten.
+    current one unless that is beaten. That part is a quadratic ``n^T M n + 2 g . n`` in the
+    normal, so on the cone a trigonometric polynomial of degree 2 in the azimuth: its four
+    coefficients are formed once per pixel, its minimum bracketed on ``samples`` trials (by
+    rotation, one sine and cosine for all) and polished by safeguarded Newton steps.
 
     Parameters
     ----------
@@ -766,6 +844,7 @@ def cone_sweep(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SMOOTH, samp
     light : (3,) float
     smooth : float
     samples : int
+        Trial azimuths per pixel (>= 3) before the Newton refinement.
 
     Returns
     -------
@@ -781,7 +860,7 @@ def cone_sweep(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SMOOTH, samp
 
 
 def cone_sweep_reference(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SMOOTH,
-                         samples=SAMPLES):
+                         samples=SWEEP_SAMPLES):
     """Slow version of :func:`cone_sweep`: the same sweep, written out in numpy per pixel.
 
     Each pixel's quadratic is assembled from its pairs with numpy, and its minimum taken over a
@@ -813,6 +892,22 @@ def cone_sweep_reference(z, normals, lit, wx, wy, cos_theta, *, light, smooth=SM
                 costs = np.einsum("pi,ij,pj->p", candidates, M, candidates) + 2 * candidates @ g
                 normals[r, c] = candidates[np.argmin(costs)]
     return normals
+
+
+@contextmanager
+def _serial():
+    """Numba's parallel kernels on one thread for the duration (the setting is per thread).
+
+    The descent's depth blocks are many small warm-started solves (a few CG iterations each, about
+    10 ms at 256x256 on one core); spread over threads on a shared machine each one waited tens
+    of times longer for the others than it computed (measured: 0.4 s instead of 0.01 s).
+    """
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
 
 
 class _Descent:
@@ -867,12 +962,13 @@ class _Descent:
         b[1:] += gy[:-1]
         if self.hierarchy is None:
             self.hierarchy = PairHierarchy(self.mask, px, py)
-            z, _, _ = self.hierarchy.solve_pairs(b, z0, tol=min(tol, 1e-6), maxiter=500)
-            return z
         z, iterations, _ = self.hierarchy.solve_pairs(b, z0, px=px, py=py, tol=tol, maxiter=500,
                                                       from_start=True)
-        if iterations > 10:  # the weights have drifted from the preconditioner's
-            self.hierarchy = PairHierarchy(self.mask, px, py)
+        # the weights have drifted from the preconditioner's: a new one, built when the next
+        # solve needs it (none after the last). A build costs about 50 iterations, but letting
+        # the count grow costs more over the sweeps (measured at 256 px: 10 to 40 as fast or slower)
+        if iterations > REBUILD:
+            self.hierarchy = None
         return z
 
     def sweep(self, z, normals):
@@ -887,7 +983,7 @@ class _Descent:
 
 def oblique_depth(image, mask, *, light, k=None, concave=None, tol=TOL, dark=0.0,
                   smooth=SMOOTH, shadow_weight=SHADOW_WEIGHT, iterations=ITERATIONS,
-                  stop=STOP) -> ObliqueResult:
+                  stop=STOP, coarse=COARSE) -> ObliqueResult:
     """Depth and normals from one shading image under any light direction.
 
     Parameters
@@ -918,6 +1014,10 @@ def oblique_depth(image, mask, *, light, k=None, concave=None, tol=TOL, dark=0.0
         Descent sweeps at most (0: the marching's normals, integrated).
     stop : float
         The sweeps stop when the energy falls by less than this fraction in one.
+    coarse : int
+        When the object's bounding box is longer than this many pixels, the steps 1-3 run first on
+        the image halved (2x2 block means, recursively), and the full-size polish starts from that
+        solution's normals, moved onto their cones, instead of from a marching at full size.
 
     Returns
     -------
@@ -963,17 +1063,107 @@ def oblique_depth(image, mask, *, light, k=None, concave=None, tol=TOL, dark=0.0
     sources = _sources(cos_theta, lit, tol)
     timer.lap("prepare")
 
-    normals, _ = march_cone(cos_theta, lit, light=light, sources=sources,
-                            concave_x=concave_x, concave_y=concave_y)
-    reached = np.isfinite(normals[..., 0])
-    unreached = int(np.count_nonzero(lit & ~reached))
-    timer.lap("march")
+    if isinstance(coarse, bool) or not isinstance(coarse, numbers.Integral) or coarse < 16:
+        raise InputError(f"coarse must be a whole number >= 16, got {coarse!r}")
+    extent = max(np.ptp(np.flatnonzero(mask.any(axis=1))), np.ptp(np.flatnonzero(mask.any(axis=0))))
+    if extent + 1 > coarse:
+        # the half-size solution gets the long wavelengths cheaply and with half the marching's
+        # drift; the full-size descent then only has to move the short ones (coarse-to-fine as
+        # in Horn 1990). k is the full-size one, so the cones keep their angles
+        half = _halve(image, mask, concave_x, concave_y)
+        start = oblique_depth(half.image, half.mask, light=light, k=k, concave=half.concave,
+                              tol=tol, dark=dark, smooth=smooth, shadow_weight=shadow_weight,
+                              iterations=iterations, stop=stop, coarse=coarse)
+        normals = _double_normals(start.normals, mask, cos_theta, lit, light)
+        reached = lit.copy()
+        unreached = int(start.info["unreached"])
+        levels = start.info["levels"] + 1
+        # the start is already polished at half size: a few sweeps move the short wavelengths
+        iterations = min(iterations, REFINE_ITERATIONS)
+    else:
+        normals, _ = march_cone(cos_theta, lit, light=light, sources=sources,
+                                concave_x=concave_x, concave_y=concave_y)
+        reached = np.isfinite(normals[..., 0])
+        unreached = int(np.count_nonzero(lit & ~reached))
+        levels = 1
+    timer.lap("march" if levels == 1 else "half-size solve")
 
     fill = _ShadowFill(mask, mask & ~reached)
     normals = fill(np.where(mask[..., None], normals, np.nan), light)
     timer.lap("shadow")
 
     descent = _Descent(mask, cos_theta, lit & reached, light, shadow_weight, smooth)
+    box = descent.box
+    with _serial():
+        normals, z, energies, sweeps = _polish(descent, fill, normals, light, iterations, stop)
+    timer.lap("descent")
+
+    depth = np.full(mask.shape, np.nan)
+    depth[box] = np.where(descent.mask, z, np.nan)
+    main = (int(sources[0, 0]), int(sources[0, 1]))
+    depth -= depth[main]
+    normals[~mask] = np.nan
+    timer.lap("depth")
+    info = {"sources": [(int(r), int(c)) for r, c in sources], "levels": levels,
+            "sweeps": int(sweeps if iterations else 0),
+            "energy": energies, "unreached": unreached, "timings": timer.timings}
+    return ObliqueResult(depth=depth, normals=normals, lit=lit, main=main, info=info)
+
+
+@dataclass(frozen=True)
+class _Half:
+    image: np.ndarray
+    mask: np.ndarray
+    concave: tuple[np.ndarray, np.ndarray] | None
+
+
+def _halve(image, mask, concave_x, concave_y) -> _Half:
+    """The image at half size: 2x2 block means over the object's pixels; a block is object when
+    at least two of its pixels are, concave where any of its pixels is."""
+    height, width = mask.shape
+    pad = ((0, height % 2), (0, width % 2))
+
+    def blocks(a):
+        a = np.pad(a, pad)
+        return a.reshape(a.shape[0] // 2, 2, a.shape[1] // 2, 2)
+
+    count = blocks(mask.astype(np.float64)).sum(axis=(1, 3))
+    total = blocks(np.where(mask, image, 0.0)).sum(axis=(1, 3))
+    half_mask = count >= 2
+    half_image = np.where(half_mask, total / np.maximum(count, 1.0), 0.0)
+    concave = None
+    if concave_x is not None:
+        concave = tuple(blocks(m.astype(bool)).any(axis=(1, 3)) for m in (concave_x, concave_y))
+    return _Half(half_image, half_mask, concave)
+
+
+def _double_normals(half_normals, mask, cos_theta, lit, light) -> np.ndarray:
+    """Normals of a half-size solution at full size: bilinear between the half-size pixel
+    centres (valid ones only; the nearest valid one past the edge), then each lit pixel's moved
+    to the nearest normal on its own cone (same azimuth about ``L``). Shadowed pixels stay NaN."""
+    valid = np.isfinite(half_normals[..., 0])
+    # past the half-size object: the nearest valid pixel's normal
+    _, (near_r, near_c) = ndi.distance_transform_edt(~valid, return_indices=True)
+    filled = half_normals[near_r, near_c]
+    height, width = mask.shape
+    # full pixel (r, c) sits at half-size coordinate (r + 0.5) / 2 - 0.5
+    rows = (np.arange(height) + 0.5) / 2 - 0.5
+    cols = (np.arange(width) + 0.5) / 2 - 0.5
+    grid = np.stack(np.meshgrid(rows, cols, indexing="ij"))
+    normals = np.stack([ndi.map_coordinates(filled[..., i], grid, order=1, mode="nearest")
+                        for i in range(3)], axis=-1)
+    phi = _azimuth(normals, light)
+    limits = _azimuth_limits(cos_theta, light)
+    on_cone = _on_cone(cos_theta, np.clip(phi, -limits, limits), light)
+    return np.where(lit[..., None], on_cone, np.nan)
+
+
+def _polish(descent, fill, normals, light, iterations, stop):
+    """Step 3: alternate the normal and depth blocks until the energy stalls.
+
+    Returns the normals (whole image), the depth on the descent's box, the energy after each
+    sweep (the first before any) and the number of sweeps done.
+    """
     box = descent.box
     field_ = np.ascontiguousarray(np.nan_to_num(normals[box]))
     z = descent.depth(field_, np.zeros(descent.mask.shape), tol=1e-6)
@@ -988,18 +1178,9 @@ def oblique_depth(image, mask, *, light, k=None, concave=None, tol=TOL, dark=0.0
         energies.append(descent.energy(z, field_))
         if energies[-2] - energies[-1] <= stop * energies[-2]:
             break
-    timer.lap("descent")
+    # the last depth block to full accuracy
     z = descent.depth(field_, z, tol=1e-8)
-
-    depth = np.full(mask.shape, np.nan)
-    depth[box] = np.where(descent.mask, z, np.nan)
-    main = (int(sources[0, 0]), int(sources[0, 1]))
-    depth -= depth[main]
-    normals[~mask] = np.nan
-    timer.lap("depth")
-    info = {"sources": [(int(r), int(c)) for r, c in sources], "sweeps": int(sweeps if iterations else 0),
-            "energy": energies, "unreached": unreached, "timings": timer.timings}
-    return ObliqueResult(depth=depth, normals=normals, lit=lit, main=main, info=info)
+    return normals, z, energies, sweeps
 
 
 def _sources(cos_theta, lit, tol) -> np.ndarray:
