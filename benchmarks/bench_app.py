@@ -144,7 +144,7 @@ def main(argv=None) -> int:
             page.wait_for_function("window.shadeform.applied() >= 1", timeout=300_000)
             page.evaluate("setSlider('step', 2)")
             page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
-            measure(page, "setSlider('step', i % 2 ? 3 : 2)", 2)  # warm-up: first geometry uploads
+            measure(page, "setSlider('step', i % 2 ? 2 : 3)", 2)  # warm-up (ends at step 2): first geometry uploads
             result = page.evaluate("window.shadeform.lastResult()")
             stages: dict[str, list[float]] = {}
             for name, setup, script in CHANGES:

@@ -445,6 +445,11 @@ def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats:
         parts.append(f"- Best measured for {light} (lowest median depth error over the "
                      f"{len(_labels(rows, 'scene'))} scenes, noise {clean:.0%}): **{bests[light] or 'none'}**"
                      + _auto_choice(light, bests[light]))
+    parts += ["", "Best measured (lowest median depth error over the scenes) at every noise level:", "",
+              "| light | " + " | ".join(f"noise {noise:.0%}" for noise in noises) + " |",
+              "|---|" + "---|" * len(noises)]
+    parts += [f"| {light} | " + " | ".join(best_method(rows, light, noise) or "none" for noise in noises) + " |"
+              for light in lights]
     for noise in noises:
         parts += ["", f"Noise {noise:.0%}: errors over the scenes per method and light, and the scenes "
                   "on which the method has the lowest depth error.", "", summary_table(rows, noise)]
