@@ -1,4 +1,6 @@
-"""Tests for shadeform.light: unit vectors, slant/tilt and their round trips."""
+"""Tests for shadeform.light: unit vectors, slant/tilt and their round trips, and the round-feature
+fit of a relief behind estimate_light (its helpers against slow references, and reliefs that are
+not the benchmark's)."""
 
 from __future__ import annotations
 
@@ -6,9 +8,24 @@ import math
 
 import numpy as np
 import pytest
+from scipy.interpolate import BSpline
 
+from shadeform import synth
 from shadeform.errors import InputError
-from shadeform.light import as_light, light_from_slant_tilt, parse_light, slant_tilt
+from shadeform.light import (
+    _PROFILE_KNOTS,
+    _block_mean,
+    _bspline,
+    _profile,
+    _render_features,
+    _ring_scores,
+    as_light,
+    estimate_light,
+    light_from_slant_tilt,
+    parse_light,
+    slant_tilt,
+)
+from _surfaces import normals_of, pixel_xy
 
 S = math.sqrt(0.5)
 
@@ -161,3 +178,209 @@ class TestParseLight:
     def test_not_text(self):
         with pytest.raises(InputError, match="bad light"):
             parse_light([0, 0, 1])
+
+
+# --- the relief fit: round features on a flat base (private helpers of estimate_light) ---------
+
+
+def _profile_reference(coefficients, spacing, radius):
+    """The slope profile by scipy's B-spline: knots ``spacing`` apart from ``-3 * spacing``,
+    coefficients c_-1 .. c_{K+4} with c_-1 = -c_1, c_0 = 0 and zeros past c_K."""
+    knots = coefficients.size
+    c = np.zeros(knots + 6)
+    c[2:knots + 2] = coefficients
+    c[0] = -coefficients[0]
+    spline = BSpline(spacing * np.arange(-3, knots + 7), c, 3)
+    return spline(radius), spline.derivative()(radius)
+
+
+def _render_reference(params, x, y, reaches):
+    """Pixel by pixel: the gradients of the round features add, then the Lambertian shading."""
+    level, tx, ty = params[:3]
+    knots = _PROFILE_KNOTS
+    out = []
+    for px, py in zip(x, y):
+        gx = gy = 0.0
+        for f, reach in enumerate(reaches):
+            base = 3 + f * (2 + knots)
+            dx, dy = px - params[base], py - params[base + 1]
+            r = math.hypot(dx, dy)
+            if 0 < r < reach:
+                s = _profile_reference(params[base + 2:base + 2 + knots], reach / (knots + 2),
+                                       np.array([r]))[0][0]
+                gx -= s * dx / r
+                gy -= s * dy / r
+        out.append(level * max(0.0, (1 - tx * gx - ty * gy) / math.sqrt(1 + gx * gx + gy * gy)))
+    return np.array(out)
+
+
+def _random_features(rng, count=2):
+    params = [0.9, 0.3, -0.2]
+    for _ in range(count):
+        params += [*rng.uniform(10, 30, 2) * (1, -1), *rng.uniform(-0.6, 0.6, _PROFILE_KNOTS)]
+    return np.array(params)
+
+
+class TestBspline:
+    def test_partition_of_unity(self):
+        _, weights, slopes = _bspline(np.linspace(0, 7.99, 200))
+        np.testing.assert_allclose(weights.sum(axis=0), 1.0, atol=1e-14)
+        np.testing.assert_allclose(slopes.sum(axis=0), 0.0, atol=1e-14)
+
+    def test_profile_matches_scipy(self):
+        rng = np.random.default_rng(1)
+        coefficients = rng.normal(size=_PROFILE_KNOTS)
+        radius = np.linspace(0, 2.0 * (_PROFILE_KNOTS + 2) - 1e-9, 301)
+        value, rate, _, _ = _profile(coefficients, 2.0, radius)
+        expected, expected_rate = _profile_reference(coefficients, 2.0, radius)
+        np.testing.assert_allclose(value, expected, atol=1e-12)
+        np.testing.assert_allclose(rate, expected_rate, atol=1e-12)
+
+    def test_profile_is_level_at_the_top_and_ends(self):
+        coefficients = np.ones(_PROFILE_KNOTS)
+        value, _, _, _ = _profile(coefficients, 1.5, np.array([0.0, 1.5 * (_PROFILE_KNOTS + 2)]))
+        np.testing.assert_allclose(value, 0.0, atol=1e-14)
+
+
+class TestRenderFeatures:
+    def test_matches_the_pixel_by_pixel_reference(self):
+        rng = np.random.default_rng(2)
+        params = _random_features(rng)
+        x, y = rng.uniform(0, 40, 120), -rng.uniform(0, 40, 120)
+        np.testing.assert_allclose(_render_features(params, x, y, [18.0, 14.0]),
+                                   _render_reference(params, x, y, [18.0, 14.0]), atol=1e-12)
+
+    def test_jacobian_matches_finite_differences(self):
+        rng = np.random.default_rng(3)
+        params = _random_features(rng)
+        x, y = rng.uniform(0, 40, 300), -rng.uniform(0, 40, 300)
+        image, jac = _render_features(params, x, y, [18.0, 14.0], jacobian=True)
+        assert jac.shape == (300, params.size)
+        lit = image > 1e-3  # away from the clipping kink
+        for i in range(params.size):
+            step = np.zeros(params.size)
+            step[i] = 1e-6
+            numeric = (_render_features(params + step, x, y, [18.0, 14.0])
+                       - _render_features(params - step, x, y, [18.0, 14.0])) / 2e-6
+            np.testing.assert_allclose(jac[lit, i], numeric[lit], atol=1e-7)
+
+    def test_flat_base(self):
+        x, y = np.arange(5.0), -np.arange(5.0)
+        params = np.r_[0.8, 0.5, 0.1, 2.0, -2.0, np.zeros(_PROFILE_KNOTS)]
+        np.testing.assert_allclose(_render_features(params, x, y, [10.0]), 0.8)
+
+
+class TestRingScores:
+    def test_direct_sums(self):
+        rng = np.random.default_rng(4)
+        deviation = -0.3 * rng.random((24, 26))  # darker than the base, as round features are
+        window = 4
+        across, score, energy = _ring_scores(deviation, window)
+        for r0, c0 in [(12, 13), (3, 20), (20, 2)]:
+            moment, weight, explained, total = np.zeros(2), 0.0, 0.0, 0.0
+            for dr in range(-window - 1, window + 2):
+                for dc in range(-window - 1, window + 2):
+                    inside = 0 <= r0 + dr < 24 and 0 <= c0 + dc < 26
+                    value = deviation[r0 + dr, c0 + dc] if inside else 0.0
+                    if math.hypot(dr, dc) < window + 0.5:
+                        total += value * value
+            for k in range(1, window + 1):
+                ring = [(dr, dc) for dr in range(-k - 1, k + 2) for dc in range(-k - 1, k + 2)
+                        if abs(math.hypot(dr, dc) - k) < 0.5]
+                vals = np.array([deviation[r0 + dr, c0 + dc]
+                                 if 0 <= r0 + dr < 24 and 0 <= c0 + dc < 26 else 0.0
+                                 for dr, dc in ring])
+                angles = np.array([math.atan2(-dr, dc) for dr, dc in ring])
+                spread = float((np.cos(angles) ** 2).sum())
+                mean = vals.mean()
+                harmonic = np.array([(vals * np.cos(angles)).sum(),
+                                     (vals * np.sin(angles)).sum()]) / spread
+                explained += len(ring) * min(mean, 0.0) ** 2
+                lean = math.sqrt(1 - min(max(1 + mean, 0.0), 1.0) ** 2)
+                moment += spread * lean * harmonic
+                weight += spread * lean * lean
+            explained += float(moment @ moment) / weight
+            assert energy[r0, c0] == pytest.approx(total, rel=1e-9)
+            np.testing.assert_allclose(across[r0, c0], moment / weight, rtol=1e-8, atol=1e-12)
+            assert score[r0, c0] == pytest.approx(-math.log(max(1 - explained / total, 1e-9)),
+                                                  rel=1e-8)
+
+    def test_reads_the_light_at_a_round_features_centre(self):
+        # one smooth cap z = h (1 - r^2 / rho^2)^2, lit from slant 30, tilt 120
+        x, y = pixel_xy((61, 61))
+        dx, dy = x - 30.0, y + 30.0
+        q = np.clip(1 - (dx * dx + dy * dy) / 400.0, 0, None)
+        grad = -4 * 8.0 * q / 400.0
+        normals = normals_of(grad * dx, grad * dy)
+        light = light_from_slant_tilt(30, 120)
+        image = synth.render(normals, np.ones((61, 61), bool), light=light)
+        across, score, _ = _ring_scores(image / light[2] - 1.0, 8)
+        np.testing.assert_allclose(across[30, 30], light[:2] / light[2], atol=0.02)
+        assert score[30, 30] == score[22:39, 22:39].max()
+
+
+class TestBlockMean:
+    def test_values(self):
+        image = np.arange(20.0).reshape(4, 5)
+        mask = np.ones((4, 5), bool)
+        mask[0, 0] = False
+        small, small_mask = _block_mean(image, mask, 2)
+        np.testing.assert_allclose(small, [[3.0, 5.0], [13.0, 15.0]])
+        np.testing.assert_array_equal(small_mask, [[False, True], [True, True]])
+
+
+def _caps(size, sign=1.0):
+    """Two smooth caps and a dimple, z = h (1 - r^2 / rho^2)^2, on a square base: round
+    features, but not the gaussians of the synthetic bumps."""
+    x, y = pixel_xy((size, size))
+    x, y = x - (size - 1) / 2, y + (size - 1) / 2
+    zx = np.zeros_like(x)
+    zy = np.zeros_like(x)
+    for x0, y0, height, rho in [(-0.2, 0.15, 0.12, 0.16), (0.18, -0.1, 0.08, 0.12),
+                                (0.15, 0.22, -0.06, 0.1)]:
+        dx, dy, rho = x - x0 * size, y - y0 * size, rho * size
+        q = np.clip(1 - (dx * dx + dy * dy) / rho ** 2, 0, None)
+        grad = -4 * sign * height * size * q / rho ** 2
+        zx += grad * dx
+        zy += grad * dy
+    mask = (np.abs(x) < 0.45 * size) & (np.abs(y) < 0.45 * size)
+    return normals_of(zx, zy), mask
+
+
+class TestRoundFeatureRelief:
+    """estimate_light on a relief of round features other than the benchmark's gaussians."""
+
+    @pytest.mark.parametrize(("slant", "tilt"), [(10, 30), (35, 200), (60, 300)])
+    def test_caps(self, slant, tilt):
+        normals, mask = _caps(128)
+        light = light_from_slant_tilt(slant, tilt)
+        est = estimate_light(synth.render(normals, mask, light=light), mask)
+        assert est.evidence == "relief"
+        assert est.info["relief_features"] == 3
+        assert abs(est.slant - slant) <= 0.5
+        assert abs((est.tilt - tilt + 180) % 360 - 180) <= 0.5
+
+    def test_sunk_relief_reads_as_raised_unless_told(self):
+        # two dimples and a cap: the raised twin lit from the other side explains it as well
+        normals, mask = _caps(128, sign=-1.0)
+        image = synth.render(normals, mask, light=light_from_slant_tilt(30, 40))
+        convex = estimate_light(image, mask)
+        concave = estimate_light(image, mask, convex=False)
+        assert abs((convex.tilt - 220 + 180) % 360 - 180) <= 0.5
+        assert abs((concave.tilt - 40 + 180) % 360 - 180) <= 0.5
+        assert concave.slant == pytest.approx(30, abs=0.5)
+
+    def test_a_ridge_is_not_made_of_round_features(self):
+        # a straight ridge with rounded ends: no sum of a few round features explains it, so the
+        # fit is not trusted and the spectrum's estimate is given
+        x, y = pixel_xy((64, 64))
+        x, y = x - 31.5, y + 31.5
+        sigma = 4.0
+        beyond = np.maximum(np.abs(x) - 16.0, 0.0)
+        z = 6.0 * np.exp(-(y * y + beyond * beyond) / (2 * sigma ** 2))
+        normals = normals_of(-z * beyond * np.sign(x) / sigma ** 2, -z * y / sigma ** 2)
+        mask = (np.abs(x) < 29) & (np.abs(y) < 29)
+        image = synth.render(normals, mask, light=light_from_slant_tilt(30, 200))
+        est = estimate_light(image, mask)
+        assert est.evidence == "relief-spectrum"
+        assert "relief_features" not in est.info
