@@ -363,6 +363,28 @@ class TestReconstruct:
         changed = reconstruct(client, bowl["image_id"], step=4, **{**params, "refine": 1}).json()
         assert changed["info"]["cached"] is False
 
+    def test_preview_then_full(self, client, bowl):
+        params = {"step": 2, "filter": {"kind": "gaussian", "size": 2.0}}
+        body = {"image_id": bowl["image_id"], "params": params, "request_id": 7}
+        quick = client.post("/api/reconstruct", json={**body, "preview": True}).json()
+        assert quick["preview"] is True and quick["info"]["preview_step"] == 2 and quick["request_id"] == 7
+        full = client.post("/api/reconstruct", json=body).json()
+        assert full["preview"] is False and "preview_step" not in full["info"] and full["info"]["cached"] is False
+        # the quick look has the full mesh's vertices and triangles, at nearly the same depth
+        quick_mesh, full_mesh = decode_mesh(quick["mesh"]), decode_mesh(full["mesh"])
+        np.testing.assert_array_equal(quick_mesh["indices"], full_mesh["indices"])
+        np.testing.assert_array_equal(quick_mesh["positions"][:, :2], full_mesh["positions"][:, :2])
+        depth_gap = quick_mesh["positions"][:, 2] - full_mesh["positions"][:, 2]
+        assert np.std(depth_gap) < 0.02 * np.ptp(full_mesh["positions"][:, 2])
+        assert quick["mask_png"] == full["mask_png"]
+        # once the full result is known, a preview request gets it
+        again = client.post("/api/reconstruct", json={**body, "preview": True}).json()
+        assert again["preview"] is False and again["info"]["cached"] is True
+        # at step 1 there is no quick look
+        single = client.post("/api/reconstruct", json={**body, "params": {**params, "step": 1, "refine": 1},
+                                                        "preview": True}).json()
+        assert single["preview"] is False
+
     def test_light_modes(self, client):
         image_id = client.post("/api/examples/synth:sphere?size=48").json()["image_id"]
         tilted = reconstruct(client, image_id, light={"mode": "slant_tilt", "slant": 20, "tilt": 30}).json()

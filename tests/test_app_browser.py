@@ -105,6 +105,8 @@ def wait_for_result(page, after: int, timeout=RESULT_MS) -> None:
     page.wait_for_function(
         f"window.shadeform.applied() > {after} && !window.shadeform.state().busy", timeout=timeout
     )
+    # nothing pending means the full-resolution model, not the quick look, is on screen
+    assert page.evaluate("window.shadeform.lastResult().preview") is False
 
 
 def open_example(page, name: str) -> None:
@@ -315,6 +317,36 @@ def test_a_newer_request_supersedes_older_ones(page, server):
     assert page.evaluate("window.shadeform.state().params.step") == 3
     assert result["request_id"] == page.evaluate("window.shadeform.requests()")
     assert result["vertex_count"] == to_mesh(expected_rec, step=3).n_vertices
+
+
+def test_a_new_solve_shows_a_quick_look_then_the_full_resolution_model(page):
+    from shadeform import reconstruct
+    from shadeform.examples import load_example
+
+    open_example(page, BOWL)
+    before = applied(page)
+    page.evaluate(
+        """() => {
+            const kind = document.getElementById('filter-kind');
+            kind.value = 'gaussian';
+            kind.dispatchEvent(new Event('change'));
+        }"""
+    )
+    wait_for_result(page, before)
+    timeline = page.evaluate("window.shadeform.timeline()")
+    result = page.evaluate("window.shadeform.lastResult()")
+    params = page.evaluate("window.shadeform.state().params")
+    assert params["step"] == 2 and params["filter"]["kind"] == "gaussian"
+    # two models drawn for the one change: the quick look, then the full solve
+    assert applied(page) == before + 2
+    assert timeline["firstRendered"] < timeline["rendered"] and timeline["preview"] is False
+    assert result["preview"] is False and "preview_step" not in result["info"]
+    # what stays on screen is the library's full-resolution model
+    image, info = load_example(BOWL)
+    expected = to_mesh(reconstruct(image, mask=info["mask"], light=info["light"],
+                                   filter=f"gaussian:{params['filter']['size']}"), step=2)
+    positions = np.array(page.evaluate("window.shadeform.mesh().positions")).reshape(-1, 3)
+    np.testing.assert_allclose(positions, expected.vertices, atol=1e-3)
 
 
 def test_reload_keeps_the_image_parameters_and_regions_even_when_the_server_forgot(page, tmp_path):

@@ -16,7 +16,7 @@ from scipy import ndimage as ndi
 from shadeform._checks import StageTimer, shading_image
 from shadeform.errors import InputError
 from shadeform.light import as_light, estimate_light
-from shadeform.preprocess import apply_filter, object_mask, parse_filter
+from shadeform.preprocess import Filter, apply_filter, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
@@ -367,3 +367,100 @@ def _brightness_scale(image, mask, main_ref, light, *, estimated=None) -> float:
     if estimated is not None:
         return estimated
     return float(image[mask].max())
+
+
+def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None = None,
+                        filter: str | None = None, references: Sequence | None = None,
+                        concave: Any = None, **options: Any) -> Reconstruction:
+    """A quick look at what ``to_mesh(reconstruct(...), step=step)`` will show.
+
+    The image is sampled at the mesh's grid (every ``step``-th row and column) and reconstructed
+    there, ``step**2`` times fewer pixels: interactive tools show this while the full-resolution
+    solve runs. Filter sizes, references and concave regions are carried to
+    the coarse grid; depth is scaled back to pixels of the input image. A feature narrower than
+    the grid can be lost (the eikonal solver's singular point on a thin rim that falls between
+    grid points): the preview is then off until the full result replaces it.
+
+    Parameters
+    ----------
+    image : (H, W) float array
+        As for :func:`reconstruct`.
+    step : int, keyword-only
+        The mesh's grid spacing in pixels, ``>= 1`` (1 is the full solve).
+    mask, filter, references, concave
+        As for :func:`reconstruct`, in pixels of the input image. A reference whose grid point
+        falls off the coarse object moves to the nearest grid point on it.
+    **options
+        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+
+    Returns
+    -------
+    Reconstruction
+        Full-size arrays (H, W): ``mask`` the object mask, ``normals`` and ``depth`` set at the
+        grid points ``[::step, ::step]`` inside the mask and NaN elsewhere, so that
+        ``to_mesh(preview, step=step)`` has the vertices and triangles of the full result's mesh.
+        ``info`` is the coarse solve's, with ``preview_step``; its references are in input
+        pixels.
+
+    Examples
+    --------
+    >>> from shadeform import synth, to_mesh
+    >>> scene = synth.scene("sphere", size=64)
+    >>> quick = reconstruct_preview(scene.image, mask=scene.mask, step=2)
+    >>> to_mesh(quick, step=2).n_vertices == to_mesh(reconstruct(scene.image, mask=scene.mask), step=2).n_vertices
+    True
+    """
+    image = _check_image(image)
+    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
+        raise InputError(f"step must be a whole number of pixels (1, 2, ...), got {step!r}")
+    step = int(step)
+    mask = object_mask(image) if mask is None else _check_mask(mask, image.shape)
+    _check_shading(image, mask)
+    if step == 1:
+        return reconstruct(image, mask=mask, filter=filter, references=references, concave=concave,
+                           **options)
+    # sampled, not averaged: an average flattens the narrow bright ridges where the eikonal
+    # solver finds its singular points (the vase's rim); the filter, scaled, does the smoothing
+    coarse_mask = mask[::step, ::step]
+    if not coarse_mask.any():
+        raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
+    coarse = np.where(coarse_mask, image[::step, ::step], 0.0)
+
+    spec = parse_filter(filter) if filter else None
+    if spec is not None and spec.kind != "none":
+        size = spec.size / step if spec.kind == "gaussian" else float(round(spec.size / step))
+        spec = Filter(spec.kind, size) if size > 0 else None
+    coarse_refs = None
+    if references:
+        coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
+    regions = tuple(Region(region.polygon / step, region.axis) for region in _as_regions(concave))
+    rec = reconstruct(coarse, mask=coarse_mask, filter=spec, references=coarse_refs,
+                      concave=regions or None, **options)
+
+    normals = np.full(image.shape + (3,), np.nan)
+    depth = np.full(image.shape, np.nan)
+    grid_normals = normals[::step, ::step]
+    grid_depth = depth[::step, ::step]
+    grid_normals[coarse_mask] = rec.normals[coarse_mask]
+    grid_depth[coarse_mask] = rec.depth[coarse_mask] * step  # heights in input pixels
+    info = {**rec.info, "preview_step": step,
+            "references": [(r * step, c * step) for r, c in rec.info["references"]]}
+    return Reconstruction(normals=normals, depth=depth, mask=mask, light=rec.light, albedo=rec.albedo,
+                          info=info)
+
+
+def _coarse_reference(item, mask, coarse_mask, step):
+    """A reference ``(row, col[, normal])`` in input pixels, checked, moved to the coarse grid."""
+    try:
+        r, c = int(item[0]), int(item[1])
+    except (TypeError, ValueError, IndexError):
+        raise InputError(f"reference {item!r} must be (row, col) or (row, col, (nx, ny, nz))") from None
+    if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
+        raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+    height, width = coarse_mask.shape
+    cr, cc = min(round(r / step), height - 1), min(round(c / step), width - 1)
+    if not coarse_mask[cr, cc]:
+        rows, cols = np.nonzero(coarse_mask)
+        nearest = np.argmin((rows - r / step) ** 2 + (cols - c / step) ** 2)
+        cr, cc = int(rows[nearest]), int(cols[nearest])
+    return (cr, cc, *item[2:3])

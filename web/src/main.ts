@@ -2,8 +2,9 @@
 // server, and wires the image pane, the side panel and the 3D view together.
 //
 // Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
-// time); a newer request aborts the one in flight, and a response whose request_id is not the
-// newest is dropped, so a stale model never arrives last.
+// time); at step >= 2 a quick look solved at the mesh's grid comes first, then the full solve
+// under the same id. A newer request aborts the one in flight, and a response whose request_id
+// is not the newest is dropped, so a stale model never arrives last.
 import './style.css';
 import * as api from './api';
 import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
@@ -39,6 +40,10 @@ interface Timeline {
   received: number;
   decoded: number;
   rendered: number;
+  /** When the first model of this request was drawn (the preview's, if one came). */
+  firstRendered: number;
+  /** Whether the last model drawn is the quick look (the full one still to come). */
+  preview: boolean;
   serverTimings: Record<string, number>;
 }
 
@@ -313,7 +318,9 @@ class App {
   }
 
   private request(requestId: number): ReconstructRequest {
-    return { image_id: this.image!.image_id, params: structuredClone(this.params), request_id: requestId };
+    return {
+      image_id: this.image!.image_id, params: structuredClone(this.params), request_id: requestId, preview: false,
+    };
   }
 
   private async solve(retried = false): Promise<void> {
@@ -329,17 +336,30 @@ class App {
     const sent = performance.now();
     this.setSolving(true);
     try {
-      const result = await api.reconstruct(this.request(id), controller.signal);
-      const received = performance.now();
-      if (result.request_id !== this.latestSent) return; // superseded while on the wire
-      const mesh = api.decodeMesh(result.mesh);
-      const decoded = performance.now();
-      this.applyResult(result, mesh);
-      const rendered = await this.viewer.rendered();
-      if (id !== this.latestSent) return;
-      this.appliedCount += 1;
-      this.timeline = { requestId: id, changed, sent, received, decoded, rendered, serverTimings: result.timings };
-      $('timing').textContent = this.timingText(result, rendered - changed);
+      // a quick look at the mesh's grid first (the server answers with the full result when it
+      // has it), then the full-resolution solve; both under this request's id and abort signal
+      let full = this.params.step < 2;
+      let firstRendered: number | null = null;
+      while (true) {
+        const result = await api.reconstruct({ ...this.request(id), preview: !full }, controller.signal);
+        const received = performance.now();
+        if (result.request_id !== this.latestSent) return; // superseded while on the wire
+        const mesh = api.decodeMesh(result.mesh);
+        const decoded = performance.now();
+        this.applyResult(result, mesh);
+        const rendered = await this.viewer.rendered();
+        if (id !== this.latestSent) return;
+        this.appliedCount += 1;
+        firstRendered ??= rendered;
+        this.timeline = {
+          requestId: id, changed, sent, received, decoded, rendered, firstRendered,
+          preview: result.preview, serverTimings: result.timings,
+        };
+        $('timing').textContent = this.timingText(result, rendered - changed);
+        // a drag that moved on wants its newest state, not this one at full resolution
+        if (!result.preview || this.dragWaiting) break;
+        full = true;
+      }
     } catch (err) {
       if ((err as Error).name === 'AbortError' || id !== this.latestSent) return;
       if (err instanceof api.ApiError && err.status === 404 && !retried && this.source) {
@@ -384,6 +404,7 @@ class App {
   private timingText(result: ReconstructResult, total: number): string {
     const server = (result.timings.total ?? 0) * 1000;
     const cached = result.info.cached ? ' (cached solve)' : '';
+    if (result.preview) return `preview in ${total.toFixed(0)} ms · full resolution on the way…`;
     return `server ${server.toFixed(0)} ms${cached} · view updated in ${total.toFixed(0)} ms`;
   }
 
@@ -691,6 +712,7 @@ class App {
         if (!r) return null;
         return {
           request_id: r.request_id,
+          preview: r.preview,
           vertex_count: r.mesh.vertex_count,
           triangle_count: r.mesh.triangle_count,
           light: r.light,

@@ -121,6 +121,11 @@ class ReconstructRequest(_Model):
         default=0,
         description="Chosen by the client, echoed in the result: a response older than the newest is stale.",
     )
+    preview: bool = Field(
+        default=False,
+        description="Answer at once with a quick look solved at the mesh's grid (step >= 2), unless the "
+                    "full result is already known; the result's ``preview`` says which came.",
+    )
 
 
 class FormatInfo(_Model):
@@ -196,6 +201,9 @@ class ReconstructResult(_Model):
     """One reconstruction: the mesh, and what the library used and found."""
 
     request_id: int
+    preview: bool = Field(
+        description="True for a quick look solved at the mesh's grid: the full result is still to come.",
+    )
     mesh: MeshData
     mask_png: str = Field(
         description="The object mask as a base64 8-bit grey PNG (255 = object), the image's size.",

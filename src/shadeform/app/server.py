@@ -203,14 +203,12 @@ def create_app(
         channel: str = Query("luma", description="luma, r, g, b or max."),
         filter: str = Query("none", description="none, or KIND:SIZE (e.g. gaussian:2, median:1)."),
     ) -> Response:
-        from shadeform.io.images import select_channel
-        from shadeform.preprocess import apply_filter, object_mask, parse_filter
+        from shadeform.preprocess import apply_filter, parse_filter
 
         entry = state.image(image_id)
         spec = parse_filter(filter)
-        image = select_channel(entry.pixels, channel)
+        image, mask, _ = _channel(state, entry, channel)
         if spec.kind != "none":
-            mask = entry.mask if entry.mask is not None else object_mask(image)
             image = apply_filter(image, mask, spec)
         return Response(_png(image), media_type="image/png", headers={"Cache-Control": "no-cache"})
 
@@ -278,6 +276,7 @@ class _State:
         self.images = LRU(max_items=limits.max_images, max_bytes=limits.max_image_bytes)
         self.results = LRU(max_items=limits.max_results, max_bytes=limits.max_result_bytes)
         self.pngs = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
+        self.masks = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
         self._examples: dict[tuple[str, int | None], str] = {}
         # one solve at a time: two would only share the cores and both arrive late
         self.solve_lock = asyncio.Lock()
@@ -361,16 +360,25 @@ class _Solved:
     depth_range: tuple[float, float]
 
 
-def _solve(state: _State, entry: StoredImage, params: ReconstructParams) -> tuple[_Solved, bool]:
-    """The reconstruction for these parameters, from the cache when only ``step`` changed."""
-    from shadeform import reconstruct
-    from shadeform.io.images import select_channel
+def _solve(state: _State, entry: StoredImage, params: ReconstructParams, *,
+           preview: bool = False) -> tuple[_Solved, bool]:
+    """The reconstruction for these parameters, from the cache when only ``step`` changed.
+
+    With ``preview`` (and ``step`` >= 2) the full result if it is cached, else the quick
+    look at the mesh's grid (:func:`shadeform.pipeline.reconstruct_preview`); the returned
+    reconstruction's ``info`` has ``preview_step`` when it is the quick one.
+    """
     from shadeform.light import light_from_slant_tilt
+    from shadeform.pipeline import reconstruct, reconstruct_preview
     from shadeform.preprocess import Filter
 
-    key = (entry.image_id, params.model_dump_json(exclude={"step"}))
-    solved = state.results.get(key)
+    full_key = (entry.image_id, params.model_dump_json(exclude={"step"}))
+    solved = state.results.get(full_key)
     if solved is not None:
+        return solved, True
+    preview = preview and params.step >= 2
+    key = (*full_key, "preview", params.step) if preview else full_key
+    if preview and (solved := state.results.get(key)) is not None:
         return solved, True
     if params.light.mode == "estimate":
         light: Any = "estimate"
@@ -379,30 +387,46 @@ def _solve(state: _State, entry: StoredImage, params: ReconstructParams) -> tupl
     else:
         light = (0.0, 0.0, 1.0)
     regions = params.concave.model_dump()
-    rec = reconstruct(
-        select_channel(entry.pixels, params.channel),
+    image, mask, mask_png = _channel(state, entry, params.channel)
+    settings = dict(
         light=light,
         method=params.method,
-        mask=entry.mask,
+        mask=mask,
         filter=Filter(params.filter.kind, params.filter.size) if params.filter.kind != "none" else None,
         references=[tuple(ref) for ref in params.references],
         concave=regions if regions["regions"] else None,
         integrator=params.integrator,
         refine=params.refine,
     )
+    rec = reconstruct_preview(image, step=params.step, **settings) if preview else reconstruct(image, **settings)
     depth = rec.depth[rec.mask]
-    solved = _Solved(rec, base64.b64encode(_png(rec.mask.astype(np.float32))).decode("ascii"),
-                     (float(np.nanmin(depth)), float(np.nanmax(depth))))
+    solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
     nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
     state.results.put(key, solved, nbytes)
     return solved, False
+
+
+def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """One channel of a stored image, its object mask and the mask as base64 PNG, kept per
+    image and channel: the mask does not change with the other parameters."""
+    from shadeform.io.images import select_channel
+    from shadeform.preprocess import object_mask
+
+    image = select_channel(entry.pixels, channel)
+    key = ("mask", entry.image_id, channel)
+    known = state.masks.get(key)
+    if known is None:
+        mask = entry.mask if entry.mask is not None else object_mask(image)
+        known = (mask, base64.b64encode(_png(mask.astype(np.float32))).decode("ascii"))
+        state.masks.put(key, known, mask.nbytes)
+    return image, *known
 
 
 def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequest) -> ReconstructResult:
     from shadeform import to_mesh
 
     start = time.perf_counter()
-    solved, cached = _solve(state, entry, body.params)
+    solved, cached = _solve(state, entry, body.params, preview=body.preview)
     rec = solved.reconstruction
     timings = {} if cached else dict(rec.info["timings"])
     lap = time.perf_counter()
@@ -421,6 +445,7 @@ def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequ
     timings["total"] = time.perf_counter() - start
     return ReconstructResult(
         request_id=body.request_id,
+        preview="preview_step" in rec.info,
         mesh=mesh_data,
         mask_png=solved.mask_png,
         light=tuple(float(v) for v in rec.light),
