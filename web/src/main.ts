@@ -333,7 +333,6 @@ class App {
     this.latestSent = id;
     const changed = this.changedAt ?? performance.now();
     this.changedAt = null;
-    const sent = performance.now();
     this.setSolving(true);
     try {
       // a quick look at the mesh's grid first (the server answers with the full result when it
@@ -341,6 +340,7 @@ class App {
       let full = this.params.step < 2;
       let firstRendered: number | null = null;
       while (true) {
+        const sent = performance.now();
         const result = await api.reconstruct({ ...this.request(id), preview: !full }, controller.signal);
         const received = performance.now();
         if (result.request_id !== this.latestSent) return; // superseded while on the wire
