@@ -18,6 +18,7 @@ from shadeform.light import (
     _bspline,
     _profile,
     _render_features,
+    _render_features_reference,
     _ring_scores,
     as_light,
     estimate_light,
@@ -249,6 +250,17 @@ class TestRenderFeatures:
         x, y = rng.uniform(0, 40, 120), -rng.uniform(0, 40, 120)
         np.testing.assert_allclose(_render_features(params, x, y, [18.0, 14.0]),
                                    _render_reference(params, x, y, [18.0, 14.0]), atol=1e-12)
+
+    def test_compiled_matches_the_vectorised_reference(self):
+        rng = np.random.default_rng(5)
+        params = _random_features(rng, count=4)
+        x, y = rng.uniform(0, 40, 500), -rng.uniform(0, 40, 500)
+        reaches = [18.0, 14.0, 9.0, 22.0]
+        image, jac = _render_features(params, x, y, reaches, jacobian=True)
+        expected_image, expected_jac = _render_features_reference(params, x, y, reaches, jacobian=True)
+        np.testing.assert_allclose(image, expected_image, atol=1e-13)
+        np.testing.assert_allclose(jac, expected_jac, atol=1e-13)
+        np.testing.assert_allclose(_render_features(params, x, y, reaches), expected_image, atol=1e-13)
 
     def test_jacobian_matches_finite_differences(self):
         rng = np.random.default_rng(3)

@@ -1295,7 +1295,21 @@ def _feature_params(level, across, features) -> np.ndarray:
 
 
 def _render_features(params, x, y, reaches, *, jacobian=False):
-    """Image of round features on a flat base, and its Jacobian.
+    """Image of round features on a flat base, and its Jacobian (compiled; the numpy
+    :func:`_render_features_reference` below is its reference)."""
+    from shadeform._relief import render_features
+
+    knots = (params.size - 3) // len(reaches) - 2 if reaches else 0
+    image = np.empty(x.size)
+    jac = np.zeros((x.size, params.size) if jacobian else (0, 0))
+    render_features(np.ascontiguousarray(params, dtype=np.float64), np.ascontiguousarray(x, dtype=np.float64),
+                    np.ascontiguousarray(y, dtype=np.float64), np.asarray(reaches, dtype=np.float64).reshape(-1),
+                    knots, image, jac, jacobian)
+    return (image, jac) if jacobian else image
+
+
+def _render_features_reference(params, x, y, reaches, *, jacobian=False):
+    """Image of round features on a flat base, and its Jacobian, vectorised over pixels.
 
     Parameters
     ----------

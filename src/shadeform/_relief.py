@@ -1,0 +1,100 @@
+"""Compiled kernel of the relief fit in :mod:`shadeform.light`: the image of round features on a
+flat base and its Jacobian, one pixel at a time (the numpy version there is its reference)."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, inline="always")
+def _spline_at(coefficients, base, knots, t):
+    """Slope ``s`` and ``ds/dt`` of the B-spline of ``coefficients[base:base + knots]`` at
+    ``t >= 0`` (knot units), with ``c_0 = 0``, ``c_-1 = -c_1`` and zeros past ``c_K``."""
+    first = math.floor(t)
+    u = t - first
+    u2 = u * u
+    u3 = u2 * u
+    weights = ((1 - u) ** 3 / 6, (3 * u3 - 6 * u2 + 4) / 6, (-3 * u3 + 3 * u2 + 3 * u + 1) / 6,
+               u3 / 6)
+    slopes = (-(1 - u) ** 2 / 2, (3 * u2 - 4 * u) / 2, (-3 * u2 + 2 * u + 1) / 2, u2 / 2)
+    value = 0.0
+    rate = 0.0
+    for k in range(4):
+        j = first - 1 + k  # coefficient index, -1 .. K + 4
+        if j == -1:
+            c = -coefficients[base]
+        elif 1 <= j <= knots:
+            c = coefficients[base + j - 1]
+        else:
+            continue
+        value += c * weights[k]
+        rate += c * slopes[k]
+    return value, rate, first, weights
+
+
+@numba.njit(cache=True)
+def render_features(params, x, y, reaches, knots, image, jac, want_jacobian):
+    """Fill ``image`` (n,) and, if ``want_jacobian``, ``jac`` (n, P) (zeroed by the caller):
+    ``k L_z max(0, (1 - tau . grad z) / sqrt(1 + |grad z|^2))`` with ``grad z`` the sum of the
+    features' ``-s(r) u``; parameters as :func:`shadeform.light._feature_params`."""
+    level = params[0]
+    tx = params[1]
+    ty = params[2]
+    stride = 2 + knots
+    for i in range(x.size):
+        gx = 0.0
+        gy = 0.0
+        for f in range(reaches.size):
+            base = 3 + f * stride
+            dx = x[i] - params[base]
+            dy = y[i] - params[base + 1]
+            radius = math.hypot(dx, dy)
+            if radius >= reaches[f]:
+                continue
+            r = max(radius, 1e-12)
+            s, _, _, _ = _spline_at(params, base + 2, knots, r / (reaches[f] / (knots + 2)))
+            gx -= s * dx / r
+            gy -= s * dy / r
+        root = math.sqrt(1.0 + gx * gx + gy * gy)
+        facing = 1.0 - tx * gx - ty * gy
+        shade = facing / root
+        if shade <= 0:
+            image[i] = 0.0
+            continue
+        image[i] = level * shade
+        if not want_jacobian:
+            continue
+        jac[i, 0] = shade
+        jac[i, 1] = -level * gx / root
+        jac[i, 2] = -level * gy / root
+        # d image / d grad z
+        ex = level * (-tx / root - facing * gx / root ** 3)
+        ey = level * (-ty / root - facing * gy / root ** 3)
+        for f in range(reaches.size):
+            base = 3 + f * stride
+            dx = x[i] - params[base]
+            dy = y[i] - params[base + 1]
+            radius = math.hypot(dx, dy)
+            if radius >= reaches[f]:
+                continue
+            r = max(radius, 1e-12)
+            spacing = reaches[f] / (knots + 2)
+            s, ds, first, weights = _spline_at(params, base + 2, knots, r / spacing)
+            ux = dx / r
+            uy = dy / r
+            # d(grad z)/d(centre) = s' u u^T + (s / r)(I - u u^T)
+            radial = ds / spacing - s / r
+            along = s / r
+            jac[i, base] = ex * (radial * ux * ux + along) + ey * (radial * uy * ux)
+            jac[i, base + 1] = ex * (radial * ux * uy) + ey * (radial * uy * uy + along)
+            # d(grad z)/d c_j = -B_j(r) u; c_-1 is -c_1
+            outward = -(ex * ux + ey * uy)
+            for k in range(4):
+                j = first - 1 + k
+                if j == -1:
+                    jac[i, base + 2] -= weights[k] * outward
+                elif 1 <= j <= knots:
+                    jac[i, base + 1 + j] += weights[k] * outward
