@@ -6,24 +6,32 @@ lies on a cone around ``L`` of half-angle ``acos(I / k)``: one unknown per pixel
 The solver
 
 1. **marches** over the lit pixels from the brightest ones (the caps within ``tol`` of ``k``: the
-   singular points, where ``N = L``), in order of distance from them. Each pixel takes the cone
-   normal and height that best fit its already accepted 8-neighbours: for a neighbour ``b`` the
-   chord from it is perpendicular to the sum of the two normals,
+   singular points, where ``N = L``), in order of distance from them plus ``BRIGHTNESS`` object
+   lengths per unit of darkening ``1 - I / k``, so that a ridge of near-full brightness (where
+   the azimuth is weakly determined) is marched along its crest first and each side is reached
+   from the crest. Each pixel takes the cone normal and height that best fit its already accepted
+   8-neighbours: for a neighbour ``b`` the chord from it is perpendicular to the sum of the two
+   normals,
 
        (n + n_b) . (x_b - x, y_b - y, z_b - z) = 0,
 
    which holds exactly for any two points of a sphere (their chord is perpendicular to the sum of
    the radii) and to second order on any smooth surface. For a trial ``phi`` the height ``z`` is
    the least-squares fit of these equations; ``phi`` minimises their residual plus a small
-   continuity term ``|n - n_b|^2`` and a tie-break that prefers the convex turn of the normal (the
-   way one moves), flipped per axis inside the user's concave regions. A pixel is accepted only
-   once its accepted neighbours span both image directions, so the front cannot run away along a
-   one-pixel path. This is in the spirit of the height-ordered local solves of Bichsel & Pentland
-   (1992), with the chord equation in place of their slope rule;
+   continuity term ``|n - n_b|^2``, a tie-break that prefers the convex turn of the normal (the
+   way one moves) and a one-sided penalty, ``HINGE`` times the squared shortfall, on a turn
+   against it (``n_x`` falling where ``x`` grows toward a neighbour, or ``n_y`` where ``y``
+   does), both flipped per axis inside the user's concave regions. The penalty is zero while the
+   turn agrees, so it picks one of the cone's two branches without pulling the normal. A pixel is
+   accepted only once its accepted neighbours span both image directions, so the front cannot run
+   away along a one-pixel path. This is in the spirit of the height-ordered local solves of
+   Bichsel & Pentland (1992), with the chord equation in place of their slope rule;
 2. **fills the shadows**: the normals of shadowed pixels continue those of the lit ones with the
    least change of curvature, a thin-plate (second-difference) fit of ``n_x`` and ``n_y`` with the
    lit normals fixed, then each is moved to the nearest normal with ``N . L <= 0`` where the fit
-   broke the constraint. The shadow is a constraint, not a dark intensity: no slope is read from it;
+   broke the constraint, all with ``n_z >= SHADOW_NZ`` (a wrong lit normal at the shadow's edge
+   then cannot extrapolate into a wall of grazing normals). The shadow is a constraint, not a dark
+   intensity: no slope is read from it;
 3. **polishes** by block-coordinate descent on one energy over the depth ``z`` and the cone
    azimuths of the lit pixels,
 
@@ -44,34 +52,44 @@ The solver
 first on the image halved (2x2 block means, recursively), and the full-size descent starts from
 that solution's normals, interpolated and put back on their cones, for at most
 :data:`REFINE_ITERATIONS` sweeps, instead of marching at full size: the marching's drift grows with
-the path length (sphere at 512 px: 1.41 % depth marched at full size, 0.22 % from the half-size
-start) and the descent moves long wavelengths slowly. The descent runs numba on one thread: its
-many small warm-started solves lose more to thread hand-offs than they gain, badly so on a
-shared machine. Speed and accuracy: ``benchmarks/results/oblique.md`` (about 2 s of CPU for a
-256x256 image on one core, 4-5 s at 512x512).
+the path length and the descent moves long wavelengths slowly (sphere at 512 px with the first
+marching: 1.41 % depth marched at full size, 0.22 % from the half-size start; with the present
+one 0.25 % and 0.24 %, but the full-size route took 14.6 s against 3.5 s). The descent runs
+numba on one thread: its many small warm-started solves lose more to thread hand-offs than they
+gain, badly so on a shared machine. Speed and accuracy: ``benchmarks/results/oblique.md``
+(about 1.3-1.6 s of CPU for a 256x256 image on one core, 2.6-3.5 s at 512x512).
 
 Depth is in pixel units, ``z = 0`` at the main source (the brightest pixel). Normals of lit pixels
 lie exactly on their cones (``N . L = I / k``).
 
 Limits. Uniform albedo, one distant light, no cast shadows, no interreflections. The marching
-decides the convex/concave choice once; the polish only refines within that basin. Where two
-singular points are joined by a ridge of nearly full brightness (the synthetic vase's belly and
-neck under the light (5, 5, 7)) the neck above the saddle can come out in the wrong basin (6.2 %
-depth at 256 px against a 4 % bar). The descent's energy does tell the basins apart there (0.02
-from the true normals, 9.6 from the marching's), but none of the starts tried reached the right
-one: marching from the sources inside or outside the marked region only, flipping the region's
-axes, other marching orders and weights, a half-size start, a smoothness continuation. Noisy
-images need a filter (``reconstruct(filter="gaussian:2")``) and a larger ``tol``.
+decides the convex/concave choice once; the polish only refines within that basin, so the
+convexity it assumes (convex unless marked) must hold where it decides: on unmarked concave parts
+(the bumps' skirts) the hinge can push the wrong way. Where two singular points are joined by a
+ridge of nearly full brightness (the synthetic vase's belly and neck under the light (5, 5, 7)),
+marching nearest-first reached the neck above the saddle from the side and left it in the wrong
+basin (6.2 % depth at 256 px; energy 9.6 against 0.02 from the true normals); the brightness term
+of the order and the hinge bring it to 3.0 % / 2.8 degrees (energy 2.9). Noisy images need a filter
+(``reconstruct(filter="gaussian:2")``) and a larger ``tol``.
 
 ``march_cone`` and ``cone_sweep`` are the compiled kernels; ``march_cone_reference`` and
 ``cone_sweep_reference`` are slow, plain-Python transcriptions kept for the tests.
 
 The constants below were chosen on the synthetic sphere and vase under the light (5, 5, 7) (the
-scenes of the accuracy bars), by hand and coarsely; see ``benchmarks/bench_oblique.py``. The
-speed constants (``SWEEP_SAMPLES``, ``REBUILD``, ``COARSE``, ``REFINE_ITERATIONS``) were set on
-the same two scenes by their time at 256 and 512 px with their errors unchanged at 256 px;
-``COARSE = 320`` keeps 256 px images on the marching at full size because the vase's depth error
-rose from 6.2 % to 7.3 % when a 128 px solution started it.
+scenes of the accuracy bars), by hand and coarsely; see ``benchmarks/bench_oblique.py``.
+``HINGE``, ``BRIGHTNESS`` and ``SHADOW_NZ`` were then set on the vase at (5, 5, 7) and at slant 30
+degrees, checked on the other scenes: at (5, 5, 7) the vase's depth error stays within 2.7-3.5 %
+for ``HINGE`` 100-1000 and ``BRIGHTNESS`` 0.08-0.16 (no hinge: 4.2 %; 10,000: 6.5 %); ``HINGE``
+300 rather than 100 made the bumps worse at slant 30 degrees (58 % against 53 %); ``SHADOW_NZ``
+0.15 rather than ``MIN_NZ`` (0.05) took the vase's depth error over ``BRIGHTNESS`` 0.11-0.14 from
+3.4-4.5 % to 2.9-3.5 %, at the cost of the crescent's worst shadow error (7.4 % to 8.7 % of the
+depth range; test ``test_shadow_is_a_constraint_not_a_cliff``). The speed constants
+(``SWEEP_SAMPLES``, ``REBUILD``, ``COARSE``, ``REFINE_ITERATIONS``) were set on the same two
+scenes by their time at 256 and 512 px with their errors unchanged at 256 px. ``COARSE = 320``
+keeps 256 px images on the marching at full size: with the first marching the vase's depth error
+rose from 6.2 % to 7.3 % when a 128 px solution started it; with this one the half-size start
+gives about the same errors (vase 3.0 %, sphere 0.23 %) in about 55-60 % of the time (not yet
+adopted).
 
 References
 ----------
@@ -122,10 +140,19 @@ TOL = 2e-3
 CONTINUITY = 0.05
 #: Weight of the convex (or marked concave) turn of the normal in the marching's local fit.
 CONVEXITY = 0.03
+#: Weight of the one-sided penalty on a turn of the normal against the convexity (the marked
+#: one inside the concave regions, convex elsewhere) in the marching's local fit: zero while the
+#: turn agrees, so it decides between the two branches without pulling either.
+HINGE = 100.0
+#: The marching's order: distance to the nearest source plus this many object lengths per unit
+#: of darkening ``1 - I / k``, so the front runs along ridges of near-full brightness first.
+BRIGHTNESS = 0.12
 #: Weight of ``|n_a - n_b|^2`` between lit neighbours in the polished energy.
 SMOOTH = 0.1
 #: Weight of the chord equations in which a shadowed pixel takes part.
 SHADOW_WEIGHT = 1e-2
+#: Filled shadow normals keep ``n_z >= SHADOW_NZ``.
+SHADOW_NZ = 0.15
 #: Block-coordinate descent sweeps at most, and the relative energy change that stops them.
 ITERATIONS = 30
 STOP = 1e-4
@@ -310,8 +337,12 @@ def _gather(r, c, z, normals, done, convex_x, convex_y, kappa, nb, db, zb, wb, p
 
 
 @numba.njit(cache=True)
-def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, out_z):
-    """Cost of azimuth ``phi`` in the local fit; its best height goes to ``out_z[0]``."""
+def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, out_z):
+    """Cost of azimuth ``phi`` in the local fit; its best height goes to ``out_z[0]``.
+
+    ``cx, cy`` are +1 (convex) or -1 (concave) along x and y at the pixel: a neighbour ``b`` at
+    ``d`` should have ``cx d_x (n_b,x - n_x) >= 0`` and ``cy d_y (n_b,y - n_y) >= 0``; each
+    shortfall costs ``hinge`` times its square."""
     cp = np.cos(phi)
     sp_ = np.sin(phi)
     n0 = a0[0] + a1[0] * cp + a2[0] * sp_
@@ -336,16 +367,21 @@ def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, out_z):
         m1 = n1 - nb[j, 1]
         m2 = n2 - nb[j, 2]
         cost += wb[j] * (residual * residual + gamma * (m0 * m0 + m1 * m1 + m2 * m2))
+        turn_x = min(cx * db[j, 0] * (nb[j, 0] - n0), 0.0)
+        turn_y = min(cy * db[j, 1] * (nb[j, 1] - n1), 0.0)
+        cost += hinge * wb[j] * (turn_x * turn_x + turn_y * turn_y)
     out_z[0] = z
     return cost
 
 
 @numba.njit(cache=True)
 def _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x, convex_y,
-               gamma, kappa, samples, work, out):
+               gamma, kappa, hinge, samples, work, out):
     """The marching's local fit at ``(r, c)``: ``out = (n_x, n_y, n_z, z, phi)``."""
     nb, db, zb, wb, prefer, a0, a1, a2, tmp = work
     count, _ = _gather(r, c, z, normals, done, convex_x, convex_y, kappa, nb, db, zb, wb, prefer)
+    cx = convex_x[r, c]
+    cy = convex_y[r, c]
     cos_t = cos_theta[r, c]
     s = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
     for i in range(3):
@@ -358,7 +394,7 @@ def _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_
     best_z = 0.0
     for j in range(samples):
         t = -limit + 2.0 * limit * j / (samples - 1)
-        cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, tmp)
+        cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, tmp)
         if cost < best_cost:
             best_cost = cost
             best = t
@@ -369,13 +405,16 @@ def _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_
     for _ in range(_GOLDEN_STEPS):
         m1 = lo + _GOLDEN * (hi - lo)
         m2 = hi - _GOLDEN * (hi - lo)
-        if _local_cost(m1, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, tmp) < \
-                _local_cost(m2, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, tmp):
+        cost1 = _local_cost(m1, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy,
+                            tmp)
+        cost2 = _local_cost(m2, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy,
+                            tmp)
+        if cost1 < cost2:
             hi = m2
         else:
             lo = m1
     t = 0.5 * (lo + hi)
-    cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, tmp)
+    cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, tmp)
     if cost < best_cost:
         best = t
         best_z = tmp[0]
@@ -389,7 +428,7 @@ def _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_
 
 @numba.njit(cache=True)
 def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sources, source_z,
-                  gamma, kappa, samples, distance, z, normals, phi, done, keys, items):
+                  gamma, kappa, hinge, samples, distance, z, normals, phi, done, keys, items):
     # work arrays of the local fit
     work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(2),
             np.empty(3), np.empty(3), np.empty(3), np.empty(1))
@@ -415,7 +454,7 @@ def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sou
             phi[r, c] = 0.0
         else:
             _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x,
-                       convex_y, gamma, kappa, samples, work, out)
+                       convex_y, gamma, kappa, hinge, samples, work, out)
             for i in range(3):
                 normals[r, c, i] = out[i]
             z[r, c] = out[3]
@@ -436,7 +475,7 @@ def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sou
                     size = _heap_push(keys, items, size, distance[rr, cc], rr * width + cc)
 
 
-def _march_setup(cos_theta, lit, light, sources, concave_x, concave_y):
+def _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness):
     cos_theta = np.ascontiguousarray(cos_theta, dtype=np.float64)
     lit = np.ascontiguousarray(lit, dtype=bool)
     light = np.asarray(light, dtype=np.float64)
@@ -448,9 +487,17 @@ def _march_setup(cos_theta, lit, light, sources, concave_x, concave_y):
     convex_y = np.where(concave_y, -1.0, 1.0) if concave_y is not None else np.ones(shape)
     seeds = np.zeros(shape, dtype=bool)
     seeds[sources[:, 0], sources[:, 1]] = True
-    # order: distance to the nearest source; the sources lie on one plateau of the height along
-    # L (N = L there), so their heights follow from their positions
+    # order: distance to the nearest source, plus the darkening in units of the object's length
+    # so that ridges of near-full brightness (where the azimuth is weakly determined) are
+    # crossed from their crest, each side taking its convex turn against the crest's normals
     distance = ndi.distance_transform_edt(~seeds)
+    if lit.any():
+        rows_lit = np.flatnonzero(lit.any(axis=1))
+        cols_lit = np.flatnonzero(lit.any(axis=0))
+        length = max(rows_lit[-1] - rows_lit[0], cols_lit[-1] - cols_lit[0]) + 1
+        distance = distance + float(brightness) * length * (1.0 - cos_theta)
+    # the sources lie on one plateau of the height along L (N = L there), so their heights
+    # follow from their positions
     r0, c0 = sources[0]
     rows, cols = np.indices(shape)
     source_z = -(light[0] * (cols - c0) - light[1] * (rows - r0)) / light[2]
@@ -458,7 +505,8 @@ def _march_setup(cos_theta, lit, light, sources, concave_x, concave_y):
 
 
 def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None,
-               continuity=CONTINUITY, convexity=CONVEXITY, samples=SAMPLES):
+               continuity=CONTINUITY, convexity=CONVEXITY, hinge=HINGE, brightness=BRIGHTNESS,
+               samples=SAMPLES):
     """Normals and heights of the lit pixels by marching from the sources (compiled).
 
     Parameters
@@ -472,9 +520,13 @@ def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None
     sources : (S, 2) int
         ``(row, col)`` of the pixels that start with ``N = L``; the first has ``z = 0``.
     concave_x, concave_y : (H, W) bool, optional
-        The user's concave regions per axis: the convexity tie-break flips there.
+        The user's concave regions per axis: the convexity tie-break and hinge flip there.
     continuity, convexity : float
         Weights of ``|n - n_b|^2`` and of the convex turn in the local fit.
+    hinge : float
+        Weight of the one-sided penalty on a turn against the convexity in the local fit.
+    brightness : float
+        Object lengths added to a pixel's place in the marching order per unit of ``1 - I / k``.
     samples : int
         Trial azimuths per pixel (>= 3) before golden-section refinement.
 
@@ -486,7 +538,7 @@ def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None
         NaN where not reached.
     """
     (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance,
-     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y)
+     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
     shape = cos_theta.shape
     z = np.full(shape, np.nan)
     normals = np.full(shape + (3,), np.nan)
@@ -496,20 +548,21 @@ def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sources, source_z,
-                  float(continuity), float(convexity), int(samples), distance, z, normals, phi,
-                  done, keys, items)
+                  float(continuity), float(convexity), float(hinge), int(samples), distance, z,
+                  normals, phi, done, keys, items)
     return normals, z
 
 
 def march_cone_reference(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None,
-                         continuity=CONTINUITY, convexity=CONVEXITY, samples=SAMPLES):
+                         continuity=CONTINUITY, convexity=CONVEXITY, hinge=HINGE,
+                         brightness=BRIGHTNESS, samples=SAMPLES):
     """Slow, plain-Python version of :func:`march_cone` (same arguments and result).
 
     ``heapq`` for the queue and the local fit evaluated by the uncompiled functions; for the
     tests, on small images.
     """
     (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance,
-     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y)
+     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
     height, width = cos_theta.shape
     z = np.full((height, width), np.nan)
     normals = np.full((height, width, 3), np.nan)
@@ -535,7 +588,7 @@ def march_cone_reference(cos_theta, lit, *, light, sources, concave_x=None, conc
             z[r, c] = source_z[r, c]
         else:
             fit(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x, convex_y,
-                float(continuity), float(convexity), int(samples), work, out)
+                float(continuity), float(convexity), float(hinge), int(samples), work, out)
             normals[r, c] = out[:3]
             z[r, c] = out[3]
             phi[r, c] = out[4]
@@ -606,7 +659,7 @@ class _ShadowFill:
         for axis in (0, 1):
             rhs = -(self.free_part.T @ (self.known_part @ values[~free, axis]))
             filled[:, axis] = self.solve(rhs)
-        filled = _visible(filled)
+        filled = _visible(filled, SHADOW_NZ)
         # the constraint N . L <= 0: a filled normal that faces the light goes to the nearest
         # one on the terminator
         facing = filled @ light
@@ -615,7 +668,7 @@ class _ShadowFill:
             moved = filled[bad] - facing[bad, None] * light
             length = np.linalg.norm(moved, axis=1, keepdims=True)
             moved = np.where(length > 1e-12, moved / np.maximum(length, 1e-12), filled[bad])
-            filled[bad] = _visible(moved)
+            filled[bad] = _visible(moved, SHADOW_NZ)
             filled[bad] -= np.maximum(filled[bad] @ light, 0.0)[:, None] * light
             filled[bad] /= np.linalg.norm(filled[bad], axis=1, keepdims=True)
         out = normals.copy()
@@ -624,11 +677,11 @@ class _ShadowFill:
         return out
 
 
-def _visible(normals: np.ndarray) -> np.ndarray:
-    """Unit normals from their ``(n_x, n_y)``, with ``|(n_x, n_y)|`` capped so ``n_z >= MIN_NZ``."""
+def _visible(normals: np.ndarray, min_nz: float = MIN_NZ) -> np.ndarray:
+    """Unit normals from their ``(n_x, n_y)``, with ``|(n_x, n_y)|`` capped so ``n_z >= min_nz``."""
     xy = normals[:, :2]
     length = np.linalg.norm(xy, axis=1)
-    cap = np.sqrt(1.0 - MIN_NZ**2)
+    cap = np.sqrt(1.0 - min_nz**2)
     xy = xy * np.minimum(1.0, cap / np.maximum(length, 1e-12))[:, None]
     return np.column_stack([xy, np.sqrt(np.maximum(1.0 - (xy * xy).sum(axis=1), 0.0))])
 
@@ -999,7 +1052,8 @@ def oblique_depth(image, mask, *, light, k=None, concave=None, tol=TOL, dark=0.0
         pixel (which faces the light in a noise-free image).
     concave : (concave_x, concave_y), optional
         Where the user marked the surface concave along x / y
-        (:func:`shadeform.regions.concave_masks`): the marching's convexity tie-break flips there.
+        (:func:`shadeform.regions.concave_masks`): the marching's convexity tie-break and its
+        one-sided penalty on turns against the convexity (``HINGE``) flip there.
     tol : float
         Pixels with ``I / k >= 1 - tol`` start the marching with ``N = L``; raise it for noisy
         images (about the noise's relative level).
