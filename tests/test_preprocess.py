@@ -7,7 +7,8 @@ import pytest
 from scipy import ndimage as ndi
 
 from shadeform.errors import InputError
-from shadeform.preprocess import FILTER_KINDS, Filter, apply_filter, object_mask, parse_filter
+from shadeform import synth
+from shadeform.preprocess import FILTER_KINDS, Filter, apply_filter, noise_level, object_mask, parse_filter
 
 N, R = 256, 100
 
@@ -250,3 +251,21 @@ class TestApplyFilter:
         bad[2, 2] = np.nan
         with pytest.raises(InputError, match="inside the mask"):
             apply_filter(bad, None, "mean:1")
+
+
+class TestNoiseLevel:
+    @pytest.mark.parametrize("noise", [0.01, 0.03])
+    @pytest.mark.parametrize("name", ["sphere", "vase", "bumps"])
+    def test_recovers_the_added_noise(self, name, noise):
+        # lit off-axis so that no flat part sits at white, where the camera clips half the noise
+        scene = synth.scene(name, size=128, noise=noise, light=(0.3, 0.2, 0.93))
+        assert noise_level(scene.image, scene.mask) == pytest.approx(noise, rel=0.1)
+
+    def test_smooth_shading_is_nearly_noise_free(self):
+        scene = synth.scene("vase", size=256)
+        assert noise_level(scene.image, scene.mask) < 0.001  # measured 0.00025: curvature leaks in
+
+    def test_too_thin_an_object(self):
+        mask = np.zeros((20, 20), bool)
+        mask[5:9, :] = True
+        assert noise_level(np.where(mask, 0.5, 0.0), mask) == 0.0

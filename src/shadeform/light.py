@@ -16,6 +16,7 @@ import numpy as np
 
 from shadeform._checks import is_number, shading_image
 from shadeform.errors import InputError
+from shadeform.preprocess import noise_level
 
 __all__ = [
     "as_light",
@@ -366,7 +367,7 @@ def estimate_light(
     from scipy import ndimage as ndi
 
     inside = ndi.distance_transform_edt(mask)
-    noise = _noise_level(image, mask, inside)
+    noise = noise_level(image, mask, inside=inside)
     brightest = float(image[mask].max())
     peak = max(_peak_level(image, mask, inside, noise), 1e-3 * brightest)
     # a top in shadow would put the light behind the object's horizon
@@ -527,19 +528,6 @@ def _slant_error(across, along_view, covariance) -> float:
     else:
         variance = float(np.linalg.eigvalsh(covariance).max())
     return math.degrees(gain * math.sqrt(max(variance, 0.0)))
-
-
-def _noise_level(image, mask, inside) -> float:
-    """Standard deviation of pixel noise: the MAD of each interior pixel minus its 3x3 mean."""
-    from scipy import ndimage as ndi
-
-    interior = (inside > 2) & (image > 0)
-    if interior.sum() < 20:
-        return 0.0
-    detail = (image - ndi.uniform_filter(image, 3))[interior]
-    # x - mean(3x3 incl. x) has variance sigma^2 * (1 - 1/9) for independent noise
-    mad = float(np.median(np.abs(detail - np.median(detail))))
-    return 1.4826 * mad / math.sqrt(8.0 / 9.0)
 
 
 def _quadratic_peak(rows, cols, values, centre, reach=None):

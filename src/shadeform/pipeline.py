@@ -16,7 +16,7 @@ from scipy import ndimage as ndi
 from shadeform._checks import StageTimer, shading_image
 from shadeform.errors import InputError
 from shadeform.light import as_light, estimate_light
-from shadeform.preprocess import Filter, apply_filter, object_mask, parse_filter
+from shadeform.preprocess import Filter, apply_filter, noise_level, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, concave_masks, parse_regions
 from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
@@ -28,6 +28,13 @@ INTEGRATORS = ("paths", "poisson", "fourier", "bilateral")
 #: What turns each method's normals into depth when ``integrator`` is not given.
 DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)",
                       "oblique": "oblique (chord-equation descent depth)"}
+
+#: Noise (standard deviation over ``k * albedo``, :func:`shadeform.preprocess.noise_level`) above
+#: which the oblique solver's image is smoothed when no filter is given, and by how much: unfiltered,
+#: 1 % noise under oblique light takes its depth error from ~1 % to 40-140 % on the synthetic
+#: scenes (benchmarks/results/methods.md); 8-bit quantisation alone is 0.1 %.
+NOISY = 0.003
+OBLIQUE_DENOISE = Filter("gaussian", 2.0)
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -73,7 +80,9 @@ def reconstruct(
     mask : (H, W) bool, optional
         Object pixels; by default found automatically (dark background).
     filter : str, optional
-        ``"none"``, ``"gaussian:SIGMA"``, ``"mean:R"``, ``"median:R"`` or ``"minimum:R"``.
+        ``"none"``, ``"gaussian:SIGMA"``, ``"mean:R"``, ``"median:R"`` or ``"minimum:R"``. Not
+        given, the oblique solver's image is smoothed by :data:`OBLIQUE_DENOISE` when its noise
+        exceeds :data:`NOISY` (``info["auto_filter"]``); ``"none"`` turns that off.
     references : sequence, optional
         Reference pixels as ``(row, col)`` or ``(row, col, (nx, ny, nz))``. By default the
         brightest object pixel (the one deepest inside the object among equals), whose normal is
@@ -131,15 +140,24 @@ def reconstruct(
     lap("mask")
     shading = apply_filter(image, mask, parse_filter(filter)) if filter else image
     lap("filter")
-    light_info = {}
+    extra_info = {}
     if estimate_wanted:
         estimate = estimate_light(shading, mask)
         light = np.asarray(estimate.light, dtype=np.float64)
-        light_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
+        extra_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
                                          "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
         lap("light")
     if method == "auto":
         method = best_method(light)
+    noise = None
+    if method == "oblique":
+        # the oblique solver starts from the brightest pixels: noise scatters them
+        noise = noise_level(shading, mask)
+        if not filter and noise > NOISY * float(shading[mask].max()):
+            shading = apply_filter(shading, mask, OBLIQUE_DENOISE)
+            noise = noise_level(shading, mask)
+            extra_info["auto_filter"] = str(OBLIQUE_DENOISE)
+            lap("filter")
     concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
     refs = _references(references, shading, mask, labels, n_parts)
@@ -150,7 +168,7 @@ def reconstruct(
 
     if method == "oblique":
         normals, depth, method_info = _oblique(shading, mask, light, k, refs, concave_x, concave_y,
-                                               integrator, lap)
+                                               integrator, noise, lap)
     elif method == "eikonal":
         normals, depth, method_info = _eikonal(shading, mask, light, k, references, concave_x, concave_y,
                                                integrator, lap)
@@ -171,7 +189,7 @@ def reconstruct(
         "k": float(k),
         "timings": timer.timings,
         **method_info,
-        **light_info,
+        **extra_info,
     }
     return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
 
@@ -255,11 +273,15 @@ def _eikonal(shading, mask, light, k, references, concave_x, concave_y, integrat
     return result.normals.copy(), depth, {"sources": sources_info}
 
 
-def _oblique(shading, mask, light, k, refs, concave_x, concave_y, integrator, lap):
-    """Any light: marching from the brightest pixels, shadow fill, descent; its own depth."""
-    from shadeform.solvers.oblique import oblique_depth
+def _oblique(shading, mask, light, k, refs, concave_x, concave_y, integrator, noise, lap):
+    """Any light: marching from the brightest pixels, shadow fill, descent; its own depth.
+    On a noisy image the start and shadow levels move to twice the noise."""
+    from shadeform.solvers.oblique import TOL, oblique_depth
 
-    result = oblique_depth(shading, mask, light=light, k=k, concave=(concave_x, concave_y))
+    levels = {}
+    if noise > NOISY * k:
+        levels = {"tol": max(TOL, 2 * noise / k), "dark": 2 * noise / k}
+    result = oblique_depth(shading, mask, light=light, k=k, concave=(concave_x, concave_y), **levels)
     lap("normals")
     main = refs[0][0]
     depth = result.depth - result.depth[main]

@@ -18,7 +18,7 @@ from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 from shadeform._checks import is_number
 from shadeform.errors import InputError
 
-__all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter"]
+__all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter", "noise_level"]
 
 #: Filter kinds, in the order the 2002 system offered them ("none" was called "blank").
 FILTER_KINDS = ("none", "gaussian", "mean", "median", "minimum")
@@ -304,3 +304,36 @@ def _as_image(image: np.ndarray) -> np.ndarray:
     if image.size == 0 or not np.isfinite(image).all():
         raise InputError("image is empty or has NaN or infinite values; give a finite image")
     return image
+
+
+def noise_level(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | None = None) -> float:
+    """Standard deviation of independent pixel noise on the object, from the image alone.
+
+    The median absolute deviation of each pixel minus the mean of its 3x3 window, over pixels
+    more than 2 pixels inside the object: smooth shading leaves next to nothing there, while
+    independent noise of standard deviation ``sigma`` leaves ``sigma sqrt(8 / 9)`` (Donoho and
+    Johnstone's robust scale of a high-pass band, 1994).
+
+    Parameters
+    ----------
+    image : (H, W) float array
+        Intensities.
+    mask : (H, W) bool array
+        Object pixels.
+    inside : (H, W) float array, optional
+        ``scipy.ndimage.distance_transform_edt(mask)`` if the caller has it.
+
+    Returns
+    -------
+    float
+        The noise's standard deviation in the image's units; 0 when fewer than 20 pixels lie
+        that deep inside the object.
+    """
+    if inside is None:
+        inside = ndi.distance_transform_edt(mask)
+    interior = (inside > 2) & (image > 0)
+    if np.count_nonzero(interior) < 20:
+        return 0.0
+    detail = (image - ndi.uniform_filter(image, 3))[interior]
+    mad = float(np.median(np.abs(detail - np.median(detail))))
+    return 1.4826 * mad / math.sqrt(8.0 / 9.0)
