@@ -72,6 +72,7 @@ class TestAutoMethod:
 
         assert best_method((0.0, 0.0, 1.0)) == "eikonal"
         assert best_method((0.1, 0.0, 0.995)) == "oblique"
+        assert best_method((0.0, 0.0, 1.0), noise=0.01) == "oblique"  # best at +z with 1 % noise
         scene = synth.scene("sphere", size=32, light=(1, 0, 3))
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
         assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
@@ -117,8 +118,8 @@ class TestReconstruct:
 
     def test_filter_helps_with_noise(self):
         scene = synth.scene("sphere", size=128, noise=0.01, seed=3)
-        raw = reconstruct(scene.image, mask=scene.mask)
-        smooth = reconstruct(scene.image, mask=scene.mask, filter="gaussian:1")
+        raw = reconstruct(scene.image, mask=scene.mask, method="eikonal")
+        smooth = reconstruct(scene.image, mask=scene.mask, method="eikonal", filter="gaussian:1")
         assert smooth.info["filter"] == "gaussian"
         assert (metrics.angular_error(smooth.normals, scene.normals, scene.mask)
                 < metrics.angular_error(raw.normals, scene.normals, scene.mask))
@@ -338,6 +339,16 @@ class TestPreview:
         scene = synth.scene("sphere", size=48)
         with pytest.raises(InputError, match="not on the object"):
             reconstruct_preview(scene.image, mask=scene.mask, step=2, references=[(0, 0)])
+
+
+class TestAutoOnNoisyImages:
+    def test_plus_z_with_noise_goes_to_the_smoothed_oblique_solver(self):
+        scene = synth.scene("ellipsoid", size=128, noise=0.01)
+        rec = reconstruct(scene.image, mask=scene.mask)
+        assert rec.info["method"] == "oblique" and rec.info["auto_filter"] == "gaussian:2"
+        # measured 1.14 % / 1.47 deg (eikonal on the unfiltered image: 2.57 % / 3.41 deg)
+        assert metrics.depth_error(rec.depth, scene.depth, scene.mask) < 3.0
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 3.5
 
 
 class TestObliqueOnNoisyImages:

@@ -70,8 +70,8 @@ def reconstruct(
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
     method : {"auto", "propagation", "eikonal", "oblique"}
-        Solver. "auto" (the default) picks the best measured one for the light
-        (:func:`best_method`): "eikonal" for a light at +z, else "oblique". The others: the 2002 convexity-guided propagation (any light), fast marching of the
+        Solver. "auto" (the default) picks the best measured one for the light and the image's
+        noise (:func:`best_method`): "eikonal" for a light at +z on a clean image, else "oblique". The others: the 2002 convexity-guided propagation (any light), fast marching of the
         eikonal equation from the singular points (light at +z only; concave regions and
         references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`), or the
         oblique-light solver (any light, attached shadows as ``N . L <= 0``; marching from the
@@ -147,12 +147,13 @@ def reconstruct(
         extra_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
                                          "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
         lap("light")
-    if method == "auto":
-        method = best_method(light)
     noise = None
+    if method in ("auto", "oblique"):
+        noise = noise_level(shading, mask)
+    if method == "auto":
+        method = best_method(light, noise=noise / float(shading[mask].max()))
     if method == "oblique":
         # the oblique solver starts from the brightest pixels: noise scatters them
-        noise = noise_level(shading, mask)
         if not filter and noise > NOISY * float(shading[mask].max()):
             shading = apply_filter(shading, mask, OBLIQUE_DENOISE)
             noise = noise_level(shading, mask)
@@ -194,24 +195,28 @@ def reconstruct(
     return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
 
 
-def best_method(light) -> str:
-    """The solver ``method="auto"`` uses for a light direction: the best measured one.
+def best_method(light, *, noise: float = 0.0) -> str:
+    """The solver ``method="auto"`` uses: the best measured for the light and the noise.
 
     On the synthetic scenes of ``benchmarks/results/methods.md`` (noise 0-3 %), "eikonal" has the
-    lowest errors with the light at +z and "oblique" under oblique light; "eikonal" only takes a
-    light at +z.
+    lowest errors with the light at +z on a clean image, and "oblique" (which smooths a noisy image
+    first, see :data:`NOISY`) under any other light and on noisy images at +z; "eikonal" only takes
+    a light at +z.
 
     Parameters
     ----------
     light : (3,) float
         Unit direction toward the light.
+    noise : float, keyword-only
+        The image's noise over its brightest object pixel
+        (:func:`shadeform.preprocess.noise_level`); noisy above :data:`NOISY`.
 
     Returns
     -------
     str
         "eikonal" or "oblique".
     """
-    return "eikonal" if _is_frontal(light) else "oblique"
+    return "eikonal" if _is_frontal(light) and noise <= NOISY else "oblique"
 
 
 def _is_frontal(light) -> bool:
