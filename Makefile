@@ -45,8 +45,10 @@ app: $(STAMP) $(WEBSTAMP)
 demo: $(STAMP)
 	$(VENV)/bin/shadeform demo --out out/demo
 
+# two test workers share the two cores: one BLAS thread each, or OpenBLAS's threads spin against
+# each other (the relief light fit's products ran 10-25x slower that way)
 test: $(STAMP) $(JSSTAMP) $(WEBSTAMP)
-	$(PY) -m pytest -n 2 -q
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_pipeline.py

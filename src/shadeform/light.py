@@ -442,8 +442,13 @@ def estimate_light(
 def _relief(image, mask, level, peak, noise, convex, info) -> LightEstimate:
     """The light on a relief over a flat base facing the camera, at intensity ``level``: from
     round features fitted to it, else from the brightest point and the image's spectrum."""
+    from threadpoolctl import threadpool_limits
+
     info["base_level"] = level
-    fit = _round_features(image, mask, level, noise)
+    # the fit's many small matrix products: BLAS threads cost more than they give, and on a
+    # busy machine they spin against each other (10-25x slower measured)
+    with threadpool_limits(1, user_api="blas"):
+        fit = _round_features(image, mask, level, noise)
     if fit is not None:
         info.update(relief_features=fit.features, relief_residual=fit.residual)
         slant, tilt, albedo = _from_components(fit.across * fit.level, fit.level)
