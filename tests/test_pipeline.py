@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from shadeform import metrics, reconstruct, synth, to_mesh
-from shadeform.pipeline import reconstruct_preview
+from shadeform.pipeline import PREVIEW_PIXELS, preview_step, reconstruct_preview
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
@@ -334,6 +334,18 @@ class TestPreview:
         image = np.where(mask, 0.8, 0.0)
         with pytest.raises(InputError, match=message):
             reconstruct_preview(image, mask=mask, step=step)
+
+    def test_preview_step_keeps_to_the_solvers_budget(self):
+        mask = np.ones((512, 512), bool)
+        # step 2 leaves 65,536 grid pixels, over the eikonal budget: doubled once (16,384)
+        assert preview_step(mask, 2, method="eikonal") == 4
+        assert 512 ** 2 / 4 ** 2 <= PREVIEW_PIXELS["eikonal"] < 512 ** 2 / 2 ** 2
+        assert preview_step(mask, 2, method="oblique") == 16  # 1,024 pixels
+        assert preview_step(mask, 3, light=(0.5, 0.0, 0.866)) == 12  # auto under oblique light
+        assert preview_step(mask, 2, light="estimate") == 16
+        assert preview_step(np.ones((64, 64), bool), 1) == 1  # small enough at full resolution
+        # never so coarse that the grid has fewer than 3 points across its short side
+        assert preview_step(np.ones((20, 100_000), bool), 1, method="oblique") == 4
 
     def test_reference_off_the_object(self):
         scene = synth.scene("sphere", size=48)

@@ -58,7 +58,7 @@ export interface ReconstructRequest {
   params: ReconstructParams;
   /** Chosen by the client, echoed in the result: a response older than the newest is stale. */
   request_id: number;
-  /** Answer at once with a quick look solved at the mesh's grid (step >= 2), unless the full result is already known; the result's ``preview`` says which came. */
+  /** Answer at once with a quick look solved at the mesh's grid (or a coarser one within the solver's pixel budget), unless the full result is already known or the grid is the image's own; the result's ``preview`` says which came. */
   preview: boolean;
 }
 
@@ -123,7 +123,7 @@ export interface MeshData {
 /** One reconstruction: the mesh, and what the library used and found. */
 export interface ReconstructResult {
   request_id: number;
-  /** True for a quick look solved at the mesh's grid: the full result is still to come. */
+  /** True for a quick look solved at the mesh's grid or a coarser one: the full result is still to come. */
   preview: boolean;
   mesh: MeshData;
   /** The object mask as a base64 8-bit grey PNG (255 = object), the image's size. */

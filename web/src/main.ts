@@ -2,8 +2,8 @@
 // server, and wires the image pane, the side panel and the 3D view together.
 //
 // Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
-// time); at step >= 2 a quick look solved at the mesh's grid comes first, then the full solve
-// under the same id. A newer request aborts the one in flight, and a response whose request_id
+// time); a quick look solved at the mesh's grid (or a coarser one) comes first where the image
+// is large enough for it to pay, then the full solve under the same id. A newer request aborts the one in flight, and a response whose request_id
 // is not the newest is dropped, so a stale model never arrives last.
 import './style.css';
 import * as api from './api';
@@ -337,7 +337,7 @@ class App {
     try {
       // a quick look at the mesh's grid first (the server answers with the full result when it
       // has it), then the full-resolution solve; both under this request's id and abort signal
-      let full = this.params.step < 2;
+      let full = false; // the server answers a quick look only where one pays
       let firstRendered: number | null = null;
       while (true) {
         const sent = performance.now();

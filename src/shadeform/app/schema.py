@@ -123,8 +123,9 @@ class ReconstructRequest(_Model):
     )
     preview: bool = Field(
         default=False,
-        description="Answer at once with a quick look solved at the mesh's grid (step >= 2), unless the "
-                    "full result is already known; the result's ``preview`` says which came.",
+        description="Answer at once with a quick look solved at the mesh's grid (or a coarser one within the "
+                    "solver's pixel budget), unless the full result is already known or the grid is the "
+                    "image's own; the result's ``preview`` says which came.",
     )
 
 
@@ -202,7 +203,8 @@ class ReconstructResult(_Model):
 
     request_id: int
     preview: bool = Field(
-        description="True for a quick look solved at the mesh's grid: the full result is still to come.",
+        description="True for a quick look solved at the mesh's grid or a coarser one: the full result is "
+                    "still to come.",
     )
     mesh: MeshData
     mask_png: str = Field(

@@ -364,21 +364,18 @@ def _solve(state: _State, entry: StoredImage, params: ReconstructParams, *,
            preview: bool = False) -> tuple[_Solved, bool]:
     """The reconstruction for these parameters, from the cache when only ``step`` changed.
 
-    With ``preview`` (and ``step`` >= 2) the full result if it is cached, else the quick
-    look at the mesh's grid (:func:`shadeform.pipeline.reconstruct_preview`); the returned
-    reconstruction's ``info`` has ``preview_step`` when it is the quick one.
+    With ``preview`` the full result if it is cached, else the quick look at the mesh's grid,
+    or a coarser one within the solver's pixel budget
+    (:func:`shadeform.pipeline.preview_step`, :func:`shadeform.pipeline.reconstruct_preview`);
+    the returned reconstruction's ``info`` has ``preview_step`` when it is the quick one.
     """
     from shadeform.light import light_from_slant_tilt
-    from shadeform.pipeline import reconstruct, reconstruct_preview
+    from shadeform.pipeline import preview_step, reconstruct, reconstruct_preview
     from shadeform.preprocess import Filter
 
     full_key = (entry.image_id, params.model_dump_json(exclude={"step"}))
     solved = state.results.get(full_key)
     if solved is not None:
-        return solved, True
-    preview = preview and params.step >= 2
-    key = (*full_key, "preview", params.step) if preview else full_key
-    if preview and (solved := state.results.get(key)) is not None:
         return solved, True
     if params.light.mode == "estimate":
         light: Any = "estimate"
@@ -398,7 +395,11 @@ def _solve(state: _State, entry: StoredImage, params: ReconstructParams, *,
         integrator=params.integrator,
         refine=params.refine,
     )
-    rec = reconstruct_preview(image, step=params.step, **settings) if preview else reconstruct(image, **settings)
+    spacing = preview_step(mask, params.step, method=params.method, light=light) if preview else 1
+    key = (*full_key, "preview", spacing) if spacing > 1 else full_key
+    if spacing > 1 and (solved := state.results.get(key)) is not None:
+        return solved, True
+    rec = reconstruct_preview(image, step=spacing, **settings) if spacing > 1 else reconstruct(image, **settings)
     depth = rec.depth[rec.mask]
     solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
     nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
@@ -430,7 +431,8 @@ def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequ
     rec = solved.reconstruction
     timings = {} if cached else dict(rec.info["timings"])
     lap = time.perf_counter()
-    mesh = to_mesh(rec, step=body.params.step)
+    # a quick look may be on a coarser grid than asked for (the solver's pixel budget)
+    mesh = to_mesh(rec, step=rec.info.get("preview_step", body.params.step))
     timings["mesh"] = time.perf_counter() - lap
     lap = time.perf_counter()
     mesh_data = MeshData(
