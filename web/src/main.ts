@@ -404,7 +404,7 @@ class App {
   private timingText(result: ReconstructResult, total: number): string {
     const server = (result.timings.total ?? 0) * 1000;
     const cached = result.info.cached ? ' (cached solve)' : '';
-    if (result.preview) return `preview in ${total.toFixed(0)} ms · full resolution on the way…`;
+    if (result.preview) return `quick look in ${total.toFixed(0)} ms · refining…`;
     return `server ${server.toFixed(0)} ms${cached} · view updated in ${total.toFixed(0)} ms`;
   }
 
