@@ -35,6 +35,20 @@ def _spline_at(coefficients, base, knots, t):
     return value, rate, first, weights
 
 
+@numba.njit(cache=True, inline="always")
+def _feature_at(params, base, knots, reach, px, py):
+    """Pixel ``(px, py)`` against the feature whose parameters start at ``base``: whether it is
+    within ``reach``, its distance ``r`` (at least 1e-12) and unit direction ``(ux, uy)`` from the
+    centre, the knot spacing, and the profile there (:func:`_spline_at`)."""
+    dx = px - params[base]
+    dy = py - params[base + 1]
+    radius = math.hypot(dx, dy)
+    r = max(radius, 1e-12)
+    spacing = reach / (knots + 2)
+    s, ds, first, weights = _spline_at(params, base + 2, knots, r / spacing)
+    return radius < reach, r, dx / r, dy / r, spacing, s, ds, first, weights
+
+
 @numba.njit(cache=True)
 def render_features(params, x, y, reaches, knots, image, jac, want_jacobian):
     """Fill ``image`` (n,) and, if ``want_jacobian``, ``jac`` (n, P) (zeroed by the caller):
@@ -48,16 +62,10 @@ def render_features(params, x, y, reaches, knots, image, jac, want_jacobian):
         gx = 0.0
         gy = 0.0
         for f in range(reaches.size):
-            base = 3 + f * stride
-            dx = x[i] - params[base]
-            dy = y[i] - params[base + 1]
-            radius = math.hypot(dx, dy)
-            if radius >= reaches[f]:
-                continue
-            r = max(radius, 1e-12)
-            s, _, _, _ = _spline_at(params, base + 2, knots, r / (reaches[f] / (knots + 2)))
-            gx -= s * dx / r
-            gy -= s * dy / r
+            near, _, ux, uy, _, s, _, _, _ = _feature_at(params, 3 + f * stride, knots, reaches[f], x[i], y[i])
+            if near:
+                gx -= s * ux
+                gy -= s * uy
         root = math.sqrt(1.0 + gx * gx + gy * gy)
         facing = 1.0 - tx * gx - ty * gy
         shade = facing / root
@@ -75,16 +83,10 @@ def render_features(params, x, y, reaches, knots, image, jac, want_jacobian):
         ey = level * (-ty / root - facing * gy / root ** 3)
         for f in range(reaches.size):
             base = 3 + f * stride
-            dx = x[i] - params[base]
-            dy = y[i] - params[base + 1]
-            radius = math.hypot(dx, dy)
-            if radius >= reaches[f]:
+            near, r, ux, uy, spacing, s, ds, first, weights = _feature_at(params, base, knots, reaches[f],
+                                                                          x[i], y[i])
+            if not near:
                 continue
-            r = max(radius, 1e-12)
-            spacing = reaches[f] / (knots + 2)
-            s, ds, first, weights = _spline_at(params, base + 2, knots, r / spacing)
-            ux = dx / r
-            uy = dy / r
             # d(grad z)/d(centre) = s' u u^T + (s / r)(I - u u^T)
             radial = ds / spacing - s / r
             along = s / r

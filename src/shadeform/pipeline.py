@@ -147,21 +147,23 @@ def reconstruct(
         extra_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
                                          "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
         lap("light")
-    noise = None
+    noise = inside = None
     if method in ("auto", "oblique"):
-        noise = noise_level(shading, mask)
+        inside = ndi.distance_transform_edt(mask)  # shared with _references
+        noise = noise_level(shading, mask, inside=inside)
+        brightest = float(shading[mask].max())
     if method == "auto":
-        method = best_method(light, noise=noise / float(shading[mask].max()))
+        method = best_method(light, noise=noise / brightest)
     if method == "oblique":
         # the oblique solver starts from the brightest pixels: noise scatters them
-        if not filter and noise > NOISY * float(shading[mask].max()):
+        if not filter and noise > NOISY * brightest:
             shading = apply_filter(shading, mask, OBLIQUE_DENOISE)
-            noise = noise_level(shading, mask)
+            noise = noise_level(shading, mask, inside=inside)
             extra_info["auto_filter"] = str(OBLIQUE_DENOISE)
             lap("filter")
     concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
-    refs = _references(references, shading, mask, labels, n_parts)
+    refs = _references(references, shading, mask, labels, n_parts, inside=inside)
     k = _brightness_scale(shading, mask, refs[0], light,
                           estimated=float(estimate.albedo) if estimate_wanted else None)
     cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
@@ -347,25 +349,11 @@ def _as_regions(concave) -> tuple[Region, ...]:
     return regions
 
 
-def _references(references, image, mask, labels, n_parts):
-    """User references checked, plus the brightest pixel of every part left without one."""
-    refs = []
-    for item in references or ():
-        try:
-            r, c = int(item[0]), int(item[1])
-            normal = None if len(item) < 3 or item[2] is None else np.asarray(item[2], dtype=np.float64)
-        except (TypeError, ValueError, IndexError):
-            raise InputError(f"reference {item!r} must be (row, col) or (row, col, (nx, ny, nz))") from None
-        if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
-            raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
-        if normal is not None:
-            length = np.linalg.norm(normal)
-            if normal.shape != (3,) or not np.isfinite(normal).all() or length == 0:
-                raise InputError(f"reference normal {item[2]!r} must be three finite numbers, not all zero")
-            normal = normal / length
-        refs.append(((r, c), normal))
+def _references(references, image, mask, labels, n_parts, *, inside=None):
+    """User references checked, plus the brightest pixel of every part left without one.
+    ``inside``: the mask's distance transform, if the caller has it."""
+    refs = [_parse_reference(item, mask) for item in references or ()]
     covered = {labels[r, c] for (r, c), _ in refs}
-    inside = None
     for part in range(1, n_parts + 1):
         if part in covered:
             continue
@@ -514,18 +502,31 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
     return spacing
 
 
-def _coarse_reference(item, mask, coarse_mask, step):
-    """A reference ``(row, col[, normal])`` in input pixels, checked, moved to the coarse grid."""
+def _parse_reference(item, mask) -> tuple[tuple[int, int], np.ndarray | None]:
+    """A reference ``(row, col)`` or ``(row, col, (nx, ny, nz))`` checked against the mask, as
+    ``((row, col), unit normal or None)``."""
     try:
         r, c = int(item[0]), int(item[1])
+        normal = None if len(item) < 3 or item[2] is None else np.asarray(item[2], dtype=np.float64)
     except (TypeError, ValueError, IndexError):
         raise InputError(f"reference {item!r} must be (row, col) or (row, col, (nx, ny, nz))") from None
     if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
         raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+    if normal is not None:
+        length = np.linalg.norm(normal)
+        if normal.shape != (3,) or not np.isfinite(normal).all() or length == 0:
+            raise InputError(f"reference normal {item[2]!r} must be three finite numbers, not all zero")
+        normal = normal / length
+    return (r, c), normal
+
+
+def _coarse_reference(item, mask, coarse_mask, step):
+    """A reference ``(row, col[, normal])`` in input pixels, checked, moved to the coarse grid."""
+    (r, c), normal = _parse_reference(item, mask)
     height, width = coarse_mask.shape
     cr, cc = min(round(r / step), height - 1), min(round(c / step), width - 1)
     if not coarse_mask[cr, cc]:
         rows, cols = np.nonzero(coarse_mask)
         nearest = np.argmin((rows - r / step) ** 2 + (cols - c / step) ** 2)
         cr, cc = int(rows[nearest]), int(cols[nearest])
-    return (cr, cc, *item[2:3])
+    return (cr, cc) if normal is None else (cr, cc, normal)

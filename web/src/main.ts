@@ -3,8 +3,9 @@
 //
 // Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
 // time); a quick look solved at the mesh's grid (or a coarser one) comes first where the image
-// is large enough for it to pay, then the full solve under the same id. A newer request aborts the one in flight, and a response whose request_id
-// is not the newest is dropped, so a stale model never arrives last.
+// is large enough for it to pay, then the full solve under the same id. A newer request aborts
+// the one in flight, and a response whose request_id is not the newest is dropped, so a stale
+// model never arrives last.
 import './style.css';
 import * as api from './api';
 import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
@@ -335,13 +336,12 @@ class App {
     this.changedAt = null;
     this.setSolving(true);
     try {
-      // a quick look at the mesh's grid first (the server answers with the full result when it
-      // has it), then the full-resolution solve; both under this request's id and abort signal
-      let full = false; // the server answers a quick look only where one pays
+      // ask for a quick look first (the server gives the full result instead where a quick look
+      // would not pay), then the full solve; both under this request's id and abort signal
       let firstRendered: number | null = null;
-      while (true) {
+      for (let preview = true; ; preview = false) {
         const sent = performance.now();
-        const result = await api.reconstruct({ ...this.request(id), preview: !full }, controller.signal);
+        const result = await api.reconstruct({ ...this.request(id), preview }, controller.signal);
         const received = performance.now();
         if (result.request_id !== this.latestSent) return; // superseded while on the wire
         const mesh = api.decodeMesh(result.mesh);
@@ -358,7 +358,6 @@ class App {
         $('timing').textContent = this.timingText(result, rendered - changed);
         // a drag that moved on wants its newest state, not this one at full resolution
         if (!result.preview || this.dragWaiting) break;
-        full = true;
       }
     } catch (err) {
       if ((err as Error).name === 'AbortError' || id !== this.latestSent) return;
