@@ -149,6 +149,22 @@ class TestMade:
         assert made(est, truth) == pytest.approx(1.0)
         assert made(np.zeros((1, 2)), truth) == pytest.approx(2.0)
 
+    def test_median_scale(self):
+        # ratios truth / est = 3, 1, 2: median 2, fitted (2, 4, 4) against (3, 2, 4)
+        est = np.array([[1.0, 2.0, 2.0]])
+        truth = np.array([[3.0, 2.0, 4.0]])
+        assert made(est, truth, fit="median_scale") == pytest.approx(1.0)
+        # least squares gives a different scale: a = (3 + 4 + 8) / 9
+        a = 15 / 9
+        assert made(est, truth) == pytest.approx(np.mean(np.abs(a * est - truth)))
+        # one wild pixel moves the least-squares scale but not the median one
+        est = np.array([[1.0, 1.0, 1.0, 1.0, 100.0]])
+        truth = np.full((1, 5), 2.0)
+        assert made(est, truth, fit="median_scale") == pytest.approx(198 / 5)
+        assert made(2 * self.truth, self.truth, fit="median_scale") == pytest.approx(0.0)
+        assert made(np.zeros((1, 2)), truth[:, :2], fit="median_scale") == pytest.approx(2.0)
+        assert depth_error(3 * self.truth, self.truth, fit="median_scale") == pytest.approx(0.0)
+
     def test_nan_inside_fails(self):
         est = 2 * self.truth
         est[1, 1] = np.nan

@@ -20,7 +20,7 @@ import numpy as np
 from shadeform.errors import InputError
 
 _REDUCTIONS = ("mean", "median", "none")
-_FITS = ("none", "offset", "scale", "scale_offset")
+_FITS = ("none", "offset", "scale", "scale_offset", "median_scale")
 
 
 def angular_error(normals, normals_true, mask=None, *, reduce: str = "mean"):
@@ -97,9 +97,10 @@ def depth_error(depth, depth_true, mask=None, *, fit: str = "offset") -> float:
         Ground-truth depth; must be finite in ``mask`` and not constant there.
     mask : (H, W) array_like of bool, optional
         Pixels to evaluate. Default: where ``depth_true`` is finite.
-    fit : {"offset", "scale_offset", "scale", "none"}, optional
-        Free parameters fitted by least squares before measuring: ``depth + b``,
-        ``a * depth + b``, ``a * depth``, or nothing.
+    fit : {"offset", "scale_offset", "scale", "median_scale", "none"}, optional
+        Free parameters fitted before measuring: by least squares ``depth + b``,
+        ``a * depth + b``, ``a * depth``; ``a * depth`` with ``a`` the median of
+        ``depth_true / depth``; or nothing.
 
     Returns
     -------
@@ -143,9 +144,11 @@ def made(depth, depth_true, mask=None, *, fit: str = "scale") -> float:
         Ground-truth depth; must be finite in ``mask``.
     mask : (H, W) array_like of bool, optional
         Pixels to evaluate. Default: where ``depth_true`` is finite.
-    fit : {"scale", "offset", "scale_offset", "none"}, optional
-        Free parameters fitted by least squares before measuring: ``a * depth``,
-        ``depth + b``, ``a * depth + b``, or nothing.
+    fit : {"scale", "median_scale", "offset", "scale_offset", "none"}, optional
+        Free parameters fitted before measuring: by least squares ``a * depth``,
+        ``depth + b``, ``a * depth + b``; ``a * depth`` with ``a`` the median of
+        ``depth_true / depth`` (the protocol of BiNI's DiLiGenT evaluation [2]_, which its
+        published figures use); or nothing.
 
     Returns
     -------
@@ -163,6 +166,8 @@ def made(depth, depth_true, mask=None, *, fit: str = "scale") -> float:
     ----------
     .. [1] B. Shi et al., "A benchmark dataset and evaluation for non-Lambertian and
        uncalibrated photometric stereo", IEEE Trans. PAMI 41(2), 2019.
+    .. [2] X. Cao, H. Santo, B. Shi, F. Okura, Y. Matsushita, "Bilateral Normal Integration",
+       ECCV 2022 (its evaluation script scales the estimate by the median depth ratio).
     """
     estimate, truth = _depth_pair(depth, depth_true, mask, fit)
     if estimate is None:
@@ -210,13 +215,18 @@ def _depth_pair(depth, depth_true, mask, fit):
 
 
 def _fitted(estimate, truth, fit):
-    """``estimate`` after the least-squares fit of its free parameters to ``truth``."""
+    """``estimate`` after the fit of its free parameters to ``truth``."""
     if fit == "offset":
         return estimate + np.mean(truth - estimate)
     if fit == "scale":
         energy = float(np.dot(estimate, estimate))
         # An all-zero estimate has no scale to fit; it stays zero.
         return estimate * (np.dot(estimate, truth) / energy if energy > 0 else 0.0)
+    if fit == "median_scale":
+        nonzero = estimate != 0
+        # Only the pixels with a defined ratio vote; an all-zero estimate stays zero.
+        return estimate * (np.median(truth[nonzero] / estimate[nonzero]) if nonzero.any()
+                           else 0.0)
     if fit == "scale_offset":
         design = np.column_stack([estimate, np.ones_like(estimate)])
         coef, *_ = np.linalg.lstsq(design, truth, rcond=None)

@@ -55,14 +55,12 @@ from shadeform.integration._multigrid import PairHierarchy
 #: normal implies at ``1 / MIN_SCALE`` (as ``MIN_NZ`` does for the Poisson integrator), so the
 #: nearly grazing normals at occluding contours cannot pull the surface around. Chosen on
 #: DiLiGenT, to which the result is sensitive (benchmarks/results/diligent.md): 0.1 favours
-#: buddha, 0.15 bear, cat and pot1; 0.12 is the compromise. Without the clamp these are BiNI's own
-#: equations, and their IRLS fixed point (each step solved exactly, scipy spsolve) is worse than
-#: BiNI's published figures on four of the six objects (bear 0.53, buddha 0.80, cat 0.105, cow
-#: 0.069, pot1 0.63, reading 0.40 mm). BiNI's loose CG (Jacobi, 1e-3 per step) stops short of
-#: that point; re-created it gives bear 0.42, cat 0.076, cow 0.058, reading 0.31, closer to, but
-#: not, the published figures. The errors sit in the offsets of whole parts across occluding
-#: contours (bear's head against its body, reading's book, cat's paw), which the normals there,
-#: nearly grazing, barely determine.
+#: buddha, 0.15 bear, cat and pot1; 0.12 is the compromise, at or below BiNI's published MADE on
+#: all six objects. Without the clamp these are BiNI's own equations, and their IRLS fixed point
+#: (each step solved exactly) is worse than BiNI's published figures on four of the six objects;
+#: BiNI's loose CG (Jacobi, 1e-3 per step) stops short of that point. The errors left sit in the
+#: offsets of whole parts across occluding contours (bear's head against its body, reading's
+#: book), which the normals there, nearly grazing, barely determine.
 MIN_SCALE = 0.12
 #: Conjugate-gradient iterations per solve at most.
 MAX_CG = 500
