@@ -125,6 +125,20 @@ class TestIntegrateFourier:
         b = integrate_poisson(n, mask)
         np.testing.assert_allclose(a - a.mean(), b - b.mean(), atol=1e-6)
 
+    def test_fused_divergence_equals_reference(self):
+        from shadeform.integration._slopes import MIN_NZ
+        from shadeform.integration.fourier import _divergence, _divergence_reference
+
+        rng = np.random.default_rng(7)
+        normals = rng.normal(size=(23, 31, 3))
+        normals[..., 2] = np.abs(normals[..., 2])  # some below MIN_NZ after normalising
+        normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+        normals[3, 4] = np.nan  # NaN slopes count as flat, as in slopes()
+        normals[5, 6, 2] = np.nan
+        mask = rng.random((23, 31)) > 0.3
+        np.testing.assert_allclose(_divergence(normals, mask, MIN_NZ),
+                                   _divergence_reference(normals, mask), atol=1e-12)
+
     def test_paraboloid_on_a_box_inside_the_image(self):
         mask = np.zeros((40, 50), bool)
         mask[5:30, 8:45] = True
