@@ -283,6 +283,24 @@ class TestLoadImageErrors:
         message = str(err.value)
         assert "\n" not in message and len(message) > 20
 
+    def test_damaged_16bit_image_data(self, tmp_path):
+        """Chunks intact (CRCs match) but the compressed pixels are not: the decoder's error
+        becomes a one-line InputError."""
+        path = tmp_path / "bad16.png"
+        with open(path, "wb") as fh:
+            png.Writer(width=8, height=4, greyscale=True, bitdepth=16).write(
+                fh, (np.arange(32).reshape(4, 8) * 1000).tolist())
+        data = bytearray(path.read_bytes())
+        at = data.index(b"IDAT")
+        (size,) = struct.unpack(">I", data[at - 4:at])
+        payload = bytes(data[at + 4:at + 6]) + b"\xff\xff\xff\xff" + bytes(data[at + 10:at + 4 + size])
+        data[at + 4:at + 4 + size] = payload
+        data[at + 4 + size:at + 8 + size] = struct.pack(">I", zlib.crc32(b"IDAT" + payload))
+        path.write_bytes(bytes(data))
+        with pytest.raises(InputError, match="damaged PNG") as err:
+            load_image(path)
+        self.assert_one_line(err)
+
     def test_missing_file(self, tmp_path):
         with pytest.raises(InputError, match="file not found") as err:
             load_image(tmp_path / "nope.png")
