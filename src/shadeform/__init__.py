@@ -37,8 +37,10 @@ _EXPORTS = {
     "Mesh": "shadeform.mesh",
     "parse_regions": "shadeform.regions",
     "integrate": "shadeform.integration",
+    "photometric_stereo": "shadeform.photometric",
+    "PhotometricStereo": "shadeform.photometric",
 }
-_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integration", "io", "mesh", "render", "examples"}
+_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integration", "io", "mesh", "render", "examples", "photometric"}
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 

@@ -145,13 +145,18 @@ def render(
     albedo: float = 1.0,
     noise: float = 0.0,
     seed: int = 0,
+    specular: float = 0.0,
+    shininess: float = 50.0,
 ) -> np.ndarray:
     """Render a Lambertian image under orthographic projection and one distant light.
 
     ``I = albedo * max(0, N . L)`` inside ``mask`` (attached shadows are 0, cast shadows are
-    not modelled), 0 outside. With ``noise > 0``, gaussian noise of standard deviation
-    ``noise * albedo`` is added to the object pixels. The result is clipped to [0, 1] like a
-    camera would (a no-op without noise when ``albedo <= 1``).
+    not modelled), 0 outside. With ``specular > 0`` a Blinn-Phong highlight
+    ``specular * (N . H)^shininess`` is added where ``N . L > 0`` (``H`` the half vector between
+    the light and the viewer, +z), for testing methods that must reject highlights. With
+    ``noise > 0``, gaussian noise of standard deviation ``noise * albedo`` is added to the object
+    pixels. The result is clipped to [0, 1] like a camera would (a no-op without noise or
+    highlights when ``albedo <= 1``).
 
     Parameters
     ----------
@@ -167,6 +172,10 @@ def render(
         Noise standard deviation as a fraction of ``albedo``; 0 for none.
     seed : int, optional
         Seed of :func:`numpy.random.default_rng`; the same seed gives the same image.
+    specular : float, optional
+        Strength of the Blinn-Phong highlight; 0 (default) for a purely Lambertian image.
+    shininess : float, optional
+        Blinn-Phong exponent: larger gives a smaller, sharper highlight.
 
     Returns
     -------
@@ -177,7 +186,12 @@ def render(
     ------
     InputError
         Mismatched shapes, non-finite normals in the mask, a light with z <= 0, a non-positive
-        albedo or a negative noise level.
+        albedo, a negative noise level, specular strength or shininess.
+
+    References
+    ----------
+    .. [1] J. F. Blinn, "Models of light reflection for computer synthesized pictures",
+       SIGGRAPH 1977.
     """
     normals = np.asarray(normals, dtype=np.float64)
     mask = np.asarray(mask)
@@ -198,10 +212,20 @@ def render(
     noise = _finite_float(noise, "noise")
     if noise < 0:
         raise InputError(f"noise must be >= 0 (a fraction of the albedo), got {noise}")
+    specular = _finite_float(specular, "specular")
+    shininess = _finite_float(shininess, "shininess")
+    if specular < 0 or shininess < 0:
+        raise InputError(f"specular and shininess must be >= 0, got {specular} and {shininess}")
 
     shading = np.zeros(mask.shape, dtype=np.float64)
     shading[mask] = normals[mask] @ direction
     image = albedo * np.maximum(shading, 0.0)
+    if specular > 0:
+        half = direction + np.array([0.0, 0.0, 1.0])
+        half /= np.linalg.norm(half)
+        facing = np.zeros(mask.shape, dtype=np.float64)
+        facing[mask] = np.maximum(normals[mask] @ half, 0.0)
+        image += np.where(shading > 0, specular * facing**shininess, 0.0)
     if noise > 0:
         # A full-frame draw keeps each pixel's noise independent of the mask's shape.
         field = np.random.default_rng(seed).normal(0.0, noise * albedo, size=mask.shape)
