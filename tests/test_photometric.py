@@ -160,6 +160,7 @@ class TestPhotometricStereoErrors:
         (lambda i, l, m: (i, l, m[:4]), "mask must be"),
         (lambda i, l, m: (i, l, np.zeros_like(m)), "empty"),
         (lambda i, l, m: (i[0], l, m), "images must be"),
+        (lambda i, l, m: (np.full(i.shape, "x"), l, m), "numeric"),
     ])
     def test_bad_input(self, good, change, match):
         with pytest.raises(InputError, match=match) as info:

@@ -135,7 +135,7 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
        three-dimensional surfaces in the presence of highlights and shadows", IEEE PAMI 25(10),
        2003.
     """
-    stack, lights, mask = _check(images, lights, mask, intensities)
+    stack, lights, mask, scale = _check(images, lights, mask, intensities)
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     if not (np.isfinite(min_shading) and 0 <= min_shading < 1):
@@ -154,7 +154,10 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
     flat = stack.reshape(len(lights), h * w, -1)
     for start in range(0, where.size, CHUNK):
         part = slice(start, start + CHUNK)
-        readings = flat[:, where[part]].astype(np.float64)  # (N, P, C or 1)
+        # only the object's readings are read, converted and divided by the lights' strengths
+        readings = flat[:, where[part]] / scale[:, None, :]  # (N, P, C or 1) float64
+        if not np.isfinite(readings).all():
+            raise InputError("images contain NaN or inf on the object; give finite intensities")
         gray = readings.mean(axis=2)
         if method == "least_squares":
             g, usable = _fit(lights, gray, np.ones_like(gray))
@@ -242,10 +245,13 @@ def _robust(lights, readings, *, min_shading, highlight_cos, iterations):
 
 def _check(images, lights, mask, intensities):
     try:
-        stack = np.asarray(images, dtype=np.float32)
+        stack = np.asarray(images)  # kept as given: only the object's readings are converted
         lights = np.asarray(lights, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InputError("images and lights must be numeric arrays: (N, H, W[, C]) and (N, 3)") from None
+        stack = None
+    if stack is None or not (np.issubdtype(stack.dtype, np.floating)
+                             or np.issubdtype(stack.dtype, np.integer)):
+        raise InputError("images and lights must be numeric arrays: (N, H, W[, C]) and (N, 3)")
     if stack.ndim not in (3, 4) or (stack.ndim == 4 and stack.shape[3] not in (1, 3, 4)):
         raise InputError(f"images must be (N, H, W) or (N, H, W, C) with C 1, 3 or 4, got shape {stack.shape}")
     if stack.ndim == 4 and stack.shape[3] == 4:
@@ -266,8 +272,7 @@ def _check(images, lights, mask, intensities):
     if np.linalg.matrix_rank(lights, tol=1e-3) < 3:
         raise InputError("the lights all lie in one plane, so they cannot fix a normal; photograph "
                          "the object under lights from at least three non-coplanar directions")
-    if not np.isfinite(stack).all():
-        raise InputError("images contain NaN or inf; give finite intensities")
+    scale = np.ones((count, 1))
     if intensities is not None:
         strength = np.asarray(intensities, dtype=np.float64)
         channels = stack.shape[3] if stack.ndim == 4 else None
@@ -276,11 +281,7 @@ def _check(images, lights, mask, intensities):
             raise InputError(f"intensities must be (N,) or (N, C) = {sorted(allowed)}, got shape {strength.shape}")
         if not (np.isfinite(strength).all() and (strength > 0).all()):
             raise InputError("intensities must be finite and positive (each photo's light strength)")
-        if strength.ndim == 1:
-            scale = strength.reshape((count,) + (1,) * (stack.ndim - 1))
-        else:
-            scale = strength.reshape(count, 1, 1, channels)
-        stack = stack / scale.astype(np.float32)
+        scale = strength.reshape(count, -1)
     if mask is None:
         mask = (stack.reshape(count, *stack.shape[1:3], -1) > 0).any(axis=(0, 3))
     else:
@@ -290,4 +291,4 @@ def _check(images, lights, mask, intensities):
         mask = mask.astype(bool)
     if not mask.any():
         raise InputError("the mask is empty (or every photo is black); mark the object's pixels")
-    return stack, lights, mask
+    return stack, lights, mask, scale
