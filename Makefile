@@ -56,6 +56,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_eikonal.py
 	$(PY) benchmarks/bench_light.py
 	$(PY) benchmarks/bench_diligent.py
+	$(PY) benchmarks/bench_stereo.py
 	$(PY) benchmarks/bench_methods.py
 
 clean:

@@ -527,3 +527,75 @@ class TestExamples:
     def test_size_is_for_synthetic_examples_only(self):
         with pytest.raises(InputError, match="size"):
             load_example("coin", size=64)
+
+
+# --- stereo --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def photo_set(tmp_path_factory) -> dict:
+    """A sphere under six lights: 16-bit photos, a light file and the truth."""
+    folder = tmp_path_factory.mktemp("stereo")
+    scene = synth.scene("sphere", size=SIZE)
+    lights = np.array([[0, 0, 1.0]] + [list(shadeform.light.light_from_slant_tilt(30, t))
+                                       for t in (0, 72, 144, 216, 288)])
+    photos = []
+    for i, light in enumerate(lights):
+        path = folder / f"{i:03d}.png"
+        cli._write_gray_png(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path,
+                            bitdepth=16)
+        photos.append(path)
+    np.savetxt(folder / "light_directions.txt", lights)
+    return {"folder": folder, "photos": photos, "lights": folder / "light_directions.txt",
+            "scene": scene}
+
+
+class TestStereo:
+    def test_folder(self, photo_set, out):
+        result = invoke("stereo", photo_set["folder"], "-o", out / "m.ply", "--normals", out / "n.png",
+                        "--depth", out / "d.npy")
+        assert result.exit_code == 0, result.output
+        assert "6 photos" in result.stdout
+        scene = photo_set["scene"]
+        normals = load_normal_map(out / "n.png")
+        inner = scene.mask & (scene.normals[..., 2] > 0.3)
+        assert metrics.angular_error(normals, scene.normals, inner) < 0.1
+        depth = load_depth(out / "d.npy")
+        assert metrics.depth_error(depth, scene.depth, inner) < 2.0
+        mesh = trimesh.load(out / "m.ply", force="mesh")
+        assert len(mesh.vertices) == np.isfinite(depth).sum()
+
+    def test_files_and_json(self, photo_set, out):
+        result = invoke("stereo", *photo_set["photos"], "--lights", photo_set["lights"],
+                        "-o", out / "m.glb", "--method", "least_squares", "--json")
+        assert result.exit_code == 0, result.output
+        report = json.loads(result.stdout)
+        assert report["command"] == "stereo" and report["info"]["photos"] == 6
+        assert report["info"]["method"] == "photometric stereo (least_squares)"
+        assert sorted(p.name for p in out.iterdir()) == ["m.glb"]
+
+    def test_needs_lights(self, photo_set, out):
+        assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
+
+    def test_too_few_photos(self, photo_set, out):
+        result = invoke("stereo", *photo_set["photos"][:2], "--lights", photo_set["lights"],
+                        "-o", out / "m.glb")
+        assert_fails(result, out, "at least 3 photos")
+
+    @pytest.mark.parametrize("text, fragment", [
+        ("0 0 1\n0.5 0 0.8\n", "6 rows"),
+        ("up\n" * 6, "numbers only"),
+        ("1 0 1\n0 1 1\n1 1 2\n2 1 3\n1 2 3\n3 1 4\n", "one plane"),
+    ])
+    def test_bad_light_file(self, photo_set, inputs, out, text, fragment):
+        path = inputs / "lights.txt"
+        path.write_text(text)
+        result = invoke("stereo", *photo_set["photos"], "--lights", path, "-o", out / "m.glb")
+        assert_fails(result, out, fragment)
+
+    def test_photos_of_different_sizes(self, photo_set, inputs, out):
+        odd = inputs / "odd.png"
+        cli._write_gray_png(np.ones((SIZE, SIZE + 3)) * 0.5, odd, bitdepth=8)
+        result = invoke("stereo", *photo_set["photos"][:5], odd, "--lights", photo_set["lights"],
+                        "-o", out / "m.glb")
+        assert_fails(result, out, "one still camera")

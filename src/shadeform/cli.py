@@ -289,6 +289,44 @@ def _print_files(console: Console, rows: list[tuple[Path, str]]) -> None:
 # --- reconstruct -------------------------------------------------------------------------------
 
 
+def _check_outputs(output: Path, depth: Path | None, normals: Path | None) -> None:
+    """The suffixes of the mesh and of the optional depth and normal maps."""
+    from shadeform.io.exporters import available_formats
+
+    _check_suffix(output, tuple(available_formats()), "a mesh to")
+    if depth is not None:
+        _check_suffix(depth, _DEPTH_SUFFIXES, "a depth map to")
+    if normals is not None:
+        _check_suffix(normals, _NORMAL_SUFFIXES, "a normal map to")
+
+
+def _output_temps(outputs: _Outputs, *targets: Path | None) -> dict[Path, Path]:
+    """Temporary paths for the mesh and the optional maps, taken before any work so that a bad
+    output path fails first."""
+    return {target: outputs.temp(target) for target in targets if target is not None}
+
+
+def _write_model(err: Console, timings: dict[str, float], rec, temps: dict[Path, Path], *,
+                 step: int, output: Path, depth: Path | None, normals: Path | None):
+    """Mesh a reconstruction and write it, and the depth and normal maps asked for, to their
+    temporaries; returns the mesh and the (file, description) rows to print."""
+    import shadeform
+    from shadeform.io.maps import save_depth, save_normal_map
+
+    with _step(err, "building the mesh", timings, "mesh"):
+        mesh = shadeform.to_mesh(rec, step=step)
+    with _step(err, "writing files", timings, "write"):
+        shadeform.export(mesh, temps[output])
+        written = [(output, shadeform.available_formats()[output.suffix.lower()])]
+        if depth is not None:
+            save_depth(rec.depth, temps[depth])
+            written.append((depth, "depth map, pixel units, NaN off the object"))
+        if normals is not None:
+            save_normal_map(rec.normals, temps[normals])
+            written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+    return mesh, written
+
+
 @app.command()
 def reconstruct(
     image: Annotated[Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)],
@@ -341,15 +379,10 @@ def reconstruct(
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
     import shadeform
-    from shadeform.io.maps import save_depth, save_normal_map
     from shadeform.regions import parse_regions
 
     # everything the user typed is checked before any work
-    _check_suffix(output, tuple(shadeform.available_formats()), "a mesh to")
-    if depth is not None:
-        _check_suffix(depth, _DEPTH_SUFFIXES, "a depth map to")
-    if normals is not None:
-        _check_suffix(normals, _NORMAL_SUFFIXES, "a normal map to")
+    _check_outputs(output, depth, normals)
     light_vector = _resolve_light(light, slant, tilt)
     references = [_parse_reference(text) for text in reference or ()]
     regions = parse_regions(concave) if concave is not None else None
@@ -358,10 +391,7 @@ def reconstruct(
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with _Outputs() as outputs:
-        mesh_tmp = outputs.temp(output)
-        depth_tmp = outputs.temp(depth) if depth is not None else None
-        normals_tmp = outputs.temp(normals) if normals is not None else None
-
+        temps = _output_temps(outputs, output, depth, normals)
         with _step(err, f"loading {escape(str(image))}", timings, "load"):
             pixels = shadeform.load_image(image, channel=channel)
             object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
@@ -370,18 +400,9 @@ def reconstruct(
                 pixels, light=light_vector, method=method, mask=object_mask, filter=filter,
                 references=references or None, concave=regions, integrator=integrator, refine=refine,
             )
-        with _step(err, "building the mesh", timings, "mesh"):
-            mesh = shadeform.to_mesh(rec, step=step)
-        with _step(err, "writing files", timings, "write"):
-            shadeform.export(mesh, mesh_tmp)
-            written = [(output, shadeform.available_formats()[output.suffix.lower()])]
-            if depth_tmp is not None:
-                save_depth(rec.depth, depth_tmp)
-                written.append((depth, "depth map, pixel units, NaN off the object"))
-            if normals_tmp is not None:
-                save_normal_map(rec.normals, normals_tmp)
-                written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
-            outputs.commit()
+        mesh, written = _write_model(err, timings, rec, temps, step=step, output=output,
+                                     depth=depth, normals=normals)
+        outputs.commit()
     timings["total"] = time.perf_counter() - total
 
     height, width = pixels.shape
@@ -414,6 +435,144 @@ def reconstruct(
     out.print(
         f"  time {_seconds(timings['total'])}: load {_seconds(timings['load'])}, "
         f"reconstruct {_seconds(timings['reconstruct'])} ({stages}), mesh {_seconds(timings['mesh'])}, "
+        f"write {_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    _print_files(out, written)
+
+
+# --- stereo ------------------------------------------------------------------------------------
+
+_PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+def _read_vectors(path: Path, what: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
+    """A text file of ``count`` rows of numbers (whitespace or commas) as an array."""
+    try:
+        text = path.read_text(encoding="utf-8").replace(",", " ")
+        values = np.array([[float(v) for v in line.split()] for line in text.splitlines()
+                           if line.strip() and not line.lstrip().startswith("#")])
+    except FileNotFoundError:
+        raise InputError(f"{what} file '{path}' does not exist; check the path") from None
+    except (ValueError, UnicodeDecodeError):
+        raise InputError(f"{what} file '{path}' must hold numbers only, one row per photo") from None
+    if values.ndim != 2 or values.shape[0] != count or values.shape[1] not in columns:
+        shape = "x".join(str(n) for n in values.shape) or "empty"
+        wanted = " or ".join(str(c) for c in columns)
+        raise InputError(f"{what} file '{path}' must have {count} rows (one per photo) of {wanted} "
+                         f"numbers, found {shape}")
+    return values[:, 0] if values.shape[1] == 1 else values
+
+
+def _photo_set(sources: list[Path], lights: Path | None, intensities: Path | None,
+               mask: Path | None) -> tuple[list[Path], Path, Path | None, Path | None]:
+    """Photos and the files describing them: one folder (DiLiGenT layout: ``filenames.txt``,
+    ``light_directions.txt``, ``light_intensities.txt``, ``mask.png``, each optional but the
+    lights) or the photo files themselves."""
+    if len(sources) == 1 and sources[0].is_dir():
+        folder = sources[0]
+        listing = folder / "filenames.txt"
+        if listing.is_file():
+            photos = [folder / name for name in listing.read_text(encoding="utf-8").split()]
+        else:
+            photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in _PHOTO_SUFFIXES
+                            and p.stem.lower() not in ("mask", "normal_gt", "normal_map"))
+        found = {name: folder / name for name in ("light_directions.txt", "light_intensities.txt",
+                                                   "mask.png") if (folder / name).is_file()}
+        lights = lights or found.get("light_directions.txt")
+        intensities = intensities or found.get("light_intensities.txt")
+        mask = mask or found.get("mask.png")
+        if lights is None:
+            raise InputError(f"folder '{folder}' has no light_directions.txt; give --lights FILE")
+    else:
+        photos = sources
+        if lights is None:
+            raise InputError("give --lights FILE: one direction toward the light per photo (x y z)")
+    if len(photos) < 3:
+        raise InputError(f"photometric stereo needs at least 3 photos, got {len(photos)}")
+    return photos, lights, intensities, mask
+
+
+@app.command()
+def stereo(
+    sources: Annotated[
+        list[Path],
+        typer.Argument(help="Three or more photos under different lights, or one folder holding "
+                            "them with light_directions.txt (and optionally filenames.txt, "
+                            "light_intensities.txt, mask.png).", show_default=False),
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Mesh file; the suffix picks the format (see `shadeform formats`).")
+    ],
+    lights: Annotated[
+        Path | None, typer.Option(help="Text file: one direction toward the light per photo (x y z, camera frame).")
+    ] = None,
+    intensities: Annotated[
+        Path | None, typer.Option(help="Text file: each photo's light strength (one number, or R G B, per photo).")
+    ] = None,
+    mask: Annotated[
+        Path | None, typer.Option(help="Mask image: non-zero pixels are the object; default every pixel some photo lights.")
+    ] = None,
+    method: Annotated[str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")] = "robust",
+    integrator: Annotated[str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")] = "poisson",
+    step: Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")] = 1,
+    depth: Annotated[Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")] = None,
+    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
+) -> None:
+    """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
+    import shadeform
+    from shadeform.photometric import reconstruct_stereo
+
+    _check_outputs(output, depth, normals)
+    photos, lights, intensities, mask = _photo_set(sources, lights, intensities, mask)
+    directions = _read_vectors(lights, "lights", len(photos), (3,))
+    strengths = (_read_vectors(intensities, "intensities", len(photos), (1, 3))
+                 if intensities is not None else None)
+
+    err = _stderr()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with _Outputs() as outputs:
+        temps = _output_temps(outputs, output, depth, normals)
+        with _step(err, f"loading {len(photos)} photos", timings, "load"):
+            loaded = [shadeform.load_image_rgb(photo) for photo in photos]
+            for photo, image in zip(photos, loaded):
+                if image.shape != loaded[0].shape:
+                    raise InputError(
+                        f"photo '{photo}' is {image.shape[1]}x{image.shape[0]} but '{photos[0]}' is "
+                        f"{loaded[0].shape[1]}x{loaded[0].shape[0]}; give photos from one still camera")
+            stack = np.stack(loaded)
+            del loaded
+            object_mask = shadeform.load_mask(mask, shape=stack.shape[1:3]) if mask is not None else None
+        with _step(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
+            rec = reconstruct_stereo(stack, directions, object_mask, intensities=strengths,
+                                     method=method, integrator=integrator)
+        mesh, written = _write_model(err, timings, rec, temps, step=step, output=output,
+                                     depth=depth, normals=normals)
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+
+    height, width = rec.shape
+    if as_json:
+        _print_json({
+            "command": "stereo",
+            "input": {"photos": [str(p) for p in photos], "width": width, "height": height},
+            "files": {"mesh": output, "depth": depth, "normals": normals},
+            "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
+            "object_pixels": int(rec.mask.sum()),
+            "info": rec.info,
+            "timings": timings,
+        })
+        return
+    out = _stdout()
+    out.print(f"[bold]reconstructed[/] {len(photos)} photos ({width}x{height}) by {rec.info['method']}, "
+              f"{integrator} integration")
+    out.print(f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel")
+    out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
+    out.print(
+        f"  time {_seconds(timings['total'])}: load {_seconds(timings['load'])}, "
+        f"reconstruct {_seconds(timings['reconstruct'])}, mesh {_seconds(timings['mesh'])}, "
         f"write {_seconds(timings['write'])}"
     )
     out.print("[bold]wrote[/]")

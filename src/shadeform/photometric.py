@@ -292,3 +292,58 @@ def _check(images, lights, mask, intensities):
     if not mask.any():
         raise InputError("the mask is empty (or every photo is black); mark the object's pixels")
     return stack, lights, mask, scale
+
+
+def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: str = "robust",
+                       integrator: str = "poisson"):
+    """Photometric stereo, then depth: the several-photo counterpart of
+    :func:`shadeform.reconstruct`.
+
+    Parameters
+    ----------
+    images, lights, mask, intensities, method
+        As for :func:`photometric_stereo`.
+    integrator : {"poisson", "bilateral", "fourier", "paths"}
+        Depth from the normals (:func:`shadeform.integrate`); ``z = 0`` at the most frontal
+        normal.
+
+    Returns
+    -------
+    shadeform.Reconstruction
+        ``mask`` is the object less the pixels no three lights reached; ``light`` the mean of the
+        lights' directions (for shading a view), ``albedo`` the gray albedo (H, W); ``info``
+        holds ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel) and
+        ``timings`` in seconds.
+
+    Raises
+    ------
+    InputError
+        As :func:`photometric_stereo`, an unknown integrator, or no pixel reached by three lights.
+    """
+    import time
+
+    from shadeform.integration import METHODS as INTEGRATORS
+    from shadeform.integration import integrate
+    from shadeform.reconstruction import Reconstruction
+
+    if integrator not in INTEGRATORS:
+        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
+    start = time.perf_counter()
+    result = photometric_stereo(images, lights, mask, intensities=intensities, method=method)
+    solved = np.isfinite(result.normals[..., 0])
+    if not solved.any():
+        raise InputError("no pixel is lit by three photos whose lights span 3-D; check the lights "
+                         "and that the photos show the object")
+    normals_time = time.perf_counter()
+    depth = integrate(result.normals, solved, method=integrator)
+    done = time.perf_counter()
+    directions = np.asarray(lights, dtype=np.float64)
+    mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
+    albedo = result.albedo if result.albedo.ndim == 2 else result.albedo.mean(axis=2)
+    return Reconstruction(
+        normals=np.where(solved[..., None], result.normals, np.nan), depth=depth, mask=solved,
+        light=mean / np.linalg.norm(mean), albedo=albedo,
+        info={"method": f"photometric stereo ({method})", "integrator": integrator,
+              "photos": len(directions),
+              "lights_used": float(np.median(result.lights_used[solved])),
+              "timings": {"normals": normals_time - start, "depth": done - normals_time}})
