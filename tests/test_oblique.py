@@ -159,10 +159,8 @@ class TestKernels:
         out = np.empty(1)
 
         def cost(phi, hinge, cx):
-            sb = np.zeros((8, 2))
-            sb[0] = (cx, 1.0)
-            return _local_cost(phi, a0, a1, a2, nb, db, zb, wb, wb, sb, 1, 0.0, np.zeros(2), hinge,
-                               out)
+            return _local_cost(phi, a0, a1, a2, nb, db, zb, wb, 1, 0.0, np.zeros(2), hinge, cx,
+                               1.0, out)
 
         low, high = np.arcsin(-0.2), np.arcsin(0.3)  # n_x = -0.2 and 0.3 beside n_b,x = 0.1
         # convex along x: n_x must not exceed the right neighbour's

@@ -299,12 +299,9 @@ def _heap_pop(keys, items, size):
 
 
 @numba.njit(cache=True)
-def _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb, wb, lb, sb,
-            prefer):
-    """Accepted 8-neighbours of ``(r, c)``: normals, displacements ``(dx, dy)`` to them, heights,
-    weights ``1 / |d|^2``, height datums ``lb`` and the convexity of the turn to each along x
-    and y ``sb`` (+1 convex, -1 marked concave, 0 where the two pixels lie on either side of a
-    concave region's edge); ``prefer`` the convexity tie-break direction. Returns
+def _gather(r, c, z, normals, done, convex_x, convex_y, kappa, nb, db, zb, wb, prefer):
+    """Accepted 8-neighbours of ``(r, c)``: normals, displacements ``(dx, dy)`` to them, heights
+    and weights ``1 / |d|^2``; ``prefer`` the convexity tie-break direction. Returns
     ``(count, spans)``, ``spans`` when the displacements span the image plane."""
     height, width = z.shape
     count = 0
@@ -327,13 +324,9 @@ def _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb
             db[count, 1] = dy
             zb[count] = z[rb, cb]
             wb[count] = weight
-            lb[count] = datum[rb, cb]
-            # the edge of a concave region is an inflection: the turn across it has no sign
-            sb[count, 0] = convex_x[r, c] if convex_x[rb, cb] == convex_x[r, c] else 0.0
-            sb[count, 1] = convex_y[r, c] if convex_y[rb, cb] == convex_y[r, c] else 0.0
             # convex: the normal turns the way one moves (from b to here, -d); concave flips it
-            prefer[0] -= kappa * weight * sb[count, 0] * dx
-            prefer[1] -= kappa * weight * sb[count, 1] * dy
+            prefer[0] -= kappa * weight * convex_x[r, c] * dx
+            prefer[1] -= kappa * weight * convex_y[r, c] * dy
             count += 1
     spans = False
     for i in range(count):
@@ -344,14 +337,12 @@ def _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb
 
 
 @numba.njit(cache=True)
-def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, prefer, hinge, out_z):
+def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, out_z):
     """Cost of azimuth ``phi`` in the local fit; its best height goes to ``out_z[0]``.
 
-    ``cw`` weighs each neighbour's chord equation (0 for a neighbour whose height is on another
-    datum, which then only takes part in the continuity and the hinge). ``sb[j]`` is +1
-    (convex), -1 (concave) or 0 (no sign) along x and y for the turn to neighbour ``j``: a
-    neighbour ``b`` at ``d`` should have ``sb_x d_x (n_b,x - n_x) >= 0`` and
-    ``sb_y d_y (n_b,y - n_y) >= 0``; each shortfall costs ``hinge`` times its square."""
+    ``cx, cy`` are +1 (convex) or -1 (concave) along x and y at the pixel: a neighbour ``b`` at
+    ``d`` should have ``cx d_x (n_b,x - n_x) >= 0`` and ``cy d_y (n_b,y - n_y) >= 0``; each
+    shortfall costs ``hinge`` times its square."""
     cp = np.cos(phi)
     sp_ = np.sin(phi)
     n0 = a0[0] + a1[0] * cp + a2[0] * sp_
@@ -363,8 +354,8 @@ def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, prefer, h
         s0 = n0 + nb[j, 0]
         s1 = n1 + nb[j, 1]
         s2 = n2 + nb[j, 2]
-        num += cw[j] * s2 * (s0 * db[j, 0] + s1 * db[j, 1] + s2 * zb[j])
-        den += cw[j] * s2 * s2
+        num += wb[j] * s2 * (s0 * db[j, 0] + s1 * db[j, 1] + s2 * zb[j])
+        den += wb[j] * s2 * s2
     z = num / den if den > 1e-12 else 0.0
     cost = -(n0 * prefer[0] + n1 * prefer[1])
     for j in range(count):
@@ -375,38 +366,22 @@ def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, prefer, h
         m0 = n0 - nb[j, 0]
         m1 = n1 - nb[j, 1]
         m2 = n2 - nb[j, 2]
-        cost += cw[j] * residual * residual + wb[j] * gamma * (m0 * m0 + m1 * m1 + m2 * m2)
-        turn_x = min(sb[j, 0] * db[j, 0] * (nb[j, 0] - n0), 0.0)
-        turn_y = min(sb[j, 1] * db[j, 1] * (nb[j, 1] - n1), 0.0)
+        cost += wb[j] * (residual * residual + gamma * (m0 * m0 + m1 * m1 + m2 * m2))
+        turn_x = min(cx * db[j, 0] * (nb[j, 0] - n0), 0.0)
+        turn_y = min(cy * db[j, 1] * (nb[j, 1] - n1), 0.0)
         cost += hinge * wb[j] * (turn_x * turn_x + turn_y * turn_y)
     out_z[0] = z
     return cost
 
 
 @numba.njit(cache=True)
-def _fit_pixel(r, c, z, normals, done, datum, cos_theta, limits, light, e1, e2, convex_x,
-               convex_y, gamma, kappa, hinge, samples, work, labels, out):
-    """The marching's local fit at ``(r, c)``: ``out = (n_x, n_y, n_z, z, phi, datum)``.
-
-    The heights of the marching are relative to the source each part was reached from (its
-    datum): two separate caps of ``N = L`` need not lie at one height along ``L``. The pixel
-    takes the datum that weighs most among its accepted neighbours (ties: the lower one) and
-    fits its height by their chord equations only."""
-    nb, db, zb, wb, cw, sb, prefer, a0, a1, a2, tmp, none, data = work
-    count, _ = _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb, wb,
-                       labels, sb, prefer)
-    chosen = -1
-    chosen_weight = -1.0
-    for i in range(count):
-        total = 0.0
-        for j in range(count):
-            if labels[j] == labels[i]:
-                total += wb[j]
-        if total > chosen_weight or (total == chosen_weight and labels[i] < chosen):
-            chosen = labels[i]
-            chosen_weight = total
-    for j in range(count):
-        cw[j] = wb[j] if labels[j] == chosen else 0.0
+def _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x, convex_y,
+               gamma, kappa, hinge, samples, work, out):
+    """The marching's local fit at ``(r, c)``: ``out = (n_x, n_y, n_z, z, phi)``."""
+    nb, db, zb, wb, prefer, a0, a1, a2, tmp = work
+    count, _ = _gather(r, c, z, normals, done, convex_x, convex_y, kappa, nb, db, zb, wb, prefer)
+    cx = convex_x[r, c]
+    cy = convex_y[r, c]
     cos_t = cos_theta[r, c]
     s = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
     for i in range(3):
@@ -414,78 +389,50 @@ def _fit_pixel(r, c, z, normals, done, datum, cos_theta, limits, light, e1, e2, 
         a1[i] = s * e1[i]
         a2[i] = s * e2[i]
     limit = limits[r, c]
-    # the tie-break picks the basin: the trial azimuth of least cost with it. The azimuth is
-    # then the least cost without it in that basin (downhill over the trials, then golden
-    # section), so the tie-break only chooses between the cone's branches; as an added linear
-    # term it would also pull the normal along its branch, by more than the turn it is meant
-    # to sign where the chord equations bind it weakly (the convex strip of the vase's mouth
-    # above its marked neck: 490 of 1100 pixels off by more than 10 degrees with the true
-    # normals below, 50 without the pull)
-    step = 2.0 * limit / (samples - 1)
-    picked = 0
-    picked_cost = np.inf
+    best = 0.0
+    best_cost = np.inf
+    best_z = 0.0
     for j in range(samples):
-        t = -limit + step * j
-        data[j] = _local_cost(t, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, none, hinge,
-                              tmp)
-        cp = np.cos(t)
-        sp_ = np.sin(t)
-        n0 = a0[0] + a1[0] * cp + a2[0] * sp_
-        n1 = a0[1] + a1[1] * cp + a2[1] * sp_
-        cost = data[j] - (n0 * prefer[0] + n1 * prefer[1])
-        if cost < picked_cost:
-            picked_cost = cost
-            picked = j
-    j = picked
-    while True:
-        lower = j
-        if j > 0 and data[j - 1] < data[lower]:
-            lower = j - 1
-        if j < samples - 1 and data[j + 1] < data[lower]:
-            lower = j + 1
-        if lower == j:
-            break
-        j = lower
-    best = -limit + step * j
-    best_cost = data[j]
+        t = -limit + 2.0 * limit * j / (samples - 1)
+        cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, tmp)
+        if cost < best_cost:
+            best_cost = cost
+            best = t
+            best_z = tmp[0]
+    step = 2.0 * limit / (samples - 1)
     lo = max(best - step, -limit)
     hi = min(best + step, limit)
     for _ in range(_GOLDEN_STEPS):
         m1 = lo + _GOLDEN * (hi - lo)
         m2 = hi - _GOLDEN * (hi - lo)
-        cost1 = _local_cost(m1, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, none, hinge,
+        cost1 = _local_cost(m1, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy,
                             tmp)
-        cost2 = _local_cost(m2, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, none, hinge,
+        cost2 = _local_cost(m2, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy,
                             tmp)
         if cost1 < cost2:
             hi = m2
         else:
             lo = m1
     t = 0.5 * (lo + hi)
-    cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, none, hinge, tmp)
+    cost = _local_cost(t, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, tmp)
     if cost < best_cost:
         best = t
-    _local_cost(best, a0, a1, a2, nb, db, zb, wb, cw, sb, count, gamma, none, hinge, tmp)
-    best_z = tmp[0]
+        best_z = tmp[0]
     cp = np.cos(best)
     sp_ = np.sin(best)
     for i in range(3):
         out[i] = a0[i] + a1[i] * cp + a2[i] * sp_
     out[3] = best_z
     out[4] = best
-    out[5] = chosen
 
 
 @numba.njit(cache=True)
 def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sources, source_z,
-                  source_datum, gamma, kappa, hinge, samples, distance, z, normals, phi, done,
-                  datum, keys, items):
+                  gamma, kappa, hinge, samples, distance, z, normals, phi, done, keys, items):
     # work arrays of the local fit
-    work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(8),
-            np.empty((8, 2)), np.empty(2), np.empty(3), np.empty(3), np.empty(3), np.empty(1),
-            np.zeros(2), np.empty(samples))
-    labels = np.empty(8, np.int64)
-    out = np.empty(6)
+    work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(2),
+            np.empty(3), np.empty(3), np.empty(3), np.empty(1))
+    out = np.empty(5)
     height, width = z.shape
     is_source = np.zeros(z.shape, np.bool_)
     size = 0
@@ -505,17 +452,15 @@ def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sou
                 normals[r, c, i] = light[i]
             z[r, c] = source_z[r, c]
             phi[r, c] = 0.0
-            datum[r, c] = source_datum[r, c]
         else:
-            _fit_pixel(r, c, z, normals, done, datum, cos_theta, limits, light, e1, e2, convex_x,
-                       convex_y, gamma, kappa, hinge, samples, work, labels, out)
+            _fit_pixel(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x,
+                       convex_y, gamma, kappa, hinge, samples, work, out)
             for i in range(3):
                 normals[r, c, i] = out[i]
             z[r, c] = out[3]
             phi[r, c] = out[4]
-            datum[r, c] = int(out[5])
         done[r, c] = True
-        nb, db, zb, wb, sb, prefer = work[0], work[1], work[2], work[3], work[5], work[6]
+        nb, db, zb, wb, prefer = work[0], work[1], work[2], work[3], work[4]
         for dr in range(-1, 2):
             for dc in range(-1, 2):
                 rr = r + dr
@@ -523,8 +468,8 @@ def _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sou
                 if rr < 0 or rr >= height or cc < 0 or cc >= width or not lit[rr, cc] \
                         or done[rr, cc]:
                     continue
-                _, spans = _gather(rr, cc, z, normals, done, datum, convex_x, convex_y, 0.0, nb,
-                                   db, zb, wb, labels, sb, prefer)
+                _, spans = _gather(rr, cc, z, normals, done, convex_x, convex_y, 0.0, nb, db,
+                                   zb, wb, prefer)
                 # one-pixel paths wait for support in both directions (next to a source: not)
                 if spans or is_source[r, c]:
                     size = _heap_push(keys, items, size, distance[rr, cc], rr * width + cc)
@@ -551,16 +496,12 @@ def _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightnes
         cols_lit = np.flatnonzero(lit.any(axis=0))
         length = max(rows_lit[-1] - rows_lit[0], cols_lit[-1] - cols_lit[0]) + 1
         distance = distance + float(brightness) * length * (1.0 - cos_theta)
-    # the sources of one connected cap lie on one plateau of the height along L (N = L there),
-    # so their heights follow from their positions; separate caps are at unknown heights along
-    # L from each other (the vase's belly and neck: 10 px apart), so each starts its own datum
+    # the sources lie on one plateau of the height along L (N = L there), so their heights
+    # follow from their positions
     r0, c0 = sources[0]
     rows, cols = np.indices(shape)
     source_z = -(light[0] * (cols - c0) - light[1] * (rows - r0)) / light[2]
-    source_datum, _ = ndi.label(seeds, structure=np.ones((3, 3), dtype=bool))
-    source_datum = source_datum.astype(np.int64)
-    return (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance,
-            source_z, source_datum)
+    return cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance, source_z
 
 
 def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None,
@@ -596,20 +537,19 @@ def march_cone(cos_theta, lit, *, light, sources, concave_x=None, concave_y=None
     depth : (H, W) float64
         NaN where not reached.
     """
-    (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance, source_z,
-     source_datum) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
+    (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance,
+     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
     shape = cos_theta.shape
     z = np.full(shape, np.nan)
     normals = np.full(shape + (3,), np.nan)
     phi = np.zeros(shape)
     done = np.zeros(shape, dtype=bool)
-    datum = np.full(shape, -1, dtype=np.int64)
     capacity = 9 * cos_theta.size + len(sources) + 1
     keys = np.empty(capacity)
     items = np.empty(capacity, dtype=np.int64)
     _march_kernel(cos_theta, lit, limits, light, e1, e2, convex_x, convex_y, sources, source_z,
-                  source_datum, float(continuity), float(convexity), float(hinge), int(samples),
-                  distance, z, normals, phi, done, datum, keys, items)
+                  float(continuity), float(convexity), float(hinge), int(samples), distance, z,
+                  normals, phi, done, keys, items)
     return normals, z
 
 
@@ -621,19 +561,16 @@ def march_cone_reference(cos_theta, lit, *, light, sources, concave_x=None, conc
     ``heapq`` for the queue and the local fit evaluated by the uncompiled functions; for the
     tests, on small images.
     """
-    (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance, source_z,
-     source_datum) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
+    (cos_theta, lit, light, sources, e1, e2, limits, convex_x, convex_y, distance,
+     source_z) = _march_setup(cos_theta, lit, light, sources, concave_x, concave_y, brightness)
     height, width = cos_theta.shape
     z = np.full((height, width), np.nan)
     normals = np.full((height, width, 3), np.nan)
     phi = np.zeros((height, width))
     done = np.zeros((height, width), dtype=bool)
-    datum = np.full((height, width), -1, dtype=np.int64)
-    work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(8),
-            np.empty((8, 2)), np.empty(2), np.empty(3), np.empty(3), np.empty(3), np.empty(1),
-            np.zeros(2), np.empty(int(samples)))
-    labels = np.empty(8, dtype=np.int64)
-    out = np.empty(6)
+    work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(2),
+            np.empty(3), np.empty(3), np.empty(3), np.empty(1))
+    out = np.empty(5)
     is_source = set()
     queue = []
     for r, c in sources:
@@ -649,22 +586,18 @@ def march_cone_reference(cos_theta, lit, *, light, sources, concave_x=None, conc
         if (r, c) in is_source:
             normals[r, c] = light
             z[r, c] = source_z[r, c]
-            datum[r, c] = source_datum[r, c]
         else:
-            fit(r, c, z, normals, done, datum, cos_theta, limits, light, e1, e2, convex_x,
-                convex_y, float(continuity), float(convexity), float(hinge), int(samples), work,
-                labels, out)
+            fit(r, c, z, normals, done, cos_theta, limits, light, e1, e2, convex_x, convex_y,
+                float(continuity), float(convexity), float(hinge), int(samples), work, out)
             normals[r, c] = out[:3]
             z[r, c] = out[3]
             phi[r, c] = out[4]
-            datum[r, c] = int(out[5])
         done[r, c] = True
         for rr in range(r - 1, r + 2):
             for cc in range(c - 1, c + 2):
                 if not (0 <= rr < height and 0 <= cc < width) or not lit[rr, cc] or done[rr, cc]:
                     continue
-                _, spans = gather(rr, cc, z, normals, done, datum, convex_x, convex_y, 0.0,
-                                  *work[:4], labels, work[5], work[6])
+                _, spans = gather(rr, cc, z, normals, done, convex_x, convex_y, 0.0, *work[:5])
                 if spans or (r, c) in is_source:
                     heapq.heappush(queue, (float(distance[rr, cc]), rr * width + cc))
     return normals, z
