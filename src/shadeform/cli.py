@@ -15,7 +15,7 @@ the library (``shadeform.reconstruct``, ``shadeform.to_mesh``, ``shadeform.expor
 Errors are handled in one place (:class:`_Group`): a user mistake (:class:`InputError`), a file
 that cannot be read or written, or bad JSON prints ``error: <one line>`` on stderr and exits with
 code 2, like a usage error. Output files are first written to hidden temporary files beside their
-targets and renamed only once all of them are complete (:class:`_Outputs`), so a failing command
+targets and renamed only once all of them are complete (:class:`OutputSet`), so a failing command
 leaves no file behind.
 """
 
@@ -24,8 +24,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import secrets
-import stat
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,10 +34,12 @@ import numpy as np
 import typer
 from rich.console import Console
 from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 from typer.core import TyperGroup
 
 from shadeform.errors import InputError
+from shadeform.io.atomic import OutputSet
 
 __all__ = ["app", "main"]
 
@@ -117,72 +117,6 @@ def _step(console: Console, text: str, timings: dict[str, float], name: str) -> 
     with console.status(text, spinner="dots"):
         yield
     timings[name] = time.perf_counter() - start
-
-
-class _Outputs:
-    """The files one command writes, made to appear together or not at all.
-
-    :meth:`temp` hands out, for each target, a hidden temporary path in the target's folder with
-    the target's suffix (writers pick formats by suffix); the library writes there (atomically
-    too). :meth:`commit` renames every temporary onto its target; if the command fails before,
-    leaving the ``with`` block deletes the temporaries. If a rename itself fails, the targets this
-    run had already created are removed again.
-    """
-
-    def __init__(self) -> None:
-        self._pending: list[tuple[Path, Path]] = []
-        self._made_folder: Path | None = None
-
-    def __enter__(self) -> _Outputs:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._discard()
-        if self._made_folder is not None and exc[0] is not None:
-            try:
-                self._made_folder.rmdir()  # only if still empty
-            except OSError:
-                pass
-
-    def make_folder(self, folder: Path) -> None:
-        """Create ``folder`` (and parents) if missing; removed again if the command fails."""
-        if folder.exists() and not folder.is_dir():
-            raise InputError(f"output folder '{folder}' is a file; give a folder name")
-        if not folder.exists():
-            folder.mkdir(parents=True)
-            self._made_folder = folder
-
-    def temp(self, target: Path | str) -> Path:
-        target = Path(target)
-        if not target.parent.is_dir():
-            raise InputError(f"output folder '{target.parent}' does not exist; create it first")
-        if target.is_dir():
-            raise InputError(f"output path '{target}' is a folder; give a file name")
-        if any(target.resolve() == final.resolve() for _, final in self._pending):
-            raise InputError(f"'{target}' is given for two outputs; give each output its own file")
-        tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.partial{target.suffix}")
-        self._pending.append((tmp, target))
-        return tmp
-
-    def commit(self) -> list[Path]:
-        created: list[Path] = []
-        try:
-            for tmp, target in self._pending:
-                existed = target.exists()
-                if existed:  # keep the permissions of the file being replaced
-                    os.chmod(tmp, stat.S_IMODE(target.stat().st_mode))
-                os.replace(tmp, target)
-                if not existed:
-                    created.append(target)
-        except BaseException:
-            for path in created:
-                path.unlink(missing_ok=True)
-            raise
-        return [target for _, target in self._pending]
-
-    def _discard(self) -> None:
-        for tmp, _ in self._pending:
-            tmp.unlink(missing_ok=True)
 
 
 def _resolve_light(light: str | None, slant: float | None, tilt: float | None) -> np.ndarray | str:
@@ -300,7 +234,7 @@ def _check_outputs(output: Path, depth: Path | None, normals: Path | None) -> No
         _check_suffix(normals, _NORMAL_SUFFIXES, "a normal map to")
 
 
-def _output_temps(outputs: _Outputs, *targets: Path | None) -> dict[Path, Path]:
+def _output_temps(outputs: OutputSet, *targets: Path | None) -> dict[Path, Path]:
     """Temporary paths for the mesh and the optional maps, taken before any work so that a bad
     output path fails first."""
     return {target: outputs.temp(target) for target in targets if target is not None}
@@ -327,18 +261,23 @@ def _write_model(err: Console, timings: dict[str, float], rec, temps: dict[Path,
     return mesh, written
 
 
+# options shared by the commands that build meshes
+_StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
+_FilterOption = Annotated[
+    str | None,
+    typer.Option("--filter", metavar="KIND:SIZE",
+                 help="Smoothing: gaussian:SIGMA, mean:R, median:R, minimum:R or none."),
+]
+
+
 @app.command()
 def reconstruct(
     image: Annotated[Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)],
     output: Annotated[
         Path, typer.Option("-o", "--output", help="Mesh file; the suffix picks the format (see `shadeform formats`).")
     ],
-    step: Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")] = 1,
-    filter: Annotated[
-        str | None,
-        typer.Option("--filter", metavar="KIND:SIZE",
-                     help="Smoothing: gaussian:SIGMA, mean:R, median:R, minimum:R or none."),
-    ] = None,
+    step: _StepOption = 1,
+    filter: _FilterOption = None,
     light: Annotated[
         str | None,
         typer.Option(metavar="X,Y,Z", help="Direction toward the light in the camera frame, or \"estimate\" to estimate it from the image; 0,0,1 if not given."),
@@ -390,7 +329,7 @@ def reconstruct(
     err = _stderr()
     timings: dict[str, float] = {}
     total = time.perf_counter()
-    with _Outputs() as outputs:
+    with OutputSet() as outputs:
         temps = _output_temps(outputs, output, depth, normals)
         with _step(err, f"loading {escape(str(image))}", timings, "load"):
             pixels = shadeform.load_image(image, channel=channel)
@@ -515,7 +454,7 @@ def stereo(
     ] = None,
     method: Annotated[str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")] = "robust",
     integrator: Annotated[str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")] = "poisson",
-    step: Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")] = 1,
+    step: _StepOption = 1,
     depth: Annotated[Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
@@ -533,7 +472,7 @@ def stereo(
     err = _stderr()
     timings: dict[str, float] = {}
     total = time.perf_counter()
-    with _Outputs() as outputs:
+    with OutputSet() as outputs:
         temps = _output_temps(outputs, output, depth, normals)
         with _step(err, f"loading {len(photos)} photos", timings, "load"):
             loaded = [shadeform.load_image_rgb(photo) for photo in photos]
@@ -579,6 +518,72 @@ def stereo(
     _print_files(out, written)
 
 
+# --- batch -------------------------------------------------------------------------------------
+
+
+@app.command()
+def batch(
+    photos: Annotated[list[Path], typer.Argument(help="Photos to reconstruct, each on its own.", show_default=False)],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the models (created if missing).")],
+    format: Annotated[str, typer.Option("--format", help="Mesh format: a suffix from `shadeform formats`.")] = ".glb",
+    step: _StepOption = 1,
+    filter: _FilterOption = None,
+    light: Annotated[
+        str | None,
+        typer.Option(metavar="X,Y,Z", help="Direction toward the light, or \"estimate\" (per photo); 0,0,1 if not given."),
+    ] = None,
+    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
+    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
+    method: Annotated[str, typer.Option(help="Solver: auto, propagation, eikonal or oblique.")] = "auto",
+    integrator: Annotated[
+        str | None, typer.Option(help="Depth from normals: paths, poisson, fourier or bilateral.")
+    ] = None,
+    refine: Annotated[int, typer.Option(min=0, help="Integrability refinement iterations.")] = 3,
+    depth: Annotated[bool, typer.Option("--depth", help="Also write NAME_depth.tiff per photo.")] = False,
+    normals: Annotated[bool, typer.Option("--normals", help="Also write NAME_normals.png per photo.")] = False,
+    workers: Annotated[int | None, typer.Option(min=1, help="Worker processes (default: one per CPU).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the table.")] = False,
+) -> None:
+    """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
+    from shadeform.batch import reconstruct_files
+
+    suffix = format if format.startswith(".") else f".{format}"
+    light_vector = _resolve_light(light, slant, tilt)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"output folder '{out}' is a file; give a folder name")
+    out.mkdir(parents=True, exist_ok=True)
+    err = _stderr()
+    total = time.perf_counter()
+    with Progress(TextColumn("reconstructing"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=err, transient=True) as bar:
+        task = bar.add_task("photos", total=len(photos))
+        results = reconstruct_files(
+            photos, out, suffix=suffix, step=step, channel=channel, depth=depth, normals=normals,
+            workers=workers, progress=lambda done, _: bar.update(task, completed=done),
+            light=light_vector, method=method, filter=filter, integrator=integrator, refine=refine)
+    seconds = time.perf_counter() - total
+    failed = [r for r in results if r.error is not None]
+    if as_json:
+        _print_json({"command": "batch", "seconds": seconds, "photos": [
+            {"photo": r.photo, "files": list(r.files), "vertices": r.vertices, "faces": r.faces,
+             "seconds": r.seconds, "error": r.error} for r in results]})
+    else:
+        table = Table("photo", "vertices", "triangles", "seconds", "written")
+        for r in results:
+            table.add_row(escape(str(r.photo)), f"{r.vertices:,}", f"{r.faces:,}",
+                          _seconds(r.seconds),
+                          escape(", ".join(p.name for p in r.files)) if r.files else "[red]failed[/]")
+        out_console = _stdout()
+        out_console.print(table)
+        out_console.print(f"{len(results) - len(failed)} of {len(results)} photos in "
+                          f"{_seconds(seconds)}, models in {escape(str(out))}")
+    for r in failed:
+        err.print(f"error: {escape(str(r.photo))}: {escape(r.error)}", soft_wrap=True)
+    if failed:
+        raise typer.Exit(2)
+
+
 # --- synth -------------------------------------------------------------------------------------
 
 
@@ -618,7 +623,7 @@ def synth(
         "depth": Path(f"{stem}_depth.{depth_format}"),
         "normals": Path(f"{stem}_normals.png"),
     }
-    with _Outputs() as outputs:
+    with OutputSet() as outputs:
         temps = {key: outputs.temp(path) for key, path in targets.items()}
         _write_gray_png(rendered.image, temps["image"], bitdepth=16)
         _write_gray_png(rendered.mask.astype(np.float64), temps["mask"], bitdepth=8)
@@ -786,7 +791,7 @@ def demo(
         ("model.glb", "mesh, glTF 2.0 binary"),
         ("result.png", "input | normal map | shaded 3D view"),
     ]
-    with _step(err, "writing files", timings, "write"), _Outputs() as outputs:
+    with _step(err, "writing files", timings, "write"), OutputSet() as outputs:
         outputs.make_folder(out)
         temps = {name: outputs.temp(out / name) for name, _ in files}
         _write_gray_png(image, temps["input.png"], bitdepth=16)

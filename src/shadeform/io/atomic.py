@@ -7,6 +7,7 @@ existing good file (``docs/conventions.md``, "Errors").
 from __future__ import annotations
 
 import os
+import secrets
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -16,7 +17,7 @@ from typing import IO
 
 from shadeform.errors import InputError
 
-__all__ = ["atomic_write"]
+__all__ = ["OutputSet", "atomic_write"]
 
 
 def _read_umask() -> int:
@@ -112,3 +113,69 @@ def _fsync_folder(folder: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+class OutputSet:
+    """The files one command (or one batch item) writes, made to appear together or not at all.
+
+    :meth:`temp` hands out, for each target, a hidden temporary path in the target's folder with
+    the target's suffix (writers pick formats by suffix); the library writes there (atomically
+    too). :meth:`commit` renames every temporary onto its target; if the command fails before,
+    leaving the ``with`` block deletes the temporaries. If a rename itself fails, the targets this
+    run had already created are removed again.
+    """
+
+    def __init__(self) -> None:
+        self._pending: list[tuple[Path, Path]] = []
+        self._made_folder: Path | None = None
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._discard()
+        if self._made_folder is not None and exc[0] is not None:
+            try:
+                self._made_folder.rmdir()  # only if still empty
+            except OSError:
+                pass
+
+    def make_folder(self, folder: Path) -> None:
+        """Create ``folder`` (and parents) if missing; removed again if the command fails."""
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"output folder '{folder}' is a file; give a folder name")
+        if not folder.exists():
+            folder.mkdir(parents=True)
+            self._made_folder = folder
+
+    def temp(self, target: Path | str) -> Path:
+        target = Path(target)
+        if not target.parent.is_dir():
+            raise InputError(f"output folder '{target.parent}' does not exist; create it first")
+        if target.is_dir():
+            raise InputError(f"output path '{target}' is a folder; give a file name")
+        if any(target.resolve() == final.resolve() for _, final in self._pending):
+            raise InputError(f"'{target}' is given for two outputs; give each output its own file")
+        tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.partial{target.suffix}")
+        self._pending.append((tmp, target))
+        return tmp
+
+    def commit(self) -> list[Path]:
+        created: list[Path] = []
+        try:
+            for tmp, target in self._pending:
+                existed = target.exists()
+                if existed:  # keep the permissions of the file being replaced
+                    os.chmod(tmp, stat.S_IMODE(target.stat().st_mode))
+                os.replace(tmp, target)
+                if not existed:
+                    created.append(target)
+        except BaseException:
+            for path in created:
+                path.unlink(missing_ok=True)
+            raise
+        return [target for _, target in self._pending]
+
+    def _discard(self) -> None:
+        for tmp, _ in self._pending:
+            tmp.unlink(missing_ok=True)

@@ -1,0 +1,167 @@
+"""Many photos, one model each, reconstructed in parallel with Dask.
+
+An edge of the library, like the CLI: it reads photos and writes files. Each photo is one Dask
+task (load, :func:`shadeform.reconstruct`, mesh, export, written atomically); the tasks run in
+worker processes (the solvers are numba kernels that hold the interpreter, so threads would
+queue). A photo that is a user mistake (unreadable, all black, ...) fails alone: its result
+carries the one-line message and the other photos go on.
+
+Dask is optional (``pip install 'shadeform[dask]'``); without it :func:`reconstruct_files`
+raises an :class:`~shadeform.errors.InputError` naming the extra.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from shadeform.errors import InputError
+
+#: Suffix of the depth and normal maps written beside each mesh.
+DEPTH_SUFFIX, NORMALS_SUFFIX = "_depth.tiff", "_normals.png"
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What became of one photo.
+
+    Attributes
+    ----------
+    photo : Path
+        The input.
+    files : tuple of Path
+        What was written for it: the mesh first, then the depth and normal maps asked for;
+        empty if it failed.
+    vertices, faces : int
+        Size of the mesh (0 if it failed).
+    seconds : float
+        Wall time of the task.
+    error : str or None
+        The one-line message of the user mistake that stopped this photo; None if it worked.
+    """
+
+    photo: Path
+    files: tuple[Path, ...]
+    vertices: int
+    faces: int
+    seconds: float
+    error: str | None = None
+
+
+def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.PathLike, *,
+                      suffix: str = ".glb", step: int = 1, channel: str = "luma",
+                      depth: bool = False, normals: bool = False, workers: int | None = None,
+                      progress: Callable[[int, int], None] | None = None,
+                      **options) -> list[BatchResult]:
+    """Reconstruct every photo with the same options and write one model per photo.
+
+    Parameters
+    ----------
+    photos : sequence of path-like
+        Input photos; their file names (without suffix) name the outputs, so they must differ.
+    out_dir : path-like
+        Existing folder for the outputs: ``NAME{suffix}``, and with ``depth`` / ``normals``
+        ``NAME_depth.tiff`` and ``NAME_normals.png``.
+    suffix : str
+        Mesh format, one of :func:`shadeform.available_formats`.
+    step : int
+        Mesh granularity in pixels per vertex.
+    channel : str
+        Image channel (:func:`shadeform.load_image`).
+    depth, normals : bool
+        Also write each photo's depth map and normal map.
+    workers : int, optional
+        Worker processes; default the CPU count. 1 runs the photos one after the other in this
+        process.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each photo, in this process.
+    **options
+        Keyword arguments of :func:`shadeform.reconstruct` (``light``, ``method``, ``filter``,
+        ``integrator``, ``refine``, ``concave``, ...), the same for every photo.
+
+    Returns
+    -------
+    list of BatchResult
+        One per photo, in the order given.
+
+    Raises
+    ------
+    InputError
+        No photos, two photos with the same name, a missing output folder, an unknown mesh
+        suffix, ``workers < 1``, or Dask not installed. Problems with one photo are reported in
+        its result instead.
+    """
+    from shadeform.io.exporters import available_formats
+
+    photos = [Path(p) for p in photos]
+    out_dir = Path(out_dir)
+    if not photos:
+        raise InputError("no photos given; list the photos to reconstruct")
+    stems = [p.stem for p in photos]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if twice:
+        raise InputError(f"two photos are named '{twice[0]}', so their models would overwrite "
+                         "each other; rename one")
+    if not out_dir.is_dir():
+        raise InputError(f"output folder '{out_dir}' does not exist; create it first")
+    if suffix.lower() not in available_formats():
+        raise InputError(f"unknown mesh suffix '{suffix}'; use one of {', '.join(available_formats())}")
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if int(workers) != workers or workers < 1:
+        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    try:
+        import dask
+        from dask.callbacks import Callback
+    except ImportError:
+        raise InputError("batch processing needs Dask; install it with "
+                         "pip install 'shadeform[dask]'") from None
+
+    jobs = [(photo, tuple(out_dir / f"{photo.stem}{end}" for end, wanted in
+                          ((suffix, True), (DEPTH_SUFFIX, depth), (NORMALS_SUFFIX, normals))
+                          if wanted)) for photo in photos]
+    tasks = [dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, options)
+             for photo, files in jobs]
+    done = [0]
+
+    def finished(key, result, dsk, state, worker_id):
+        done[0] += 1
+        if progress is not None:
+            progress(min(done[0], len(tasks)), len(tasks))
+
+    scheduler = "synchronous" if workers == 1 else "processes"
+    with Callback(posttask=finished):
+        results = dask.compute(*tasks, scheduler=scheduler, num_workers=int(workers))
+    return list(results)
+
+
+def _reconstruct_one(photo: Path, files: tuple[Path, ...], step: int, channel: str,
+                     options: dict) -> BatchResult:
+    """One photo: load, reconstruct, mesh, write; a user mistake becomes the result's error."""
+    import shadeform
+    from shadeform.io.atomic import OutputSet
+    from shadeform.io.maps import save_depth, save_normal_map
+
+    start = time.perf_counter()
+    try:
+        with OutputSet() as outputs:  # a photo's files appear together or not at all
+            temps = [outputs.temp(path) for path in files]
+            image = shadeform.load_image(photo, channel=channel)
+            rec = shadeform.reconstruct(image, **options)
+            mesh = shadeform.to_mesh(rec, step=step)
+            shadeform.export(mesh, temps[0])
+            for path, temp in zip(files[1:], temps[1:]):
+                if path.name.endswith(DEPTH_SUFFIX):
+                    save_depth(rec.depth, temp)
+                else:
+                    save_normal_map(rec.normals, temp)
+            outputs.commit()
+    except InputError as err:
+        return BatchResult(photo, (), 0, 0, time.perf_counter() - start, str(err))
+    except OSError as err:
+        reason = err.strerror or type(err).__name__
+        return BatchResult(photo, (), 0, 0, time.perf_counter() - start,
+                           f"cannot read or write the files of '{photo}': {reason}")
+    return BatchResult(photo, files, mesh.n_vertices, mesh.n_faces, time.perf_counter() - start)

@@ -1,0 +1,113 @@
+"""Batch reconstruction with Dask: the same models as one at a time, failures stay alone."""
+
+from __future__ import annotations
+
+import builtins
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import shadeform
+from shadeform import cli, synth
+from shadeform.batch import reconstruct_files
+from shadeform.errors import InputError
+from shadeform.io.maps import load_depth
+
+from test_cli import invoke, out  # noqa: F401  (the out fixture: an empty output folder)
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("photos")
+    paths = []
+    for name in ("sphere", "ellipsoid", "vase"):
+        path = folder / f"{name}.png"
+        cli._write_gray_png(synth.scene(name, size=48).image, path, bitdepth=16)
+        paths.append(path)
+    return paths
+
+
+class TestReconstructFiles:
+    @pytest.mark.parametrize("workers", [1, 2])
+    def test_same_models_as_one_at_a_time(self, photos, out, workers):
+        seen = []
+        results = reconstruct_files(photos, out, suffix=".ply", step=2, depth=True,
+                                    workers=workers, progress=lambda done, total: seen.append((done, total)),
+                                    method="eikonal")
+        assert [r.photo for r in results] == photos
+        assert seen[-1] == (3, 3) and len(seen) == 3
+        for photo, result in zip(photos, results):
+            assert result.error is None
+            assert [p.name for p in result.files] == [f"{photo.stem}.ply", f"{photo.stem}_depth.tiff"]
+            rec = shadeform.reconstruct(shadeform.load_image(photo), method="eikonal")
+            mesh = shadeform.to_mesh(rec, step=2)
+            assert (result.vertices, result.faces) == (mesh.n_vertices, mesh.n_faces)
+            written = trimesh.load(out / f"{photo.stem}.ply", force="mesh")
+            assert len(written.vertices) == mesh.n_vertices
+            np.testing.assert_allclose(load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth,
+                                       atol=1e-4, equal_nan=True)  # float32 file
+
+    def test_a_bad_photo_fails_alone(self, photos, out, tmp_path):
+        bad = tmp_path / "black.png"
+        cli._write_gray_png(np.zeros((20, 20)), bad, bitdepth=8)
+        old = out / "black.glb"
+        old.write_bytes(b"a good model from before")
+        results = reconstruct_files([photos[0], bad], out, workers=1)
+        assert results[0].error is None and results[0].files == (out / "sphere.glb",)
+        assert results[1].files == () and "black" in results[1].error.lower()
+        assert "\n" not in results[1].error
+        assert old.read_bytes() == b"a good model from before"  # nothing clobbered
+        assert sorted(p.name for p in out.iterdir()) == ["black.glb", "sphere.glb"]
+
+    def test_errors(self, photos, out, tmp_path, monkeypatch):
+        with pytest.raises(InputError, match="no photos"):
+            reconstruct_files([], out)
+        twin = tmp_path / "again"
+        twin.mkdir()
+        with pytest.raises(InputError, match="named 'sphere'"):
+            reconstruct_files([photos[0], twin / "sphere.png"], out)
+        with pytest.raises(InputError, match="does not exist"):
+            reconstruct_files(photos, tmp_path / "missing")
+        with pytest.raises(InputError, match="suffix"):
+            reconstruct_files(photos, out, suffix=".xyz")
+        with pytest.raises(InputError, match="workers"):
+            reconstruct_files(photos, out, workers=0)
+        real_import = builtins.__import__
+
+        def no_dask(name, *args, **kwargs):
+            if name == "dask" or name.startswith("dask."):
+                raise ImportError(name)
+            return real_import(name, *args, **kwargs)
+
+        monkeypatch.setattr(builtins, "__import__", no_dask)
+        with pytest.raises(InputError, match=r"shadeform\[dask\]"):
+            reconstruct_files(photos, out)
+
+
+class TestBatchCommand:
+    def test_json_and_folder_created(self, photos, tmp_path):
+        folder = tmp_path / "models"
+        result = invoke("batch", *photos, "--out", folder, "--format", "obj", "--normals",
+                        "--workers", "1", "--json")
+        assert result.exit_code == 0, result.output
+        report = json.loads(result.stdout)
+        assert [Path(p["photo"]).name for p in report["photos"]] == [p.name for p in photos]
+        assert all(p["error"] is None for p in report["photos"])
+        assert len(list(folder.iterdir())) == 6
+
+    def test_failures_exit_2_with_one_line_each(self, photos, tmp_path):
+        bad = tmp_path / "notes.png"
+        bad.write_text("not a photo")
+        result = invoke("batch", photos[0], bad, "--out", tmp_path / "m", "--workers", "1")
+        assert result.exit_code == 2
+        assert "1 of 2 photos" in result.stdout
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: ") and "notes.png" in lines[0]
+        assert "Traceback" not in result.output
+
+    def test_bad_option_is_one_line(self, photos, tmp_path):
+        result = invoke("batch", *photos, "--out", tmp_path / "m", "--format", "xyz")
+        assert result.exit_code == 2 and "suffix" in result.stderr and "Traceback" not in result.output
