@@ -12,6 +12,7 @@ from shadeform.solvers.oblique import (
     SHADOW_NZ,
     _cone_coefficients,
     _cone_minimum,
+    _caps,
     _Descent,
     _double_normals,
     _local_cost,
@@ -145,6 +146,43 @@ class TestKernels:
         for a, b in zip(fast, slow):
             np.testing.assert_allclose(a, b, atol=1e-9, equal_nan=True)
         assert np.isfinite(fast[1][lit]).all()
+
+    def test_march_with_two_caps_matches_its_reference(self):
+        # two separate caps of sources: two height datums, fronts that meet
+        scene = synth.scene("sphere", size=24, light=LIGHT)
+        cos_theta = scene.image / scene.image.max()
+        lit = scene.mask & (cos_theta > 0)
+        main = np.unravel_index(np.argmax(cos_theta), cos_theta.shape)
+        far = np.argwhere(lit)[np.argmax(np.where(lit, cos_theta, 2.0)[lit] < 0.5)]
+        sources = np.array([main, far])
+        fast = march_cone(cos_theta, lit, light=scene.light, sources=sources)
+        slow = march_cone_reference(cos_theta, lit, light=scene.light, sources=sources)
+        for a, b in zip(fast, slow):
+            np.testing.assert_allclose(a, b, atol=1e-9, equal_nan=True)
+        assert np.isfinite(fast[1][lit]).all()
+
+    def test_caps_merge_only_what_one_plateau_can_hold(self):
+        """Separate groups of sources share a height datum only when the brightest path between
+        them keeps the plateau's height error under a pixel."""
+        lit = np.ones((9, 40), bool)
+        seeds = np.zeros_like(lit)
+        seeds[4, [2, 6, 30]] = True
+        cos_theta = np.full(lit.shape, 0.9)
+        cos_theta[seeds] = 1.0
+        cos_theta[3:6, 2:7] = np.maximum(cos_theta[3:6, 2:7], 0.999)  # 4 px at 1e-3: 0.18 px
+        caps = _caps(seeds, cos_theta, lit)
+        assert caps[4, 2] == caps[4, 6] != caps[4, 30]  # 24 px at 0.1: up to 10.6 px
+        cos_theta[3:6, 2:7] = np.where(seeds[3:6, 2:7], 1.0, 0.9)  # 4 px at 0.1: up to 1.8 px
+        caps = _caps(seeds, cos_theta, lit)
+        assert len({caps[4, 2], caps[4, 6], caps[4, 30]}) == 3
+
+    def test_vase_belly_and_neck_are_separate_caps(self):
+        scene = synth.scene("vase", size=128, light=tuple(light_from_slant_tilt(30, 45)))
+        cos_theta = scene.image / scene.image.max()
+        lit = scene.mask & (cos_theta > 0)
+        seeds = lit & (cos_theta >= 1 - 2e-3)
+        caps = _caps(seeds, cos_theta, lit)
+        assert len(np.unique(caps[seeds])) == 2
 
     def test_hinge_costs_only_a_turn_against_the_convexity(self):
         """One neighbour to the right (d = (1, 0)) and normals n = (sin phi, 0, cos phi) at two
