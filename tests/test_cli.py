@@ -574,6 +574,18 @@ class TestStereo:
         assert report["info"]["method"] == "photometric stereo (least_squares)"
         assert sorted(p.name for p in out.iterdir()) == ["m.glb"]
 
+    def test_light_file_with_comments_and_commas(self, photo_set, inputs, out):
+        rows = np.loadtxt(photo_set["lights"])
+        path = inputs / "lights.csv"
+        path.write_text("# x, y, z toward each light\n\n"
+                        + "\n".join(", ".join(f"{v:.17g}" for v in row) for row in rows) + "\n")
+        result = invoke("stereo", *photo_set["photos"], "--lights", path, "-o", out / "a.ply",
+                        "--normals", out / "a.png")
+        assert result.exit_code == 0, result.output
+        plain = invoke("stereo", photo_set["folder"], "-o", out / "b.ply", "--normals", out / "b.png")
+        assert plain.exit_code == 0, plain.output
+        np.testing.assert_array_equal(load_normal_map(out / "a.png"), load_normal_map(out / "b.png"))
+
     def test_needs_lights(self, photo_set, out):
         assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
 
