@@ -199,3 +199,27 @@ def test_diligent_ball():
     plain = photometric_stereo(images, lights, mask, intensities=strengths, method="least_squares")
     assert abs(angles(plain.normals, truth, mask).mean() - 4.10) < 0.3
     assert angles(robust.normals, truth, mask).mean() < 2.0
+
+
+class TestReconstructStereo:
+    def test_mask_found_on_a_noisy_background(self, sphere):
+        from shadeform.photometric import reconstruct_stereo
+
+        lights = np.vstack([[0, 0, 1], ring(5, 25)])
+        rng = np.random.default_rng(0)
+        images = photos(sphere, lights, albedo=0.8) + rng.uniform(0, 0.02, (6,) + sphere.mask.shape)
+        rec = reconstruct_stereo(images, lights)
+        # the background's dim noise is not object; the object's rim is
+        assert (rec.mask & ~sphere.mask).sum() == 0
+        assert rec.mask.sum() >= 0.97 * sphere.mask.sum()
+        inner = rec.mask & (sphere.normals[..., 2] > 0.5)
+        assert angles(rec.normals, sphere.normals, inner).mean() < 1.0
+        assert np.isfinite(rec.depth[rec.mask]).all() and np.isnan(rec.depth[~rec.mask]).all()
+
+    def test_black_photos(self):
+        from shadeform.photometric import reconstruct_stereo
+
+        with pytest.raises(InputError, match="black"):
+            reconstruct_stereo(np.zeros((3, 8, 8)), ring(3, 20))
+        with pytest.raises(InputError, match="integrator"):
+            reconstruct_stereo(np.ones((3, 8, 8)), ring(3, 20), integrator="magic")

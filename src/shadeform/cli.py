@@ -450,7 +450,7 @@ def stereo(
         Path | None, typer.Option(help="Text file: each photo's light strength (one number, or R G B, per photo).")
     ] = None,
     mask: Annotated[
-        Path | None, typer.Option(help="Mask image: non-zero pixels are the object; default every pixel some photo lights.")
+        Path | None, typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given.")
     ] = None,
     method: Annotated[str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")] = "robust",
     integrator: Annotated[str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")] = "poisson",

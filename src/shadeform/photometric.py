@@ -301,8 +301,11 @@ def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: s
 
     Parameters
     ----------
-    images, lights, mask, intensities, method
+    images, lights, intensities, method
         As for :func:`photometric_stereo`.
+    mask : (H, W) array_like of bool, optional
+        Object pixels. Default: found in the brightest reading of each pixel over the photos, as
+        :func:`shadeform.preprocess.object_mask` finds an object on a dark background.
     integrator : {"poisson", "bilateral", "fourier", "paths"}
         Depth from the normals (:func:`shadeform.integrate`); ``z = 0`` at the most frontal
         normal.
@@ -329,6 +332,15 @@ def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: s
     if integrator not in INTEGRATORS:
         raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
     start = time.perf_counter()
+    if mask is None:
+        from shadeform.preprocess import object_mask
+
+        stack = np.asarray(images)
+        brightest = stack.max(axis=0) if stack.ndim == 3 else stack.max(axis=(0, 3))
+        peak = float(brightest.max()) if brightest.size else 0.0
+        if not (np.isfinite(peak) and peak > 0):
+            raise InputError("every photo is black (or not finite); give photos of the lit object")
+        mask = object_mask(brightest / peak)
     result = photometric_stereo(images, lights, mask, intensities=intensities, method=method)
     solved = np.isfinite(result.normals[..., 0])
     if not solved.any():
