@@ -589,6 +589,12 @@ class TestStereo:
     def test_needs_lights(self, photo_set, out):
         assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
 
+    @pytest.mark.parametrize("option, value", [("--method", "magic"), ("--integrator", "magic")])
+    def test_unknown_choice_before_any_work(self, photo_set, out, monkeypatch, option, value):
+        monkeypatch.setattr(shadeform, "load_image_rgb", lambda *a, **k: pytest.fail("photos read"))
+        result = invoke("stereo", photo_set["folder"], "-o", out / "m.glb", option, value)
+        assert_fails(result, out, "unknown", value)
+
     def test_too_few_photos(self, photo_set, out):
         result = invoke("stereo", *photo_set["photos"][:2], "--lights", photo_set["lights"],
                         "-o", out / "m.glb")

@@ -464,6 +464,14 @@ def stereo(
     from shadeform.photometric import reconstruct_stereo
 
     _check_outputs(output, depth, normals)
+    from shadeform.integration import METHODS as INTEGRATORS
+    from shadeform.photometric import METHODS
+
+    # everything the user typed is checked before the photos are read
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
+    if integrator not in INTEGRATORS:
+        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
     photos, lights, intensities, mask = _photo_set(sources, lights, intensities, mask)
     directions = _read_vectors(lights, "lights", len(photos), (3,))
     strengths = (_read_vectors(intensities, "intensities", len(photos), (1, 3))
