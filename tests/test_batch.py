@@ -108,6 +108,14 @@ class TestBatchCommand:
         assert len(lines) == 1 and lines[0].startswith("error: ") and "notes.png" in lines[0]
         assert "Traceback" not in result.output
 
-    def test_bad_option_is_one_line(self, photos, tmp_path):
-        result = invoke("batch", *photos, "--out", tmp_path / "m", "--format", "xyz")
-        assert result.exit_code == 2 and "suffix" in result.stderr and "Traceback" not in result.output
+    @pytest.mark.parametrize("option, value, fragment", [
+        ("--format", "xyz", "format"), ("--method", "magic", "method"),
+        ("--integrator", "magic", "integrator"), ("--filter", "blur:2", "filter"),
+    ])
+    def test_bad_option_is_one_line(self, photos, tmp_path, option, value, fragment):
+        result = invoke("batch", *photos, "--out", tmp_path / "m", option, value)
+        assert result.exit_code == 2 and "Traceback" not in result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and fragment in lines[0], result.stderr
+        assert result.stdout == ""
+        assert not (tmp_path / "m").exists()  # refused before the folder was made

@@ -554,10 +554,23 @@ def batch(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the table.")] = False,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
+    import shadeform
     from shadeform.batch import reconstruct_files
+    from shadeform.integration import METHODS as INTEGRATORS
+    from shadeform.pipeline import METHODS
+    from shadeform.preprocess import parse_filter
 
+    # the options every photo shares are checked once, before any photo is read
     suffix = format if format.startswith(".") else f".{format}"
     light_vector = _resolve_light(light, slant, tilt)
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
+    if integrator is not None and integrator not in INTEGRATORS:
+        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
+    parse_filter(filter)
+    known = tuple(shadeform.available_formats())
+    if suffix.lower() not in known:
+        raise InputError(f"unknown mesh format '{format}'; use one of {', '.join(known)}")
     if out.exists() and not out.is_dir():
         raise InputError(f"output folder '{out}' is a file; give a folder name")
     out.mkdir(parents=True, exist_ok=True)
