@@ -15,6 +15,8 @@ from shadeform.solvers.oblique import (
     _caps,
     _Descent,
     _double_normals,
+    _fit_pixel,
+    _gather,
     _local_cost,
     _serial,
     cone_sweep,
@@ -207,6 +209,43 @@ class TestKernels:
         # marked concave along x: the other way round
         assert cost(high, 50.0, -1.0) == pytest.approx(cost(high, 0.0, -1.0))
         assert cost(low, 50.0, -1.0) == pytest.approx(cost(low, 0.0, -1.0) + 50.0 * 0.3**2)
+
+    @pytest.mark.parametrize("compiled", [True, False])
+    def test_convexity_pull_has_no_sign_across_a_region_edge(self, compiled):
+        """A pixel on the last convex row above a region marked concave along y, with all eight
+        neighbours accepted: the three below straddle the inflection and pull neither way, so the
+        tie-break is the three above's alone (weights 1, 1/2, 1/2; convex: moving down from them
+        n_y falls, so the cost 2 kappa n_y) instead of cancelling to zero. Along x every pair is
+        convex and cancels."""
+        kappa = 0.03
+        z = np.zeros((3, 3))
+        normals = np.zeros((3, 3, 3))
+        normals[..., 2] = 1.0
+        done = np.ones((3, 3), bool)
+        done[1, 1] = False
+        datum = np.ones((3, 3), np.int64)
+        convex_x = np.ones((3, 3))
+        convex_y = np.ones((3, 3))
+        convex_y[2] = -1.0  # the row below is marked concave along y
+        work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(2))
+        labels = np.empty(8, np.int64)
+        gather = _gather if compiled else _gather.py_func
+        count, spans = gather(1, 1, z, normals, done, datum, convex_x, convex_y, kappa, *work[:4],
+                              labels, work[4])
+        assert count == 8 and spans
+        np.testing.assert_allclose(work[4], [0.0, -2.0 * kappa], atol=1e-15)
+        # the local fit recomputes the pull over its datum's neighbours: the same, so on this
+        # flat patch (the chords are symmetric in n_y) the fitted normal leans down the cone
+        light = np.array([0.0, 0.0, 1.0])
+        cos_theta = np.full((3, 3), 0.95)
+        limits = np.full((3, 3), np.pi)
+        e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+        fit_work = work + (np.empty(3), np.empty(3), np.empty(3), np.empty(1))
+        out = np.empty(6)
+        fit = _fit_pixel if compiled else _fit_pixel.py_func
+        fit(1, 1, z, normals, done, datum, cos_theta, limits, light, e1, e2, convex_x, convex_y,
+            0.05, kappa, 0.0, 72, fit_work, labels, out)
+        assert out[1] < -0.3 and abs(out[0]) < 1e-6
 
     def test_sweep_matches_its_reference(self):
         scene = synth.scene("sphere", size=20, light=LIGHT)

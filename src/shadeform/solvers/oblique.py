@@ -21,10 +21,15 @@ The solver
    continuity term ``|n - n_b|^2``, a tie-break that prefers the convex turn of the normal (the
    way one moves) and a one-sided penalty, ``HINGE`` times the squared shortfall, on a turn
    against it (``n_x`` falling where ``x`` grows toward a neighbour, or ``n_y`` where ``y``
-   does), both flipped per axis inside the user's concave regions. The penalty is zero while the
-   turn agrees, so it picks one of the cone's two branches without pulling the normal. A pixel is
-   accepted only once its accepted neighbours span both image directions, so the front cannot run
-   away along a one-pixel path. Each cap of sources (the sources of one plateau of the height
+   does), both flipped per axis inside the user's concave regions. The tie-break takes, per
+   neighbour, the mean of the two pixels' signs: none across a region's edge, where the
+   surface's inflection lies between them and neither turn is the expected one (a constant pull
+   there over-turns the weakly curved surface past the edge; the vase's mouth above its marked
+   neck at slant 30 degrees: 1252 pixels off by more than 10 degrees, 1214 with the mean; at
+   slant 45 degrees 3.58 % depth error, 3.27 %). The penalty is zero while the turn agrees, so
+   it picks one of the cone's two branches without pulling the normal. A pixel is accepted only
+   once its accepted neighbours span both image directions, so the front cannot run away along
+   a one-pixel path. Each cap of sources (the sources of one plateau of the height
    along ``L``: connected, or joined by a path too bright for the plateau to be off by a pixel)
    starts its own height datum, and a pixel is fitted to the neighbours of one datum only (the
    one that weighs most): where the fronts of two caps meet, neither's heights nor its drift
@@ -309,7 +314,9 @@ def _heap_pop(keys, items, size):
 def _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb, wb, lb,
             prefer):
     """Accepted 8-neighbours of ``(r, c)``: normals, displacements ``(dx, dy)`` to them, heights,
-    weights ``1 / |d|^2`` and height datums ``lb``; ``prefer`` the convexity tie-break direction.
+    weights ``1 / |d|^2`` and height datums ``lb``; ``prefer`` the convexity tie-break direction,
+    each neighbour's term with the mean of its and the pixel's convexity sign (0 across the edge
+    of a concave region).
     Returns ``(count, spans)``, ``spans`` when the displacements span the image plane."""
     height, width = z.shape
     count = 0
@@ -333,9 +340,11 @@ def _gather(r, c, z, normals, done, datum, convex_x, convex_y, kappa, nb, db, zb
             zb[count] = z[rb, cb]
             wb[count] = weight
             lb[count] = datum[rb, cb]
-            # convex: the normal turns the way one moves (from b to here, -d); concave flips it
-            prefer[0] -= kappa * weight * convex_x[r, c] * dx
-            prefer[1] -= kappa * weight * convex_y[r, c] * dy
+            # convex: the normal turns the way one moves (from b to here, -d); concave flips it,
+            # and a pair across a concave region's edge (the inflection between them) has no
+            # preferred turn
+            prefer[0] -= kappa * weight * 0.5 * (convex_x[r, c] + convex_x[rb, cb]) * dx
+            prefer[1] -= kappa * weight * 0.5 * (convex_y[r, c] + convex_y[rb, cb]) * dy
             count += 1
     spans = False
     for i in range(count):
@@ -411,8 +420,10 @@ def _fit_pixel(r, c, z, normals, done, datum, cos_theta, limits, light, e1, e2, 
     for j in range(count):
         if labels[j] != chosen:
             wb[j] = 0.0
-        prefer[0] -= kappa * wb[j] * convex_x[r, c] * db[j, 0]
-        prefer[1] -= kappa * wb[j] * convex_y[r, c] * db[j, 1]
+        rb = r - int(db[j, 1])
+        cb = c + int(db[j, 0])
+        prefer[0] -= kappa * wb[j] * 0.5 * (convex_x[r, c] + convex_x[rb, cb]) * db[j, 0]
+        prefer[1] -= kappa * wb[j] * 0.5 * (convex_y[r, c] + convex_y[rb, cb]) * db[j, 1]
     cx = convex_x[r, c]
     cy = convex_y[r, c]
     cos_t = cos_theta[r, c]
