@@ -134,6 +134,20 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
     .. [2] S. Barsky, M. Petrou, "The 4-source photometric stereo technique for
        three-dimensional surfaces in the presence of highlights and shadows", IEEE PAMI 25(10),
        2003.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from shadeform import synth
+    >>> scene = synth.scene("sphere", size=64)
+    >>> lights = np.array([[0, 0, 1], [0.5, 0, 0.87], [0, 0.5, 0.87], [-0.5, -0.5, 0.71]])
+    >>> photos = [synth.render(scene.normals, scene.mask, light=l, albedo=0.6) for l in lights]
+    >>> result = photometric_stereo(photos, lights, scene.mask)
+    >>> inner = scene.mask & (scene.normals[..., 2] > 0.8)
+    >>> bool(np.allclose(result.normals[inner], scene.normals[inner], atol=1e-6))
+    True
+    >>> round(float(np.nanmedian(result.albedo)), 3)
+    0.6
     """
     stack, lights, mask, scale = _check(images, lights, mask, intensities)
     if method not in METHODS:
