@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from shadeform import metrics, reconstruct, synth, to_mesh
+from shadeform import metrics, pipeline, reconstruct, synth, to_mesh
 from shadeform.pipeline import PREVIEW_PIXELS, preview_step, reconstruct_preview
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
@@ -273,6 +273,37 @@ class TestEstimatedLight:
 
 class TestPreview:
     """reconstruct_preview: the quick look at the mesh's grid that the app shows first."""
+
+    @pytest.mark.parametrize(("name", "step", "bound"), [("vase", 2, 0.5), ("vase", 3, 0.5),
+                                                         ("bumps", 2, 5.0)])
+    def test_bright_caps_between_grid_points_are_kept(self, name, step, bound):
+        """The vase's lip (its singular point on the top row) and the bumps' small caps fall
+        between grid points: sampled plainly, the eikonal quick look lost them (6.3 % and 19 %)."""
+        scene = synth.scene(name, size=256)
+        quick = pipeline.reconstruct_preview(scene.image, mask=scene.mask, step=step,
+                                             concave=synth.concave_regions(name, size=256),
+                                             method="eikonal")
+        grid = np.zeros_like(scene.mask)
+        grid[::step, ::step] = True
+        on = grid & scene.mask
+        assert metrics.depth_error(np.where(on, quick.depth, np.nan),
+                                   np.where(on, scene.depth, np.nan), on) < bound
+
+    def test_keep_caps_moves_a_cap_to_the_nearest_grid_point(self):
+        image = np.full((9, 9), 0.5)
+        mask = np.ones((9, 9), bool)
+        image[3, 5] = 1.0  # between the grid points of step 2 (rows and columns 0, 2, 4, ...)
+        coarse = image[::2, ::2].copy()
+        kept = pipeline._keep_caps(image, mask, coarse, mask[::2, ::2], 2)
+        assert kept.max() == 1.0
+        assert kept[1, 2] == 1.0 or kept[2, 2] == 1.0 or kept[1, 3] == 1.0 or kept[2, 3] == 1.0
+        assert (kept == 1.0).sum() == 1
+        assert (np.delete(kept.ravel(), np.argmax(kept)) == 0.5).all()
+        on_grid = image.copy()
+        on_grid[3, 5], on_grid[4, 4] = 0.5, 1.0
+        np.testing.assert_array_equal(
+            pipeline._keep_caps(on_grid, mask, on_grid[::2, ::2], mask[::2, ::2], 2),
+            on_grid[::2, ::2])
 
     @pytest.mark.parametrize(("name", "step"), [("vase", 2), ("sphere", 2), ("sphere", 3)])
     def test_same_mesh_as_the_full_solve_and_close_to_the_truth(self, name, step):

@@ -392,9 +392,11 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     The image is sampled at the mesh's grid (every ``step``-th row and column) and reconstructed
     there, ``step**2`` times fewer pixels: interactive tools show this while the full-resolution
     solve runs. Filter sizes, references and concave regions are carried to
-    the coarse grid; depth is scaled back to pixels of the input image. A feature narrower than
-    the grid can be lost (the eikonal solver's singular point on a thin rim that falls between
-    grid points): the preview is then off until the full result replaces it.
+    the coarse grid; depth is scaled back to pixels of the input image. A bright cap that falls
+    between grid points (a singular point on a thin rim or on the object's top row) is kept at the
+    nearest grid point, so the solvers still start from it (vase 256 px, eikonal, step 2: 0.12 %
+    depth error, 6.3 % without). Other features narrower than the grid are lost until the full
+    result replaces the preview.
 
     Parameters
     ----------
@@ -439,7 +441,8 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     coarse_mask = mask[::step, ::step]
     if not coarse_mask.any():
         raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
-    coarse = np.where(coarse_mask, image[::step, ::step], 0.0)
+    coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0),
+                        coarse_mask, step)
 
     spec = parse_filter(filter) if filter else None
     if spec is not None and spec.kind != "none":
@@ -462,6 +465,41 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
             "references": [(r * step, c * step) for r, c in rec.info["references"]]}
     return Reconstruction(normals=normals, depth=depth, mask=mask, light=rec.light, albedo=rec.albedo,
                           info=info)
+
+
+def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:
+    """``coarse`` with every bright cap of ``image`` kept: a cap (the pixels within the eikonal
+    solver's tolerance of the object's brightest value, where the eikonal and oblique solvers
+    find their singular points) that no grid point samples (the vase's lip on the top row, a thin
+    rim) gives its brightest value to the grid point on the object nearest to it. Without it the
+    quick look loses that singular point and marches the region from elsewhere (vase 256 px,
+    step 2: 6.3 % depth error)."""
+    from scipy.spatial import cKDTree
+
+    from shadeform.solvers.eikonal import TOL
+
+    peak = float(image[mask].max())
+    labels, count = ndi.label(mask & (image >= (1.0 - TOL) * peak), structure=np.ones((3, 3)))
+    sampled = np.zeros(count + 1, dtype=bool)
+    sampled[labels[::step, ::step][coarse_mask]] = True
+    missing = np.flatnonzero(~sampled[1:]) + 1
+    if missing.size == 0:
+        return coarse
+    # the brightest pixel of each missing cap: the last of its pixels sorted by value
+    rows, cols = np.nonzero(np.isin(labels, missing))
+    owner = labels[rows, cols]
+    order = np.lexsort((image[rows, cols], owner))
+    last = order[np.r_[owner[order][1:] != owner[order][:-1], True]]
+    brightest = np.column_stack([rows[last], cols[last]])
+    # the nearest grid point; a search over the object's grid points only where that is off it
+    near = np.minimum(np.rint(brightest / step).astype(int), np.array(coarse_mask.shape) - 1)
+    off = ~coarse_mask[near[:, 0], near[:, 1]]
+    if off.any():
+        grid = np.argwhere(coarse_mask)
+        near[off] = grid[cKDTree(grid * step).query(brightest[off])[1]]
+    out = coarse.copy()
+    np.maximum.at(out, (near[:, 0], near[:, 1]), image[brightest[:, 0], brightest[:, 1]])
+    return out
 
 
 #: Most object pixels a quick look solves with each solver: about 0.1 s of solver time on one core
