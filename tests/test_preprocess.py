@@ -269,3 +269,34 @@ class TestNoiseLevel:
         mask = np.zeros((20, 20), bool)
         mask[5:9, :] = True
         assert noise_level(np.where(mask, 0.5, 0.0), mask) == 0.0
+
+
+class TestSrgbToLinear:
+    @staticmethod
+    def encode(linear):
+        """The sRGB encoding (IEC 61966-2-1), written out independently."""
+        linear = np.asarray(linear, dtype=np.float64)
+        return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+    def test_known_values(self):
+        from shadeform.preprocess import srgb_to_linear
+
+        np.testing.assert_allclose(srgb_to_linear(np.array([0.0, 1.0])), [0.0, 1.0])
+        assert srgb_to_linear(np.array(0.5)) == pytest.approx(0.21404, abs=1e-5)
+        assert srgb_to_linear(np.array(0.04045)) == pytest.approx(0.0031308, abs=1e-7)
+
+    def test_round_trip_and_shape(self):
+        from shadeform.preprocess import srgb_to_linear
+
+        linear = np.linspace(0, 1, 1001)
+        np.testing.assert_allclose(srgb_to_linear(self.encode(linear)), linear, atol=1e-12)
+        rgb = np.random.default_rng(0).random((4, 5, 3))
+        assert srgb_to_linear(rgb).shape == (4, 5, 3)
+        assert (np.diff(srgb_to_linear(np.linspace(0, 1, 500))) > 0).all()
+
+    @pytest.mark.parametrize("bad", [np.array([1.5]), np.array([-0.1]), np.array([np.nan])])
+    def test_out_of_range(self, bad):
+        from shadeform.preprocess import srgb_to_linear
+
+        with pytest.raises(InputError, match=r"\[0, 1\]"):
+            srgb_to_linear(bad)

@@ -263,6 +263,9 @@ def _write_model(err: Console, timings: dict[str, float], rec, temps: dict[Path,
 
 # options shared by the commands that build meshes
 _StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
+_SrgbOption = Annotated[
+    bool, typer.Option("--srgb", help="Undo the sRGB encoding of 8-bit photos (JPEG) first: shading needs linear light."),
+]
 _FilterOption = Annotated[
     str | None,
     typer.Option("--filter", metavar="KIND:SIZE",
@@ -289,6 +292,7 @@ def reconstruct(
         float | None, typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant.")
     ] = None,
     channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
+    srgb: _SrgbOption = False,
     concave: Annotated[
         Path | None, typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False)
     ] = None,
@@ -318,6 +322,7 @@ def reconstruct(
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
     import shadeform
+    from shadeform.preprocess import srgb_to_linear
     from shadeform.regions import parse_regions
 
     # everything the user typed is checked before any work
@@ -333,6 +338,8 @@ def reconstruct(
         temps = _output_temps(outputs, output, depth, normals)
         with _step(err, f"loading {escape(str(image))}", timings, "load"):
             pixels = shadeform.load_image(image, channel=channel)
+            if srgb:
+                pixels = srgb_to_linear(pixels)
             object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
         with _step(err, f"reconstructing ({method})", timings, "reconstruct"):
             rec = shadeform.reconstruct(
@@ -455,6 +462,7 @@ def stereo(
     method: Annotated[str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")] = "robust",
     integrator: Annotated[str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")] = "poisson",
     step: _StepOption = 1,
+    srgb: _SrgbOption = False,
     depth: Annotated[Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
@@ -462,6 +470,7 @@ def stereo(
     """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
     import shadeform
     from shadeform.photometric import reconstruct_stereo
+    from shadeform.preprocess import srgb_to_linear
 
     _check_outputs(output, depth, normals)
     from shadeform.integration import METHODS as INTEGRATORS
@@ -484,6 +493,8 @@ def stereo(
         temps = _output_temps(outputs, output, depth, normals)
         with _step(err, f"loading {len(photos)} photos", timings, "load"):
             loaded = [shadeform.load_image_rgb(photo) for photo in photos]
+            if srgb:
+                loaded = [srgb_to_linear(image) for image in loaded]
             for photo, image in zip(photos, loaded):
                 if image.shape != loaded[0].shape:
                     raise InputError(

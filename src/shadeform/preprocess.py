@@ -18,7 +18,8 @@ from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 from shadeform._checks import is_number
 from shadeform.errors import InputError
 
-__all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter", "noise_level"]
+__all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter", "noise_level",
+           "srgb_to_linear"]
 
 #: Filter kinds, in the order the 2002 system offered them ("none" was called "blank").
 FILTER_KINDS = ("none", "gaussian", "mean", "median", "minimum")
@@ -337,3 +338,37 @@ def noise_level(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | Non
     detail = (image - ndi.uniform_filter(image, 3))[interior]
     mad = float(np.median(np.abs(detail - np.median(detail))))
     return 1.4826 * mad / math.sqrt(8.0 / 9.0)
+
+
+def srgb_to_linear(image: np.ndarray) -> np.ndarray:
+    """Undo the sRGB encoding of an 8-bit photo (JPEG, most PNGs from phones and cameras).
+
+    Shading methods assume intensities proportional to the light received; an sRGB file stores
+    them raised to about 1 / 2.2, which makes a Lambertian surface look flatter and biases its
+    normals. 16-bit and RAW-derived files are often linear already: leave those as they are.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        Encoded values in [0, 1] (as :func:`shadeform.load_image` gives them).
+
+    Returns
+    -------
+    ndarray, same shape, float64
+        Linear values in [0, 1]: ``v / 12.92`` up to 0.04045, ``((v + 0.055) / 1.055) ** 2.4``
+        above (IEC 61966-2-1).
+
+    Raises
+    ------
+    InputError
+        Values outside [0, 1] or not finite.
+
+    Examples
+    --------
+    >>> round(float(srgb_to_linear(np.array(0.5))), 4)
+    0.214
+    """
+    values = np.asarray(image, dtype=np.float64)
+    if not np.isfinite(values).all() or values.min(initial=0.0) < 0 or values.max(initial=0.0) > 1:
+        raise InputError("sRGB values must be finite and in [0, 1], as load_image gives them")
+    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
