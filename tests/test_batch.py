@@ -50,6 +50,17 @@ class TestReconstructFiles:
             np.testing.assert_allclose(load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth,
                                        atol=1e-4, equal_nan=True)  # float32 file
 
+    def test_srgb(self, out, tmp_path):
+        scene = synth.scene("sphere", size=48)
+        path = tmp_path / "srgb.png"
+        encoded = np.where(scene.image <= 0.0031308, 12.92 * scene.image,
+                           1.055 * scene.image ** (1 / 2.4) - 0.055)
+        cli._write_gray_png(encoded, path, bitdepth=16)
+        reconstruct_files([path], out, suffix=".ply", depth=True, srgb=True, workers=1)
+        linear = shadeform.reconstruct(shadeform.preprocess.srgb_to_linear(shadeform.load_image(path)))
+        np.testing.assert_allclose(load_depth(out / "srgb_depth.tiff"), linear.depth, atol=1e-4,
+                                   equal_nan=True)
+
     def test_a_bad_photo_fails_alone(self, photos, out, tmp_path):
         bad = tmp_path / "black.png"
         cli._write_gray_png(np.zeros((20, 20)), bad, bitdepth=8)

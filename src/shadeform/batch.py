@@ -53,7 +53,7 @@ class BatchResult:
 
 def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.PathLike, *,
                       suffix: str = ".glb", step: int = 1, channel: str = "luma",
-                      depth: bool = False, normals: bool = False, workers: int | None = None,
+                      srgb: bool = False, depth: bool = False, normals: bool = False, workers: int | None = None,
                       progress: Callable[[int, int], None] | None = None,
                       **options) -> list[BatchResult]:
     """Reconstruct every photo with the same options and write one model per photo.
@@ -71,6 +71,8 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
         Mesh granularity in pixels per vertex.
     channel : str
         Image channel (:func:`shadeform.load_image`).
+    srgb : bool
+        Undo the sRGB encoding of 8-bit photos first (:func:`shadeform.preprocess.srgb_to_linear`).
     depth, normals : bool
         Also write each photo's depth map and normal map.
     workers : int, optional
@@ -122,7 +124,7 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     jobs = [(photo, tuple(out_dir / f"{photo.stem}{end}" for end, wanted in
                           ((suffix, True), (DEPTH_SUFFIX, depth), (NORMALS_SUFFIX, normals))
                           if wanted)) for photo in photos]
-    tasks = [dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, options)
+    tasks = [dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, srgb, options)
              for photo, files in jobs]
     done = [0]
 
@@ -137,18 +139,21 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     return list(results)
 
 
-def _reconstruct_one(photo: Path, files: tuple[Path, ...], step: int, channel: str,
+def _reconstruct_one(photo: Path, files: tuple[Path, ...], step: int, channel: str, srgb: bool,
                      options: dict) -> BatchResult:
     """One photo: load, reconstruct, mesh, write; a user mistake becomes the result's error."""
     import shadeform
     from shadeform.io.atomic import OutputSet
     from shadeform.io.maps import save_depth, save_normal_map
+    from shadeform.preprocess import srgb_to_linear
 
     start = time.perf_counter()
     try:
         with OutputSet() as outputs:  # a photo's files appear together or not at all
             temps = [outputs.temp(path) for path in files]
             image = shadeform.load_image(photo, channel=channel)
+            if srgb:
+                image = srgb_to_linear(image)
             rec = shadeform.reconstruct(image, **options)
             mesh = shadeform.to_mesh(rec, step=step)
             shadeform.export(mesh, temps[0])

@@ -554,6 +554,7 @@ def batch(
     slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
     tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
     channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
+    srgb: _SrgbOption = False,
     method: Annotated[str, typer.Option(help="Solver: auto, propagation, eikonal or oblique.")] = "auto",
     integrator: Annotated[
         str | None, typer.Option(help="Depth from normals: paths, poisson, fourier or bilateral.")
@@ -591,7 +592,7 @@ def batch(
                   TimeElapsedColumn(), console=err, transient=True) as bar:
         task = bar.add_task("photos", total=len(photos))
         results = reconstruct_files(
-            photos, out, suffix=suffix, step=step, channel=channel, depth=depth, normals=normals,
+            photos, out, suffix=suffix, step=step, channel=channel, srgb=srgb, depth=depth, normals=normals,
             workers=workers, progress=lambda done, _: bar.update(task, completed=done),
             light=light_vector, method=method, filter=filter, integrator=integrator, refine=refine)
     seconds = time.perf_counter() - total
