@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,8 +103,7 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     out_dir = Path(out_dir)
     if not photos:
         raise InputError("no photos given; list the photos to reconstruct")
-    stems = [p.stem for p in photos]
-    twice = sorted({s for s in stems if stems.count(s) > 1})
+    twice = sorted(stem for stem, n in Counter(p.stem for p in photos).items() if n > 1)
     if twice:
         raise InputError(f"two photos are named '{twice[0]}', so their models would overwrite "
                          "each other; rename one")
