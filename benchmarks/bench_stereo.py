@@ -78,24 +78,20 @@ def synthetic_rows(repeats):
 def ball_rows(repeats):
     import scipy.io
 
-    from shadeform.io.images import load_image_rgb, load_mask
+    from shadeform.io.photoset import load_photo_set
 
-    names = (BALL / "filenames.txt").read_text().split()
-    images = np.stack([load_image_rgb(BALL / name) for name in names])
-    lights = np.loadtxt(BALL / "light_directions.txt")
-    strengths = np.loadtxt(BALL / "light_intensities.txt")
-    mask = load_mask(BALL / "mask.png")
+    ball = load_photo_set([BALL])
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
     rows = []
     for method in METHODS[::-1]:
-        result, seconds = timed(lambda: photometric_stereo(images, lights, mask,
-                                                           intensities=strengths,
+        result, seconds = timed(lambda: photometric_stereo(ball.images, ball.lights, ball.mask,
+                                                           intensities=ball.intensities,
                                                            method=method), repeats)
-        errors = angles(result.normals, truth, mask)
+        errors = angles(result.normals, truth, ball.mask)
         rows.append((method, float(np.nanmean(errors)), float(np.nanmedian(errors)),
-                     PUBLISHED[method], seconds, int(mask.sum())))
+                     PUBLISHED[method], seconds, int(ball.mask.sum())))
         print(rows[-1], flush=True)
-    return rows, len(names)
+    return rows, len(ball.paths)
 
 
 def main(argv=None) -> str:

@@ -86,6 +86,10 @@ class TestReconstructFiles:
             reconstruct_files(photos, out, suffix=".xyz")
         with pytest.raises(InputError, match="workers"):
             reconstruct_files(photos, out, workers=0)
+        for options, match in (({"method": "magic"}, "method"), ({"integrator": "x"}, "integrator"),
+                               ({"filter": "blur:2"}, "filter")):
+            with pytest.raises(InputError, match=match):
+                reconstruct_files([tmp_path / "never-read.png"], out, **options)
         real_import = builtins.__import__
 
         def no_dask(name, *args, **kwargs):

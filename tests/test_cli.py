@@ -591,7 +591,9 @@ class TestStereo:
 
     @pytest.mark.parametrize("option, value", [("--method", "magic"), ("--integrator", "magic")])
     def test_unknown_choice_before_any_work(self, photo_set, out, monkeypatch, option, value):
-        monkeypatch.setattr(shadeform, "load_image_rgb", lambda *a, **k: pytest.fail("photos read"))
+        from shadeform.io import photoset
+
+        monkeypatch.setattr(photoset, "load_image_rgb", lambda *a, **k: pytest.fail("photos read"))
         result = invoke("stereo", photo_set["folder"], "-o", out / "m.glb", option, value)
         assert_fails(result, out, "unknown", value)
 

@@ -187,14 +187,12 @@ def test_diligent_ball():
     classical robust method of the benchmark."""
     import scipy.io
 
-    from shadeform.io.images import load_image_rgb, load_mask
+    from shadeform.io.photoset import load_photo_set
 
-    names = (BALL / "filenames.txt").read_text().split()
-    images = np.stack([load_image_rgb(BALL / name) for name in names])
-    lights = np.loadtxt(BALL / "light_directions.txt")
-    strengths = np.loadtxt(BALL / "light_intensities.txt")
-    mask = load_mask(BALL / "mask.png")
+    ball = load_photo_set([BALL])
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
+    images, lights, strengths, mask = ball.images, ball.lights, ball.intensities, ball.mask
+    assert images.shape == (96, 512, 612, 3) and strengths.shape == (96, 3)
     robust = photometric_stereo(images, lights, mask, intensities=strengths)
     plain = photometric_stereo(images, lights, mask, intensities=strengths, method="least_squares")
     assert abs(angles(plain.normals, truth, mask).mean() - 4.10) < 0.3

@@ -94,10 +94,14 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     ------
     InputError
         No photos, two photos with the same name, a missing output folder, an unknown mesh
-        suffix, ``workers < 1``, or Dask not installed. Problems with one photo are reported in
-        its result instead.
+        suffix, ``workers < 1``, an unknown ``method`` or ``integrator``, a malformed
+        ``filter``, or Dask not installed: all before any photo is read. Problems with one photo
+        are reported in its result instead.
     """
+    from shadeform.integration import METHODS as INTEGRATORS
     from shadeform.io.exporters import available_formats
+    from shadeform.pipeline import METHODS
+    from shadeform.preprocess import parse_filter
 
     photos = [Path(p) for p in photos]
     out_dir = Path(out_dir)
@@ -110,7 +114,14 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     if not out_dir.is_dir():
         raise InputError(f"output folder '{out_dir}' does not exist; create it first")
     if suffix.lower() not in available_formats():
-        raise InputError(f"unknown mesh suffix '{suffix}'; use one of {', '.join(available_formats())}")
+        raise InputError(f"unknown mesh format suffix '{suffix}'; use one of {', '.join(available_formats())}")
+    # the options every photo shares are checked once, not found wrong in every task
+    if options.get("method", "auto") not in METHODS:
+        raise InputError(f"unknown method {options['method']!r}; choose one of: {', '.join(METHODS)}")
+    if options.get("integrator") not in (None, *INTEGRATORS):
+        raise InputError(f"unknown integrator {options['integrator']!r}; choose one of: "
+                         f"{', '.join(INTEGRATORS)}")
+    parse_filter(options.get("filter"))
     workers = (os.cpu_count() or 1) if workers is None else workers
     if int(workers) != workers or workers < 1:
         raise InputError(f"workers must be a whole number >= 1, got {workers!r}")

@@ -389,56 +389,6 @@ def reconstruct(
 
 # --- stereo ------------------------------------------------------------------------------------
 
-_PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
-
-
-def _read_vectors(path: Path, what: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
-    """A text file of ``count`` rows of numbers (whitespace or commas) as an array."""
-    try:
-        text = path.read_text(encoding="utf-8").replace(",", " ")
-        values = np.array([[float(v) for v in line.split()] for line in text.splitlines()
-                           if line.strip() and not line.lstrip().startswith("#")])
-    except FileNotFoundError:
-        raise InputError(f"{what} file '{path}' does not exist; check the path") from None
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(f"{what} file '{path}' must hold numbers only, one row per photo") from None
-    if values.ndim != 2 or values.shape[0] != count or values.shape[1] not in columns:
-        shape = "x".join(str(n) for n in values.shape) or "empty"
-        wanted = " or ".join(str(c) for c in columns)
-        raise InputError(f"{what} file '{path}' must have {count} rows (one per photo) of {wanted} "
-                         f"numbers, found {shape}")
-    return values[:, 0] if values.shape[1] == 1 else values
-
-
-def _photo_set(sources: list[Path], lights: Path | None, intensities: Path | None,
-               mask: Path | None) -> tuple[list[Path], Path, Path | None, Path | None]:
-    """Photos and the files describing them: one folder (DiLiGenT layout: ``filenames.txt``,
-    ``light_directions.txt``, ``light_intensities.txt``, ``mask.png``, each optional but the
-    lights) or the photo files themselves."""
-    if len(sources) == 1 and sources[0].is_dir():
-        folder = sources[0]
-        listing = folder / "filenames.txt"
-        if listing.is_file():
-            photos = [folder / name for name in listing.read_text(encoding="utf-8").split()]
-        else:
-            photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in _PHOTO_SUFFIXES
-                            and p.stem.lower() not in ("mask", "normal_gt", "normal_map"))
-        found = {name: folder / name for name in ("light_directions.txt", "light_intensities.txt",
-                                                   "mask.png") if (folder / name).is_file()}
-        lights = lights or found.get("light_directions.txt")
-        intensities = intensities or found.get("light_intensities.txt")
-        mask = mask or found.get("mask.png")
-        if lights is None:
-            raise InputError(f"folder '{folder}' has no light_directions.txt; give --lights FILE")
-    else:
-        photos = sources
-        if lights is None:
-            raise InputError("give --lights FILE: one direction toward the light per photo (x y z)")
-    if len(photos) < 3:
-        raise InputError(f"photometric stereo needs at least 3 photos, got {len(photos)}")
-    return photos, lights, intensities, mask
-
-
 @app.command()
 def stereo(
     sources: Annotated[
@@ -468,44 +418,28 @@ def stereo(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
 ) -> None:
     """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
-    import shadeform
-    from shadeform.photometric import reconstruct_stereo
-    from shadeform.preprocess import srgb_to_linear
-
-    _check_outputs(output, depth, normals)
     from shadeform.integration import METHODS as INTEGRATORS
-    from shadeform.photometric import METHODS
+    from shadeform.io.photoset import load_photo_set
+    from shadeform.photometric import METHODS, reconstruct_stereo
 
     # everything the user typed is checked before the photos are read
+    _check_outputs(output, depth, normals)
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
     if integrator not in INTEGRATORS:
         raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
-    photos, lights, intensities, mask = _photo_set(sources, lights, intensities, mask)
-    directions = _read_vectors(lights, "lights", len(photos), (3,))
-    strengths = (_read_vectors(intensities, "intensities", len(photos), (1, 3))
-                 if intensities is not None else None)
-
     err = _stderr()
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = _output_temps(outputs, output, depth, normals)
-        with _step(err, f"loading {len(photos)} photos", timings, "load"):
-            loaded = [shadeform.load_image_rgb(photo) for photo in photos]
-            if srgb:
-                loaded = [srgb_to_linear(image) for image in loaded]
-            for photo, image in zip(photos, loaded):
-                if image.shape != loaded[0].shape:
-                    raise InputError(
-                        f"photo '{photo}' is {image.shape[1]}x{image.shape[0]} but '{photos[0]}' is "
-                        f"{loaded[0].shape[1]}x{loaded[0].shape[0]}; give photos from one still camera")
-            stack = np.stack(loaded)
-            del loaded
-            object_mask = shadeform.load_mask(mask, shape=stack.shape[1:3]) if mask is not None else None
+        with _step(err, "loading the photos", timings, "load"):
+            photos = load_photo_set(sources, lights=lights, intensities=intensities, mask=mask,
+                                    srgb=srgb)
         with _step(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
-            rec = reconstruct_stereo(stack, directions, object_mask, intensities=strengths,
-                                     method=method, integrator=integrator)
+            rec = reconstruct_stereo(photos.images, photos.lights, photos.mask,
+                                     intensities=photos.intensities, method=method,
+                                     integrator=integrator)
         mesh, written = _write_model(err, timings, rec, temps, step=step, output=output,
                                      depth=depth, normals=normals)
         outputs.commit()
@@ -515,7 +449,7 @@ def stereo(
     if as_json:
         _print_json({
             "command": "stereo",
-            "input": {"photos": [str(p) for p in photos], "width": width, "height": height},
+            "input": {"photos": [str(p) for p in photos.paths], "width": width, "height": height},
             "files": {"mesh": output, "depth": depth, "normals": normals},
             "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
             "object_pixels": int(rec.mask.sum()),
@@ -524,7 +458,7 @@ def stereo(
         })
         return
     out = _stdout()
-    out.print(f"[bold]reconstructed[/] {len(photos)} photos ({width}x{height}) by {rec.info['method']}, "
+    out.print(f"[bold]reconstructed[/] {len(photos.paths)} photos ({width}x{height}) by {rec.info['method']}, "
               f"{integrator} integration")
     out.print(f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel")
     out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
@@ -566,34 +500,22 @@ def batch(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the table.")] = False,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
-    import shadeform
     from shadeform.batch import reconstruct_files
-    from shadeform.integration import METHODS as INTEGRATORS
-    from shadeform.pipeline import METHODS
-    from shadeform.preprocess import parse_filter
 
-    # the options every photo shares are checked once, before any photo is read
     suffix = format if format.startswith(".") else f".{format}"
     light_vector = _resolve_light(light, slant, tilt)
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
-    if integrator is not None and integrator not in INTEGRATORS:
-        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
-    parse_filter(filter)
-    known = tuple(shadeform.available_formats())
-    if suffix.lower() not in known:
-        raise InputError(f"unknown mesh format '{format}'; use one of {', '.join(known)}")
-    if out.exists() and not out.is_dir():
-        raise InputError(f"output folder '{out}' is a file; give a folder name")
-    out.mkdir(parents=True, exist_ok=True)
     err = _stderr()
     total = time.perf_counter()
-    with Progress(TextColumn("reconstructing"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=err, transient=True) as bar:
+    # the folder is made for the run and removed again if the run is refused (bad options)
+    with OutputSet() as outputs, Progress(
+            TextColumn("reconstructing"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            console=err, transient=True) as bar:
+        outputs.make_folder(out)
         task = bar.add_task("photos", total=len(photos))
         results = reconstruct_files(
-            photos, out, suffix=suffix, step=step, channel=channel, srgb=srgb, depth=depth, normals=normals,
-            workers=workers, progress=lambda done, _: bar.update(task, completed=done),
+            photos, out, suffix=suffix, step=step, channel=channel, srgb=srgb, depth=depth,
+            normals=normals, workers=workers,
+            progress=lambda done, _: bar.update(task, completed=done),
             light=light_vector, method=method, filter=filter, integrator=integrator, refine=refine)
     seconds = time.perf_counter() - total
     failed = [r for r in results if r.error is not None]
