@@ -53,3 +53,62 @@ class StageTimer:
         now = time.perf_counter()
         self.timings[stage] = self.timings.get(stage, 0.0) + now - self._clock
         self._clock = now
+
+
+def check_mask(mask, shape, *, of: str = "the image") -> np.ndarray:
+    """A user's object mask as a bool array of ``shape``, not empty.
+
+    Parameters
+    ----------
+    mask : array_like
+        Anything numpy reads as an array; nonzero marks the object.
+    shape : tuple of int
+        The shape it must have.
+    of : str, keyword-only
+        What ``shape`` belongs to, in the user's words, for the message.
+    """
+    mask = np.asarray(mask)
+    if mask.shape != tuple(shape):
+        raise InputError(f"mask has shape {mask.shape} but {of} has {tuple(shape)}; "
+                         "give a mask of the same size")
+    mask = mask.astype(bool)
+    if not mask.any():
+        raise InputError("mask is empty; it must mark the object's pixels")
+    return mask
+
+
+def check_choice(value, choices, what: str):
+    """``value`` if it is one of ``choices``, else an ``unknown WHAT`` error that lists them."""
+    if isinstance(value, str) and value in choices:
+        return value
+    raise InputError(f"unknown {what} {value!r}; choose one of: {', '.join(map(str, choices))}")
+
+
+def finite(value, what: str) -> float:
+    """A real number (not a bool), finite, as a float."""
+    if not is_number(value) or not np.isfinite(value):
+        raise InputError(f"{what} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def positive(value, what: str) -> float:
+    """A finite number > 0, as a float."""
+    value = finite(value, what)
+    if value <= 0:
+        raise InputError(f"{what} must be > 0, got {value}")
+    return value
+
+
+def fraction(value, what: str, *, closed: bool = False) -> float:
+    """A number in (0, 1), or (0, 1] when ``closed``."""
+    value = finite(value, what)
+    if not (0 < value < 1 or (closed and value == 1)):
+        raise InputError(f"{what} must be in (0, {'1]' if closed else '1)'}, got {value}")
+    return value
+
+
+def whole(value, what: str, *, minimum: int = 0) -> int:
+    """A whole number (Python or numpy integer, not a bool) >= ``minimum``, as an int."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise InputError(f"{what} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)

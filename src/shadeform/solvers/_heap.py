@@ -1,0 +1,79 @@
+"""One binary min-heap for the marching solvers (compiled), keyed by ``(key, item)``.
+
+Fast marching (:mod:`shadeform.solvers.eikonal`) and the oblique solver's cone marching
+(:mod:`shadeform.solvers.oblique`) both pop pixels in order of a key. The heap lives in three
+preallocated arrays: ``keys`` and ``items`` (its entries) and ``where`` (an item's position in it,
+-1 when it is not queued), so an item is queued at most once and its key can be lowered in place.
+Equal keys pop the smaller item first, so the order never depends on the order of insertion.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, inline="always")
+def _before(key_a, item_a, key_b, item_b) -> bool:
+    return key_a < key_b or (key_a == key_b and item_a < item_b)
+
+
+@numba.njit(cache=True)
+def heap_update(keys, items, where, size, key, item):
+    """Queue ``item`` with ``key``, or lower its key if it is queued with a larger one.
+
+    Returns the new size. An item already queued with a key at or below ``key`` stays as it is.
+    """
+    i = where[item]
+    if i < 0:
+        i = size
+        size += 1
+    elif not _before(key, item, keys[i], item):
+        return size
+    while i > 0:
+        parent = (i - 1) // 2
+        if not _before(key, item, keys[parent], items[parent]):
+            break
+        keys[i] = keys[parent]
+        items[i] = items[parent]
+        where[items[i]] = i
+        i = parent
+    keys[i] = key
+    items[i] = item
+    where[item] = i
+    return size
+
+
+@numba.njit(cache=True)
+def heap_pop(keys, items, where, size):
+    """Remove the smallest ``(key, item)``; return ``(key, item, new size)``."""
+    key = keys[0]
+    item = items[0]
+    where[item] = -1
+    size -= 1
+    if size == 0:
+        return key, item, size
+    last_key = keys[size]
+    last_item = items[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and _before(keys[child + 1], items[child + 1], keys[child], items[child]):
+            child += 1
+        if not _before(keys[child], items[child], last_key, last_item):
+            break
+        keys[i] = keys[child]
+        items[i] = items[child]
+        where[items[i]] = i
+        i = child
+    keys[i] = last_key
+    items[i] = last_item
+    where[last_item] = i
+    return key, item, size
+
+
+def new_heap(n_items: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Empty ``keys``, ``items`` and ``where`` arrays for up to ``n_items`` items ``0..n_items-1``."""
+    return np.empty(n_items), np.empty(n_items, np.int64), np.full(n_items, -1, np.int64)
