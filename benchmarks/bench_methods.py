@@ -2,7 +2,7 @@
 
 The grid is method x scene x light x noise:
 
-- methods: every solver in :data:`shadeform.pipeline.SOLVERS` (the methods less "auto", which
+- methods: every registered solver (:func:`shadeform.solvers.solver_names`: the methods less "auto", which
   picks one of them by the light: its choice is reported), read when the script runs (a new
   solver is benchmarked without touching this file), with its default options, plus
   "propagation (2002)": ``method="propagation", refine=0, integrator="paths"``, the report's
@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 import shadeform
-from shadeform import metrics, pipeline, synth
+from shadeform import metrics, solvers, synth
 from shadeform.errors import InputError
 from shadeform.io.atomic import atomic_write
 from shadeform.light import light_from_slant_tilt
@@ -69,7 +69,7 @@ NOISES = (0.0, 0.01, 0.03)
 SEED = 0
 #: The configuration of the showcase picture: an oblique light on a shape with a concave neck.
 SHOWCASE = ("vase", "slant 30°", 0.0)
-#: Label of the report's algorithm exactly, benchmarked beside every method of the pipeline.
+#: Label of the report's algorithm exactly, benchmarked beside every registered solver.
 LEGACY = "propagation (2002)"
 
 
@@ -109,13 +109,13 @@ class Memory:
 
 
 def methods() -> list[tuple[str, dict]]:
-    """(label, keyword arguments of ``reconstruct``) of every solver, read now from the pipeline.
+    """(label, keyword arguments of ``reconstruct``) of every solver, read now from the registry.
 
-    The solvers are :data:`shadeform.pipeline.SOLVERS`: the methods less "auto", which only picks
-    one of them for the light (its choice is reported, not run again).
+    The solvers are :func:`shadeform.solvers.solver_names`: the methods less "auto", which only
+    picks one of them for the light (its choice is reported, not run again).
     """
     found = []
-    for name in getattr(pipeline, "SOLVERS", pipeline.METHODS):
+    for name in solvers.solver_names():
         found.append((name, {"method": name}))
         if name == "propagation":
             found.append((LEGACY, {"method": "propagation", "refine": 0, "integrator": "paths"}))
@@ -399,11 +399,10 @@ def full_table(rows: Sequence[Row], light: str) -> str:
 
 def _auto_choice(light: str, best: str | None) -> str:
     """What ``method="auto"`` picks for a light of :data:`LIGHTS`, and whether it is the best."""
-    choose = getattr(pipeline, "best_method", None)
     directions = dict(LIGHTS)
-    if choose is None or light not in directions:
+    if light not in directions:
         return ""
-    picked = choose(np.asarray(directions[light]))
+    picked = solvers.choose(np.asarray(directions[light])).name
     return f"; `method=\"auto\"` picks {picked}" + ("" if picked == best else " (**not** the best measured here)")
 
 
@@ -427,7 +426,7 @@ def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats:
         f"Lights: +z, and slant 30° and 45° at tilt {TILT:g}° (from the upper right). Noise: Gaussian, "
         f"a fraction of the albedo, seed {SEED}. Depth error: RMSE as % of the true depth range after "
         "fitting the free offset; angle: mean angular error of the normals (both as `shadeform "
-        "evaluate`). Methods: every solver in `shadeform.pipeline.SOLVERS` with its defaults (the "
+        "evaluate`). Methods: every registered solver (`shadeform methods`) with its defaults (the "
         "default `method=\"auto\"` picks one of them by the light), and "
         f"\"{LEGACY}\" = propagation with `refine=0`, `integrator=\"paths\"` (the report's algorithm). "
         "n/a: the method refuses that light (its message is below).",

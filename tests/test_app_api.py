@@ -32,8 +32,9 @@ from shadeform.examples import EXAMPLES, load_example
 from shadeform.io.exporters import available_formats
 from shadeform.io.images import CHANNELS
 from shadeform.light import light_from_slant_tilt
-from shadeform.pipeline import INTEGRATORS, METHODS
+from shadeform.integration import available_integrators
 from shadeform.preprocess import FILTER_KINDS, apply_filter
+from shadeform.solvers import available_methods
 
 ROOT = Path(__file__).resolve().parents[1]
 LOCAL = "http://127.0.0.1:8000"
@@ -129,8 +130,9 @@ def centre_minus_rim(positions: np.ndarray, size: int) -> float:
 class TestOptions:
     def test_lists_the_library(self, client):
         options = client.get("/api/options").json()
-        assert options["methods"] == list(METHODS)
-        assert options["integrators"] == list(INTEGRATORS)
+        assert {m["name"]: m["description"] for m in options["methods"]} == available_methods()
+        assert list(available_methods())[0] == "auto"
+        assert {i["name"]: i["description"] for i in options["integrators"]} == available_integrators()
         assert options["channels"] == list(CHANNELS)
         assert options["filters"] == list(FILTER_KINDS)
         assert {f["suffix"]: f["description"] for f in options["formats"]} == available_formats()
@@ -398,8 +400,8 @@ class TestReconstruct:
         assert result["references"][0] == [20, 30]
 
     def test_every_method_and_integrator(self, client, bowl):
-        for method in METHODS:
-            for integrator in (None, *INTEGRATORS):
+        for method in available_methods():
+            for integrator in (None, *available_integrators()):
                 response = reconstruct(client, bowl["image_id"], step=4, method=method, integrator=integrator)
                 assert response.status_code == 200, (method, integrator, response.text)
 

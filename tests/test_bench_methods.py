@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import shadeform
-from shadeform import metrics, pipeline, synth
+from shadeform import metrics, solvers, synth
+from shadeform.solvers import solver_names
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_methods.py"
 SIZE = 32
@@ -39,14 +40,15 @@ def rows():
 class TestMethods:
     def test_every_solver_and_the_2002_variant(self):
         labels = [label for label, _ in bench.methods()]
-        solvers = getattr(pipeline, "SOLVERS", pipeline.METHODS)
+        solvers = solver_names()
         assert set(solvers) <= set(labels) and "auto" not in labels
         assert dict(bench.methods())[bench.LEGACY] == {"method": "propagation", "refine": 0, "integrator": "paths"}
         assert len(labels) == len(solvers) + 1
 
     def test_picks_up_a_new_solver(self, monkeypatch):
-        name = "SOLVERS" if hasattr(pipeline, "SOLVERS") else "METHODS"
-        monkeypatch.setattr(pipeline, name, (*getattr(pipeline, name), "newcomer"))
+        monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))
+        solvers.register(solvers.Solver("newcomer", "shadeform.solvers.propagation:solve", integrator="paths",
+                                        description="a solver registered by the test"))
         assert ("newcomer", {"method": "newcomer"}) in bench.methods()
 
 
@@ -126,8 +128,8 @@ class TestReport:
         best = bench.best_method(rows, "+z", 0.0)
         assert f"Best measured for +z (lowest median depth error over the 1 scenes, noise 0%): **{best}**" in text
         assert "| eikonal | slant 30° | n/a |" in text
-        if hasattr(pipeline, "best_method"):  # the default's choice is shown beside the measured best
-            assert f'`method="auto"` picks {pipeline.best_method(np.array([0.0, 0.0, 1.0]))}' in text
+        # the default's choice is shown beside the measured best
+        assert f'`method="auto"` picks {solvers.choose(np.array([0.0, 0.0, 1.0])).name}' in text
 
     def test_replot_from_saved_rows(self, rows, tmp_path):
         from PIL import Image

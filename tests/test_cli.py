@@ -373,7 +373,7 @@ class TestReconstruct:
             if extra[0] == "--light":
                 assert info["light_estimate"]["slant"] < 3  # the sphere is lit from +z
             else:
-                assert info["method"] == "eikonal" and info["sources"]
+                assert info["method"] == "eikonal" and info["singular_points"]
 
     @pytest.mark.parametrize("depth_name", ["depth.tiff", "depth.npy"])
     def test_depth_and_normals_are_readable_and_right(self, sphere, out, depth_name):

@@ -157,7 +157,7 @@ class TestPhotometricStereoErrors:
         (lambda i, l, m: (i, np.vstack([l[:3], [0, 0, 0]]), m), "zero vector"),
         (lambda i, l, m: (i, np.where(l > 0.5, np.nan, l), m), "NaN or inf"),
         (lambda i, l, m: (np.where(i > 0, np.inf, i), l, m), "finite intensities"),
-        (lambda i, l, m: (i, l, m[:4]), "mask must be"),
+        (lambda i, l, m: (i, l, m[:4]), "mask has shape"),
         (lambda i, l, m: (i, l, np.zeros_like(m)), "empty"),
         (lambda i, l, m: (i[0], l, m), "images must be"),
         (lambda i, l, m: (np.full(i.shape, "x"), l, m), "numeric"),

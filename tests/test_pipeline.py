@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from shadeform import metrics, pipeline, reconstruct, synth, to_mesh
-from shadeform.pipeline import PREVIEW_PIXELS, preview_step, reconstruct_preview
+from shadeform.pipeline import preview_step, reconstruct_preview
+from shadeform.solvers import choose, get_solver
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
@@ -68,11 +69,10 @@ class TestBars:
 
 class TestAutoMethod:
     def test_picks_eikonal_at_plus_z_and_oblique_otherwise(self):
-        from shadeform.pipeline import best_method
-
-        assert best_method((0.0, 0.0, 1.0)) == "eikonal"
-        assert best_method((0.1, 0.0, 0.995)) == "oblique"
-        assert best_method((0.0, 0.0, 1.0), noise=0.01) == "oblique"  # best at +z with 1 % noise
+        assert choose((0.0, 0.0, 1.0)).name == "eikonal"
+        assert choose((0.1, 0.0, 0.995)).name == "oblique"
+        assert choose((0.0, 0.0, 1.0), noise=0.01).name == "oblique"  # best at +z with 1 % noise
+        assert choose(None).name == "oblique"  # a light still to be estimated may be oblique
         scene = synth.scene("sphere", size=32, light=(1, 0, 3))
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
         assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
@@ -213,7 +213,7 @@ class TestEikonalMethod:
         scene = synth.scene("vase", size=SIZE)
         rec = reconstruct(scene.image, mask=scene.mask, method="eikonal",
                           concave=synth.concave_regions("vase", size=SIZE))
-        assert rec.info["method"] == "eikonal" and rec.info["sources"]
+        assert rec.info["method"] == "eikonal" and rec.info["singular_points"]
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) <= 1.0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) <= 3.0
 
@@ -370,7 +370,7 @@ class TestPreview:
         mask = np.ones((512, 512), bool)
         # step 2 leaves 65,536 grid pixels, over the eikonal budget: doubled once (16,384)
         assert preview_step(mask, 2, method="eikonal") == 4
-        assert 512 ** 2 / 4 ** 2 <= PREVIEW_PIXELS["eikonal"] < 512 ** 2 / 2 ** 2
+        assert 512 ** 2 / 4 ** 2 <= get_solver("eikonal").preview_pixels < 512 ** 2 / 2 ** 2
         assert preview_step(mask, 2, method="oblique") == 16  # 1,024 pixels
         assert preview_step(mask, 3, light=(0.5, 0.0, 0.866)) == 12  # auto under oblique light
         assert preview_step(mask, 2, light="estimate") == 16

@@ -69,7 +69,7 @@ class TestProjectToCone:
 class TestPropagateNormals:
     def test_smoke_shapes_units(self):
         scene = synth.scene("sphere", size=64)
-        n = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), k=1.0)
+        n = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), albedo=1.0)
         assert n.shape == (64, 64, 3)
         assert np.isnan(n[~scene.mask]).all()
         np.testing.assert_allclose(np.linalg.norm(n[scene.mask], axis=1), 1, atol=1e-12)
@@ -77,13 +77,13 @@ class TestPropagateNormals:
     def test_brightness_is_explained(self):
         scene = synth.scene("ellipsoid", size=64, light=light_from_slant_tilt(20, 45))
         n = propagate_normals(scene.image, scene.mask, light=scene.light, reference=brightest(scene),
-                              k=scene.image.max())
+                              albedo=scene.image.max())
         np.testing.assert_allclose((n @ scene.light)[scene.mask], scene.image[scene.mask] / scene.image.max(),
                                    atol=1e-12)
 
     def test_sphere_is_recovered(self):
         scene = synth.scene("sphere", size=128)
-        n = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), k=1.0)
+        n = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), albedo=1.0)
         assert metrics.angular_error(n, scene.normals) < 0.5
 
     @pytest.mark.parametrize("name,light,concave", [
@@ -97,7 +97,7 @@ class TestPropagateNormals:
         scene = synth.scene(name, size=40, light=light)
         cx = scene.mask if concave in ("x", "both") else None
         cy = scene.mask if concave in ("y", "both") else None
-        kwargs = dict(light=np.asarray(scene.light), reference=brightest(scene), k=float(scene.image.max()),
+        kwargs = dict(light=np.asarray(scene.light), reference=brightest(scene), albedo=float(scene.image.max()),
                       concave_x=cx, concave_y=cy)
         fast = propagate_normals(scene.image, scene.mask, **kwargs)
         slow = propagate_normals_reference(scene.image, scene.mask, **kwargs)
@@ -107,8 +107,8 @@ class TestPropagateNormals:
     def test_concave_flags_flip_the_bowl(self):
         scene = synth.scene("bowl", size=96)
         ref = brightest(scene)
-        convex = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, k=1.0)
-        concave = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, k=1.0,
+        convex = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, albedo=1.0)
+        concave = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, albedo=1.0,
                                     concave_x=scene.mask, concave_y=scene.mask)
         assert metrics.angular_error(convex, scene.normals) > 10
         assert metrics.angular_error(concave, scene.normals) < 1
@@ -117,7 +117,7 @@ class TestPropagateNormals:
         scene = synth.scene("sphere", size=32)
         given = np.array([0.1, 0.2, 0.97])
         given /= np.linalg.norm(given)
-        n = propagate_normals(scene.image, scene.mask, light=Z, reference=(16, 16), reference_normal=given, k=1.0)
+        n = propagate_normals(scene.image, scene.mask, light=Z, reference=(16, 16), reference_normal=given, albedo=1.0)
         np.testing.assert_allclose(n[16, 16], given)
 
     def test_disconnected_part_stays_nan(self):
@@ -125,25 +125,25 @@ class TestPropagateNormals:
         mask = np.zeros((10, 10), bool)
         mask[1:4, 1:4] = True
         mask[6:9, 6:9] = True
-        n = propagate_normals(image, mask, light=Z, reference=(2, 2), k=0.9)
+        n = propagate_normals(image, mask, light=Z, reference=(2, 2), albedo=0.9)
         assert np.isfinite(n[1:4, 1:4]).all() and np.isnan(n[6:9, 6:9]).all()
 
     def test_reference_off_the_mask_is_an_input_error(self):
         scene = synth.scene("sphere", size=32)
         with pytest.raises(InputError, match="not on the object"):
-            propagate_normals(scene.image, scene.mask, light=Z, reference=(0, 0), k=1.0)
+            propagate_normals(scene.image, scene.mask, light=Z, reference=(0, 0), albedo=1.0)
 
 
 class TestRefineByIntegrability:
     def test_improves_the_ellipsoid_and_keeps_the_brightness(self):
         scene = synth.scene("ellipsoid", size=128)
-        n0 = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), k=1.0)
+        n0 = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), albedo=1.0)
         n3 = refine_by_integrability(n0, scene.image, scene.mask, light=Z, iterations=3)
         assert metrics.angular_error(n3, scene.normals) < metrics.angular_error(n0, scene.normals) - 0.5
         np.testing.assert_allclose(n3[scene.mask][:, 2], scene.image[scene.mask], atol=1e-9)
 
     def test_sphere_stays_right(self):
         scene = synth.scene("sphere", size=128)
-        n0 = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), k=1.0)
+        n0 = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), albedo=1.0)
         n3 = refine_by_integrability(n0, scene.image, scene.mask, light=Z, iterations=3)
         assert metrics.angular_error(n3, scene.normals) < 0.5

@@ -98,10 +98,11 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
         ``filter``, or Dask not installed: all before any photo is read. Problems with one photo
         are reported in its result instead.
     """
-    from shadeform.integration import METHODS as INTEGRATORS
+    from shadeform._checks import check_choice
+    from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
-    from shadeform.pipeline import METHODS
     from shadeform.preprocess import parse_filter
+    from shadeform.solvers import available_methods
 
     photos = [Path(p) for p in photos]
     out_dir = Path(out_dir)
@@ -116,11 +117,9 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     if suffix.lower() not in available_formats():
         raise InputError(f"unknown mesh format suffix '{suffix}'; use one of {', '.join(available_formats())}")
     # the options every photo shares are checked once, not found wrong in every task
-    if options.get("method", "auto") not in METHODS:
-        raise InputError(f"unknown method {options['method']!r}; choose one of: {', '.join(METHODS)}")
-    if options.get("integrator") not in (None, *INTEGRATORS):
-        raise InputError(f"unknown integrator {options['integrator']!r}; choose one of: "
-                         f"{', '.join(INTEGRATORS)}")
+    check_choice(options.get("method", "auto"), tuple(available_methods()), "method")
+    if options.get("integrator") is not None:
+        check_choice(options["integrator"], tuple(available_integrators()), "integrator")
     parse_filter(options.get("filter"))
     workers = (os.cpu_count() or 1) if workers is None else workers
     if int(workers) != workers or workers < 1:

@@ -6,6 +6,7 @@ Commands::
     shadeform synth SCENE -o image.png       a synthetic image and its ground truth
     shadeform evaluate                       error table of the methods on the synthetic scenes
     shadeform formats                        the mesh formats -o understands
+    shadeform methods                        the solvers and integrators --method / --integrator take
     shadeform demo                           the main job on a shipped photograph
     shadeform app [IMAGE]                    the browser app, served on 127.0.0.1
 
@@ -39,7 +40,9 @@ from rich.table import Table
 from typer.core import TyperGroup
 
 from shadeform.errors import InputError
+from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet
+from shadeform.solvers import available_methods
 
 __all__ = ["app", "main"]
 
@@ -263,6 +266,15 @@ def _write_model(err: Console, timings: dict[str, float], rec, temps: dict[Path,
 
 # options shared by the commands that build meshes
 _StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
+_MethodOption = Annotated[
+    str,
+    typer.Option(help=f"Solver: {', '.join(available_methods())} (`shadeform methods` says what each does)."),
+]
+_IntegratorOption = Annotated[
+    str | None,
+    typer.Option(help=f"Depth from normals: {', '.join(available_integrators())} (default: the solver's own)."),
+]
+_RefineOption = Annotated[int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")]
 _SrgbOption = Annotated[
     bool, typer.Option("--srgb", help="Undo the sRGB encoding of 8-bit photos (JPEG) first: shading needs linear light."),
 ]
@@ -311,14 +323,9 @@ def reconstruct(
     depth: Annotated[Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
-    method: Annotated[
-        str, typer.Option(help="Solver: auto (the best measured for the light), propagation, eikonal or oblique.")
-    ] = "auto",
-    integrator: Annotated[
-        str | None,
-        typer.Option(help="Depth from normals: paths, poisson, fourier or bilateral (default: the method's own)."),
-    ] = None,
-    refine: Annotated[int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")] = 3,
+    method: _MethodOption = "auto",
+    integrator: _IntegratorOption = None,
+    refine: _RefineOption = 3,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
     import shadeform
@@ -418,16 +425,14 @@ def stereo(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")] = False,
 ) -> None:
     """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
-    from shadeform.integration import METHODS as INTEGRATORS
+    from shadeform._checks import check_choice
     from shadeform.io.photoset import load_photo_set
     from shadeform.photometric import METHODS, reconstruct_stereo
 
     # everything the user typed is checked before the photos are read
     _check_outputs(output, depth, normals)
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
-    if integrator not in INTEGRATORS:
-        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
+    check_choice(method, METHODS, "method")
+    check_choice(integrator, tuple(available_integrators()), "integrator")
     err = _stderr()
     timings: dict[str, float] = {}
     total = time.perf_counter()
@@ -489,11 +494,9 @@ def batch(
     tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
     channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
     srgb: _SrgbOption = False,
-    method: Annotated[str, typer.Option(help="Solver: auto, propagation, eikonal or oblique.")] = "auto",
-    integrator: Annotated[
-        str | None, typer.Option(help="Depth from normals: paths, poisson, fourier or bilateral.")
-    ] = None,
-    refine: Annotated[int, typer.Option(min=0, help="Integrability refinement iterations.")] = 3,
+    method: _MethodOption = "auto",
+    integrator: _IntegratorOption = None,
+    refine: _RefineOption = 3,
     depth: Annotated[bool, typer.Option("--depth", help="Also write NAME_depth.tiff per photo.")] = False,
     normals: Annotated[bool, typer.Option("--normals", help="Also write NAME_normals.png per photo.")] = False,
     workers: Annotated[int | None, typer.Option(min=1, help="Worker processes (default: one per CPU).")] = None,
@@ -707,6 +710,38 @@ def formats(
     for suffix, description in registry.items():
         table.add_row(suffix, description)
     _stdout().print(table)
+
+
+# --- methods -----------------------------------------------------------------------------------
+
+
+@app.command()
+def methods(
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the tables.")] = False,
+) -> None:
+    """List the solvers `reconstruct --method` takes and the integrators of `--integrator`."""
+    from shadeform.integration import available_integrators
+    from shadeform.solvers import AUTO, available_methods, get_solver, solver_names
+
+    rows = [{"name": AUTO, "lights": "any", "depth": "the chosen solver's", "description": available_methods()[AUTO]}]
+    rows += [{"name": s.name, "lights": s.lights, "depth": s.integrator or s.depth, "description": s.description}
+             for s in map(get_solver, solver_names())]
+    if as_json:
+        _print_json({"command": "methods", "methods": rows, "integrators": available_integrators()})
+        return
+    table = Table(title="Solvers (--method)")
+    for column in ("method", "lights", "depth by", "what it does"):
+        table.add_column(column, style="bold" if column == "method" else None)
+    for row in rows:
+        table.add_row(row["name"], row["lights"], row["depth"], row["description"])
+    out = _stdout()
+    out.print(table)
+    table = Table(title="Integrators (--integrator)")
+    table.add_column("integrator", style="bold")
+    table.add_column("what it does")
+    for name, text in available_integrators().items():
+        table.add_row(name, text)
+    out.print(table)
 
 
 # --- demo --------------------------------------------------------------------------------------

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shadeform._checks import check_choice, check_mask
 from shadeform.errors import InputError
 
 METHODS = ("robust", "least_squares")
@@ -150,8 +151,7 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
     0.6
     """
     stack, lights, mask, scale = _check(images, lights, mask, intensities)
-    if method not in METHODS:
-        raise InputError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    check_choice(method, METHODS, "method")
     if not (np.isfinite(min_shading) and 0 <= min_shading < 1):
         raise InputError(f"min_shading must be in [0, 1), got {min_shading!r}")
     if not (np.isfinite(highlight_angle) and 0 <= highlight_angle < 90):
@@ -299,10 +299,7 @@ def _check(images, lights, mask, intensities):
     if mask is None:
         mask = (stack.reshape(count, *stack.shape[1:3], -1) > 0).any(axis=(0, 3))
     else:
-        mask = np.asarray(mask)
-        if mask.shape != stack.shape[1:3]:
-            raise InputError(f"mask must be (H, W) = {stack.shape[1:3]} like the photos, got shape {mask.shape}")
-        mask = mask.astype(bool)
+        mask = check_mask(mask, stack.shape[1:3], of="each photo")
     if not mask.any():
         raise InputError("the mask is empty (or every photo is black); mark the object's pixels")
     return stack, lights, mask, scale
@@ -339,12 +336,10 @@ def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: s
     """
     import time
 
-    from shadeform.integration import METHODS as INTEGRATORS
-    from shadeform.integration import integrate
+    from shadeform.integration import available_integrators, integrate
     from shadeform.reconstruction import Reconstruction
 
-    if integrator not in INTEGRATORS:
-        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
+    check_choice(integrator, tuple(available_integrators()), "integrator")
     start = time.perf_counter()
     if mask is None:
         from shadeform.preprocess import object_mask

@@ -1,40 +1,26 @@
 """``reconstruct()``: one call from a shading image to normals and depth.
 
-load -> (mask, filter) -> light -> normals -> depth, each stage a pure function; this module only
-checks the user's input once, at the boundary, and wires the stages together.
+load -> (mask, filter) -> light -> solvers[method] -> depth. This module checks the user's input
+once, at the boundary, prepares what every solver needs (:class:`shadeform.solvers.Problem`) and
+looks the solver up in the registry (:mod:`shadeform.solvers`); it knows no solver by name.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import ndimage as ndi
 
-from shadeform._checks import StageTimer, shading_image
+from shadeform._checks import StageTimer, check_choice, check_mask, shading_image, whole
 from shadeform.errors import InputError
+from shadeform.integration import available_integrators
 from shadeform.light import as_light, estimate_light
 from shadeform.preprocess import Filter, apply_filter, noise_level, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
-from shadeform.regions import Region, concave_masks, parse_regions
-from shadeform.solvers.propagation import propagate_normals, refine_by_integrability
-
-#: The solvers, and "auto": the best measured one for the light (benchmarks/results/methods.md).
-SOLVERS = ("propagation", "eikonal", "oblique")
-METHODS = ("auto", *SOLVERS)
-INTEGRATORS = ("paths", "poisson", "fourier", "bilateral")
-#: What turns each method's normals into depth when ``integrator`` is not given.
-DEFAULT_INTEGRATOR = {"propagation": "paths", "eikonal": "eikonal (fast-marching depth)",
-                      "oblique": "oblique (chord-equation descent depth)"}
-
-#: Noise (standard deviation over ``k * albedo``, :func:`shadeform.preprocess.noise_level`) above
-#: which the oblique solver's image is smoothed when no filter is given, and by how much: unfiltered,
-#: 1 % noise under oblique light takes its depth error from ~1 % to 40-140 % on the synthetic
-#: scenes (benchmarks/results/methods.md); 8-bit quantisation alone is 0.1 %.
-NOISY = 0.003
-OBLIQUE_DENOISE = Filter("gaussian", 2.0)
+from shadeform.regions import Region, as_regions, concave_masks
+from shadeform.solvers import AUTO, NOISY, Problem, Reference, choose, get_solver, solver_names
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -48,7 +34,7 @@ def reconstruct(
     light: Sequence[float] | str = (0.0, 0.0, 1.0),
     method: str = "auto",
     mask: np.ndarray | None = None,
-    filter: str | None = None,
+    filter: str | Filter | None = None,
     references: Sequence | None = None,
     concave: Any = None,
     integrator: str | None = None,
@@ -56,9 +42,10 @@ def reconstruct(
 ) -> Reconstruction:
     """Recover normals and depth from one shading image.
 
-    The 2002 ModelBuilder pipeline (``DESIGN.md``): object mask, optional filter, reference
-    normal(s), normal field by convexity-guided propagation from each reference, depth by
-    averaging integration paths, several references combined by the report's eq. 7.
+    The image is checked, the object found (or the mask checked), the filter applied, the light
+    settled (given or estimated), the reference pixels and the brightness ``k * albedo`` found;
+    then the solver named by ``method`` (:func:`shadeform.solvers.available_methods`) turns them
+    into normals and depth.
 
     Parameters
     ----------
@@ -69,20 +56,21 @@ def reconstruct(
         Direction toward the light in the camera frame (``docs/conventions.md``), or
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
-    method : {"auto", "propagation", "eikonal", "oblique"}
-        Solver. "auto" (the default) picks the best measured one for the light and the image's
-        noise (:func:`best_method`): "eikonal" for a light at +z on a clean image, else "oblique". The others: the 2002 convexity-guided propagation (any light), fast marching of the
-        eikonal equation from the singular points (light at +z only; concave regions and
-        references become minima, saddles and maxima: :mod:`shadeform.solvers.eikonal`), or the
-        oblique-light solver (any light, attached shadows as ``N . L <= 0``; marching from the
-        brightest pixels, then descent on chord equations: :mod:`shadeform.solvers.oblique`).
-        With "oblique" the first reference, if given, only sets where ``z = 0``.
+    method : str
+        "auto" (the default: the best measured solver for the light and the image's noise,
+        :func:`shadeform.solvers.choose`) or a registered solver: "propagation" (the 2002
+        convexity-guided propagation, any light), "eikonal" (fast marching of the eikonal equation
+        from the singular points, light at +z only; concave regions and references become minima,
+        saddles and maxima: :mod:`shadeform.solvers.eikonal`), "oblique" (any light, attached
+        shadows as ``N . L <= 0``; marching from the brightest pixels, then descent on chord
+        equations: :mod:`shadeform.solvers.oblique`; the first reference only sets where
+        ``z = 0``), or any solver added with :func:`shadeform.solvers.register`.
     mask : (H, W) bool, optional
         Object pixels; by default found automatically (dark background).
-    filter : str, optional
+    filter : str or Filter, optional
         ``"none"``, ``"gaussian:SIGMA"``, ``"mean:R"``, ``"median:R"`` or ``"minimum:R"``. Not
-        given, the oblique solver's image is smoothed by :data:`OBLIQUE_DENOISE` when its noise
-        exceeds :data:`NOISY` (``info["auto_filter"]``); ``"none"`` turns that off.
+        given, a solver with a noise policy smooths a noisy image its own way (the oblique solver:
+        ``info["auto_filter"]``); ``"none"`` turns that off.
     references : sequence, optional
         Reference pixels as ``(row, col)`` or ``(row, col, (nx, ny, nz))``. By default the
         brightest object pixel (the one deepest inside the object among equals), whose normal is
@@ -93,8 +81,9 @@ def reconstruct(
         such a file, or a sequence of :class:`shadeform.regions.Region`.
     integrator : {"paths", "poisson", "fourier", "bilateral"}, optional
         Depth from normals: the report's path averaging, masked least squares, its DCT solve on
-        the bounding rectangle, or discontinuity-preserving (:func:`shadeform.integration.integrate`). By default
-        "paths" for propagation, and the solver's own depth for "eikonal" and "oblique".
+        the bounding rectangle, or discontinuity-preserving (:func:`shadeform.integration.integrate`).
+        By default the solver's own ("paths" for propagation, the solver's depth for "eikonal" and
+        "oblique").
     refine : int
         Iterations of the integrability refinement of the propagated field
         (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
@@ -127,184 +116,79 @@ def reconstruct(
     if estimate_wanted and light != "estimate":
         raise InputError(f"light must be a direction (x, y, z) or 'estimate', got {light!r}")
     light = None if estimate_wanted else as_light(light)
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of: {', '.join(METHODS)}")
-    requested_method = method
-    if integrator is not None and integrator not in INTEGRATORS:
-        raise InputError(f"unknown integrator {integrator!r}; choose one of: {', '.join(INTEGRATORS)}")
-    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
-        raise InputError(f"refine must be a whole number of iterations >= 0, got {refine!r}")
+    solver = None if method == AUTO else get_solver(method)
+    if integrator is not None:
+        check_choice(integrator, tuple(available_integrators()), "integrator")
+    refine = whole(refine, "refine (iterations)")
+    user_filter = parse_filter(filter) if filter else None
 
-    mask = object_mask(image) if mask is None else _check_mask(mask, image.shape)
+    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
     _check_shading(image, mask)
     lap("mask")
-    shading = apply_filter(image, mask, parse_filter(filter)) if filter else image
+    shading = apply_filter(image, mask, user_filter) if user_filter else image
     lap("filter")
-    extra_info = {}
+    info: dict[str, Any] = {}
     if estimate_wanted:
         estimate = estimate_light(shading, mask)
         light = np.asarray(estimate.light, dtype=np.float64)
-        extra_info = {"light_estimate": {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
-                                         "albedo": float(estimate.albedo), "evidence": estimate.evidence}}
+        info["light_estimate"] = {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
+                                  "albedo": float(estimate.albedo), "evidence": estimate.evidence}
         lap("light")
     noise = inside = None
-    if method in ("auto", "oblique"):
+    if solver is None or solver.denoise is not None:
         inside = ndi.distance_transform_edt(mask)  # shared with _references
         noise = noise_level(shading, mask, inside=inside)
         brightest = float(shading[mask].max())
-    if method == "auto":
-        method = best_method(light, noise=noise / brightest)
-    if method == "oblique":
-        # the oblique solver starts from the brightest pixels: noise scatters them
-        if not filter and noise > NOISY * brightest:
-            shading = apply_filter(shading, mask, OBLIQUE_DENOISE)
+        if solver is None:
+            solver = choose(light, noise=noise / brightest)
+        # the solver's noise policy: its own smoothing of a noisy image, unless the user chose a filter
+        if solver.denoise is not None and user_filter is None and noise > NOISY * brightest:
+            denoise = parse_filter(solver.denoise)
+            shading = apply_filter(shading, mask, denoise)
             noise = noise_level(shading, mask, inside=inside)
-            extra_info["auto_filter"] = str(OBLIQUE_DENOISE)
+            info["auto_filter"] = str(denoise)
             lap("filter")
-    concave_x, concave_y = concave_masks(_as_regions(concave), image.shape)
+        if solver.denoise is None:
+            noise = None
+    if not solver.takes(light):
+        raise InputError(f"method {solver.name!r} needs the light at (0, 0, 1); use "
+                         f"{' or '.join(repr(s) for s in _any_light())} for other light directions")
+    concave_x, concave_y = concave_masks(as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
     refs = _references(references, shading, mask, labels, n_parts, inside=inside)
-    k = _brightness_scale(shading, mask, refs[0], light,
-                          estimated=float(estimate.albedo) if estimate_wanted else None)
-    cos_theta = np.clip(np.where(mask, shading / k, 0.0), 0.0, 1.0)
+    albedo = _brightness_scale(shading, mask, refs[0], light,
+                               estimated=float(estimate.albedo) if estimate_wanted else None)
     lap("references")
 
-    if method == "oblique":
-        normals, depth, method_info = _oblique(shading, mask, light, k, refs, concave_x, concave_y,
-                                               integrator, noise, lap)
-    elif method == "eikonal":
-        normals, depth, method_info = _eikonal(shading, mask, light, k, references, concave_x, concave_y,
-                                               integrator, lap)
-    else:
-        normals, depth, method_info = _propagation(shading, mask, light, k, refs, labels, n_parts, cos_theta,
-                                                   concave_x, concave_y, integrator, refine, lap)
+    problem = Problem(image=shading, mask=mask, light=light, albedo=albedo, references=tuple(refs),
+                      given=len(references or ()), concave_x=concave_x, concave_y=concave_y,
+                      labels=labels, parts=int(n_parts), integrator=integrator or solver.integrator,
+                      refine=refine, noise=noise, lap=lap)
+    solution = solver.run(problem)
+    normals = np.array(solution.normals, dtype=np.float64)
+    depth = np.array(solution.depth, dtype=np.float64)
     normals[~mask] = np.nan
     depth[~mask] = np.nan
     lap("combine")
     info = {
-        "method": method,
-        "method_requested": requested_method,
-        "integrator": integrator or DEFAULT_INTEGRATOR[method],
-        "refine": int(refine) if method == "propagation" else 0,
-        "filter": parse_filter(filter).kind if filter else "none",
-        "references": [(int(r), int(c)) for (r, c), _ in refs],
+        "method": solver.name,
+        "method_requested": method,
+        "integrator": problem.integrator or solver.depth,
+        "refine": 0,
+        "filter": user_filter.kind if user_filter else "none",
+        "references": [ref.pixel for ref in refs],
         "parts": int(n_parts),
-        "k": float(k),
+        "albedo": float(albedo),
         "timings": timer.timings,
-        **method_info,
-        **extra_info,
+        **solution.info,
+        **info,
     }
-    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(k), info=info)
+    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(albedo), info=info)
 
 
-def best_method(light, *, noise: float = 0.0) -> str:
-    """The solver ``method="auto"`` uses: the best measured for the light and the noise.
-
-    On the synthetic scenes of ``benchmarks/results/methods.md`` (noise 0-3 %), "eikonal" has the
-    lowest errors with the light at +z on a clean image, and "oblique" (which smooths a noisy image
-    first, see :data:`NOISY`) under any other light and on noisy images at +z; "eikonal" only takes
-    a light at +z.
-
-    Parameters
-    ----------
-    light : (3,) float
-        Unit direction toward the light.
-    noise : float, keyword-only
-        The image's noise over its brightest object pixel
-        (:func:`shadeform.preprocess.noise_level`); noisy above :data:`NOISY`.
-
-    Returns
-    -------
-    str
-        "eikonal" or "oblique".
-    """
-    return "eikonal" if _is_frontal(light) and noise <= NOISY else "oblique"
-
-
-def _is_frontal(light) -> bool:
-    """Whether the light is at +z (to rounding): the only light the eikonal solver takes."""
-    return bool(np.allclose(np.asarray(light, dtype=np.float64), (0.0, 0.0, 1.0), atol=1e-6))
-
-
-def _propagation(shading, mask, light, k, refs, labels, n_parts, cos_theta, concave_x, concave_y,
-                 integrator, refine, lap):
-    """The 2002 route: a field per reference, integrated from it, combined by eq. 7."""
-    integrator = integrator or "paths"
-    normals_sum = np.zeros(mask.shape + (3,))
-    depth_sum = np.zeros(mask.shape)
-    depth_count = np.zeros(mask.shape)
-    for part in range(1, n_parts + 1):
-        part_refs = [ref for ref in refs if labels[ref[0]] == part]
-        part_mask = labels == part
-        depth_main = None
-        for (r, c), ref_normal in part_refs:
-            field = propagate_normals(shading, part_mask, light=light, reference=(r, c),
-                                      reference_normal=ref_normal, k=k,
-                                      concave_x=concave_x, concave_y=concave_y)
-            lap("normals")
-            if refine:
-                field = refine_by_integrability(field, cos_theta, part_mask, light=light,
-                                                iterations=int(refine))
-                lap("refine")
-            depth = _integrate(field, part_mask, (r, c), integrator)
-            lap("depth")
-            # eq. 7: reference J's depths, moved into the main reference's frame by Z_MJ, the
-            # main reference's depth at J's origin
-            if depth_main is None:
-                depth_main = depth
-            depth_sum[part_mask] += depth[part_mask] + depth_main[r, c]
-            depth_count[part_mask] += 1
-            normals_sum[part_mask] += field[part_mask]
-    if len(refs) > 1:
-        normals_sum /= np.linalg.norm(normals_sum, axis=-1, keepdims=True).clip(1e-300)
-        depth_sum /= np.maximum(depth_count, 1)
-    return normals_sum, depth_sum, {}
-
-
-def _eikonal(shading, mask, light, k, references, concave_x, concave_y, integrator, lap):
-    """Fast marching from the singular points (light at +z only); its own depth by default."""
-    from shadeform.solvers.eikonal import eikonal_depth
-
-    if not _is_frontal(light):
-        raise InputError("method 'eikonal' needs the light at (0, 0, 1); use method='propagation' for "
-                         "other light directions")
-    sources = [(int(item[0]), int(item[1])) for item in references or ()]
-    result = eikonal_depth(shading, mask, k=k, sources=sources or None, concave=(concave_x, concave_y))
-    lap("normals")
-    depth = result.depth.copy()
-    if integrator is not None:
-        main = (result.sources[0].row, result.sources[0].col)
-        depth = _integrate(result.normals, mask, main, integrator)
-    lap("depth")
-    sources_info = [{"row": s.row, "col": s.col, "kind": s.kind, "height": float(s.height)} for s in result.sources]
-    return result.normals.copy(), depth, {"sources": sources_info}
-
-
-def _oblique(shading, mask, light, k, refs, concave_x, concave_y, integrator, noise, lap):
-    """Any light: marching from the brightest pixels, shadow fill, descent; its own depth.
-    On a noisy image the start and shadow levels move to twice the noise."""
-    from shadeform.solvers.oblique import TOL, oblique_depth
-
-    levels = {}
-    if noise > NOISY * k:
-        levels = {"tol": max(TOL, 2 * noise / k), "dark": 2 * noise / k}
-    result = oblique_depth(shading, mask, light=light, k=k, concave=(concave_x, concave_y), **levels)
-    lap("normals")
-    main = refs[0][0]
-    depth = result.depth - result.depth[main]
-    if integrator is not None:
-        depth = _integrate(result.normals, mask, main, integrator)
-    lap("depth")
-    info = {"sources": len(result.info["sources"]), "levels": result.info["levels"],
-            "sweeps": result.info["sweeps"],
-            "shadowed": int(np.count_nonzero(mask & ~result.lit))}
-    return result.normals.copy(), depth, info
-
-
-def _integrate(normals, mask, origin, integrator):
-    from shadeform.integration import integrate
-
-    return integrate(normals, mask, method=integrator, origin=origin)
+def _any_light() -> list[str]:
+    """The registered solvers that take any light."""
+    return [name for name in solver_names() if get_solver(name).lights == "any"]
 
 
 def _check_image(image) -> np.ndarray:
@@ -313,16 +197,6 @@ def _check_image(image) -> np.ndarray:
         raise InputError(f"image is {image.shape[1]}x{image.shape[0]} pixels; it needs at least "
                          f"{MIN_SIDE}x{MIN_SIDE}")
     return image
-
-
-def _check_mask(mask, shape) -> np.ndarray:
-    mask = np.asarray(mask)
-    if mask.shape != shape:
-        raise InputError(f"mask has shape {mask.shape} but the image has {shape}; give a mask of the image's size")
-    mask = mask.astype(bool)
-    if not mask.any():
-        raise InputError("mask is empty; it must mark the object's pixels")
-    return mask
 
 
 def _check_shading(image, mask) -> None:
@@ -338,22 +212,11 @@ def _check_shading(image, mask) -> None:
         )
 
 
-def _as_regions(concave) -> tuple[Region, ...]:
-    if concave is None:
-        return ()
-    if isinstance(concave, (dict, str, Path)):
-        return parse_regions(concave)
-    regions = tuple(concave)
-    if not all(isinstance(region, Region) for region in regions):
-        raise InputError("concave must be a regions dict, JSON text, a .json path or a sequence of Region")
-    return regions
-
-
-def _references(references, image, mask, labels, n_parts, *, inside=None):
+def _references(references, image, mask, labels, n_parts, *, inside=None) -> list[Reference]:
     """User references checked, plus the brightest pixel of every part left without one.
     ``inside``: the mask's distance transform, if the caller has it."""
     refs = [_parse_reference(item, mask) for item in references or ()]
-    covered = {labels[r, c] for (r, c), _ in refs}
+    covered = {labels[ref.pixel] for ref in refs}
     for part in range(1, n_parts + 1):
         if part in covered:
             continue
@@ -365,20 +228,19 @@ def _references(references, image, mask, labels, n_parts, *, inside=None):
             inside = ndi.distance_transform_edt(mask) if inside is None else inside
             brightest = np.where(brightest, inside, -1.0)
         r, c = np.unravel_index(np.argmax(brightest), brightest.shape)
-        refs.append(((int(r), int(c)), None))
+        refs.append(Reference(int(r), int(c)))
     return refs
 
 
-def _brightness_scale(image, mask, main_ref, light, *, estimated=None) -> float:
+def _brightness_scale(image, mask, main: Reference, light, *, estimated=None) -> float:
     """``k * albedo``: from the main reference when its normal is given, else the light
     estimate's, else the brightest pixel (the 2002 rule: it faces the light)."""
-    (r, c), normal = main_ref
-    if normal is not None:
-        facing = float(normal @ light)
-        if facing <= 0 or image[r, c] <= 0:
-            raise InputError(f"reference (row {r}, col {c}) is in shadow or its normal faces away from the light; "
-                             "pick a lit reference")
-        return float(image[r, c] / facing)
+    if main.normal is not None:
+        facing = float(main.normal @ light)
+        if facing <= 0 or image[main.pixel] <= 0:
+            raise InputError(f"reference (row {main.row}, col {main.col}) is in shadow or its normal faces "
+                             "away from the light; pick a lit reference")
+        return float(image[main.pixel] / facing)
     if estimated is not None:
         return estimated
     return float(image[mask].max())
@@ -428,10 +290,8 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     True
     """
     image = _check_image(image)
-    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
-        raise InputError(f"step must be a whole number of pixels (1, 2, ...), got {step!r}")
-    step = int(step)
-    mask = object_mask(image) if mask is None else _check_mask(mask, image.shape)
+    step = whole(step, "step (pixels)", minimum=1)
+    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
     _check_shading(image, mask)
     if step == 1:
         return reconstruct(image, mask=mask, filter=filter, references=references, concave=concave,
@@ -451,7 +311,7 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     coarse_refs = None
     if references:
         coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
-    regions = tuple(Region(region.polygon / step, region.axis) for region in _as_regions(concave))
+    regions = tuple(Region(region.polygon / step, region.axis) for region in as_regions(concave))
     rec = reconstruct(coarse, mask=coarse_mask, filter=spec, references=coarse_refs,
                       concave=regions or None, **options)
 
@@ -502,17 +362,11 @@ def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:
     return out
 
 
-#: Most object pixels a quick look solves with each solver: about 0.1 s of solver time on one core
-#: of the 2-core machine of ``benchmarks/results/app.md`` (the oblique solver's descent costs
-#: ~50x more per pixel than fast marching on grids this small: 7,400 pixels took 0.36 s).
-PREVIEW_PIXELS = {"eikonal": 40_000, "propagation": 40_000, "oblique": 2_500}
-
-
 def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: Any = (0.0, 0.0, 1.0)) -> int:
     """The grid spacing of a quick look (:func:`reconstruct_preview`) for a mesh of ``step``.
 
     ``step`` itself, doubled until the object's pixels on the grid fit the solver's budget
-    (:data:`PREVIEW_PIXELS`); the quick look's mesh is then coarser than the one asked for.
+    (:attr:`shadeform.solvers.Solver.preview_pixels`); the quick look's mesh is then coarser than the one asked for.
 
     Parameters
     ----------
@@ -530,9 +384,11 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
     int
         A multiple of ``step``.
     """
-    if method == "auto":
-        method = "oblique" if isinstance(light, str) else best_method(as_light(light))
-    budget = PREVIEW_PIXELS.get(method, PREVIEW_PIXELS["oblique"])
+    if method == AUTO:
+        solver = choose(None if isinstance(light, str) else as_light(light))
+    else:
+        solver = get_solver(method)
+    budget = solver.preview_pixels
     count = int(np.count_nonzero(mask))
     spacing = max(int(step), 1)
     while count / spacing ** 2 > budget and min(mask.shape) // (2 * spacing) >= MIN_SIDE:
@@ -540,9 +396,8 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
     return spacing
 
 
-def _parse_reference(item, mask) -> tuple[tuple[int, int], np.ndarray | None]:
-    """A reference ``(row, col)`` or ``(row, col, (nx, ny, nz))`` checked against the mask, as
-    ``((row, col), unit normal or None)``."""
+def _parse_reference(item, mask) -> Reference:
+    """A reference ``(row, col)`` or ``(row, col, (nx, ny, nz))`` checked against the mask."""
     try:
         r, c = int(item[0]), int(item[1])
         normal = None if len(item) < 3 or item[2] is None else np.asarray(item[2], dtype=np.float64)
@@ -555,12 +410,12 @@ def _parse_reference(item, mask) -> tuple[tuple[int, int], np.ndarray | None]:
         if normal.shape != (3,) or not np.isfinite(normal).all() or length == 0:
             raise InputError(f"reference normal {item[2]!r} must be three finite numbers, not all zero")
         normal = normal / length
-    return (r, c), normal
+    return Reference(r, c, normal)
 
 
 def _coarse_reference(item, mask, coarse_mask, step):
     """A reference ``(row, col[, normal])`` in input pixels, checked, moved to the coarse grid."""
-    (r, c), normal = _parse_reference(item, mask)
+    r, c, normal = _parse_reference(item, mask)
     height, width = coarse_mask.shape
     cr, cc = min(round(r / step), height - 1), min(round(c / step), width - 1)
     if not coarse_mask[cr, cc]:

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 
-from shadeform._checks import is_number
+from shadeform._checks import check_mask, is_number
 from shadeform.errors import InputError
 
 __all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter", "noise_level",
@@ -257,14 +257,7 @@ def apply_filter(
         )
     if mask is None:
         mask = np.ones(image.shape, dtype=bool)
-    mask = np.asarray(mask, dtype=bool)
-    if mask.shape != image.shape:
-        raise InputError(
-            f"mask has shape {mask.shape} but the image has shape {image.shape}; give a mask of "
-            "the image's size"
-        )
-    if not mask.any():
-        raise InputError("mask is empty: no object pixel to filter; check the mask")
+    mask = check_mask(mask, image.shape)
     if not np.isfinite(image[mask]).all():
         raise InputError("image has NaN or infinite values inside the mask; fix them or the mask")
     if spec.kind == "none" or spec.size == 0:

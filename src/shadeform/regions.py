@@ -117,6 +117,32 @@ def parse_regions(source) -> tuple[Region, ...]:
     return tuple(_region(entry, i) for i, entry in enumerate(entries, start=1))
 
 
+def as_regions(concave) -> tuple[Region, ...]:
+    """Concave regions from any form a user gives them: what ``concave=`` means everywhere.
+
+    Parameters
+    ----------
+    concave : dict, str, path, sequence of Region, or None
+        Parsed JSON or JSON text in the format of ``docs/conventions.md``, a path to a ``.json``
+        file (see :func:`parse_regions`), regions already made, or None for none.
+
+    Returns
+    -------
+    tuple of Region
+    """
+    if concave is None:
+        return ()
+    if isinstance(concave, (dict, str, Path)):
+        return parse_regions(concave)
+    try:
+        regions = tuple(concave)
+    except TypeError:
+        regions = None
+    if regions is None or not all(isinstance(region, Region) for region in regions):
+        raise InputError("concave must be a regions dict, JSON text, a .json path or a sequence of Region")
+    return regions
+
+
 def regions_to_json(regions) -> dict:
     """The JSON document of ``regions``; ``parse_regions`` reads it back unchanged.
 

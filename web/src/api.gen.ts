@@ -62,6 +62,13 @@ export interface ReconstructRequest {
   preview: boolean;
 }
 
+/** A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`, :func:`shadeform.integration.available_integrators`). */
+export interface MethodInfo {
+  name: string;
+  /** One line in the user's words. */
+  description: string;
+}
+
 /** A mesh format the export endpoint writes (:func:`shadeform.available_formats`). */
 export interface FormatInfo {
   suffix: string;
@@ -94,8 +101,9 @@ export interface ImageInfo {
 
 /** What the library offers, the upload limits and the default parameters. */
 export interface Options {
-  methods: string[];
-  integrators: string[];
+  /** "auto" first, then every registered solver. */
+  methods: MethodInfo[];
+  integrators: MethodInfo[];
   channels: string[];
   filters: string[];
   formats: FormatInfo[];

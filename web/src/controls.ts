@@ -24,8 +24,16 @@ export interface PanelEvents {
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
-function fillSelect(select: HTMLSelectElement, entries: Array<[string, string]>): void {
-  select.replaceChildren(...entries.map(([value, text]) => new Option(text, value)));
+function fillSelect(select: HTMLSelectElement, entries: Array<[string, string]>, tips: Record<string, string> = {}): void {
+  select.replaceChildren(...entries.map(([value, text]) => {
+    const option = new Option(text, value);
+    if (tips[value]) option.title = tips[value];
+    return option;
+  }));
+}
+
+function descriptions(entries: Array<{ name: string; description: string }>): Record<string, string> {
+  return Object.fromEntries(entries.map((e) => [e.name, capitalised(e.description)]));
 }
 
 const CHANNEL_NAMES: Record<string, string> = { luma: 'Luma (Rec. 601)', r: 'Red', g: 'Green', b: 'Blue', max: 'Max of R, G, B' };
@@ -43,6 +51,8 @@ export class Panel {
   private readonly slant = $<HTMLInputElement>('slant');
   private readonly tilt = $<HTMLInputElement>('tilt');
   private readonly method = $<HTMLSelectElement>('method');
+  private readonly methodNote = $<HTMLElement>('method-note');
+  private methodHelp: Record<string, string> = {};
   private readonly integrator = $<HTMLSelectElement>('integrator');
   private readonly refine = $<HTMLInputElement>('refine');
   private readonly step = $<HTMLInputElement>('step');
@@ -51,8 +61,11 @@ export class Panel {
     this.params = structuredClone(options.defaults);
     fillSelect(this.channel, options.channels.map((c) => [c, CHANNEL_NAMES[c] ?? c]));
     fillSelect(this.filterKind, options.filters.map((f) => [f, FILTER_NAMES[f] ?? capitalised(f)]));
-    fillSelect(this.method, options.methods.map((m) => [m, m === "auto" ? "Auto (best for the light)" : capitalised(m)]));
-    fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i, capitalised(i)])]);
+    // names, help lines and order come from the library's registries: a new solver shows up here
+    this.methodHelp = descriptions(options.methods);
+    fillSelect(this.method, options.methods.map((m): [string, string] => [m.name, m.name === 'auto' ? 'Auto (best for the light)' : capitalised(m.name)]), this.methodHelp);
+    fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i.name, capitalised(i.name)])],
+      descriptions(options.integrators));
 
     this.channel.addEventListener('change', () => this.emit({ channel: this.channel.value as Params['channel'] }));
     this.filterKind.addEventListener('change', () => {
@@ -115,6 +128,7 @@ export class Panel {
     this.slant.value = String(params.light.slant);
     this.tilt.value = String(params.light.tilt);
     this.method.value = params.method;
+    this.methodNote.textContent = this.methodHelp[params.method] ?? '';
     this.integrator.value = params.integrator ?? '';
     this.refine.value = String(params.refine);
     this.step.value = String(params.step);

@@ -129,6 +129,14 @@ class ReconstructRequest(_Model):
     )
 
 
+class MethodInfo(_Model):
+    """A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`,
+    :func:`shadeform.integration.available_integrators`)."""
+
+    name: str
+    description: str = Field(description="One line in the user's words.")
+
+
 class FormatInfo(_Model):
     """A mesh format the export endpoint writes (:func:`shadeform.available_formats`)."""
 
@@ -167,8 +175,8 @@ class ImageInfo(_Model):
 class Options(_Model):
     """What the library offers, the upload limits and the default parameters."""
 
-    methods: list[str]
-    integrators: list[str]
+    methods: list[MethodInfo] = Field(description='"auto" first, then every registered solver.')
+    integrators: list[MethodInfo]
     channels: list[str]
     filters: list[str]
     formats: list[FormatInfo]
@@ -241,6 +249,7 @@ _EXPORTED = (
     ConcaveRegions,
     ReconstructParams,
     ReconstructRequest,
+    MethodInfo,
     FormatInfo,
     ExampleInfo,
     Limits,

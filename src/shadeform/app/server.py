@@ -56,6 +56,7 @@ from shadeform.app.schema import (
     LightParams,
     Limits,
     MeshData,
+    MethodInfo,
     Options,
     ReconstructParams,
     ReconstructRequest,
@@ -340,11 +341,12 @@ def _lifespan(warm: bool):
 def warm_up() -> None:
     """Run every method and integrator once on a tiny scene: compiles (or loads) numba kernels."""
     from shadeform import reconstruct, synth, to_mesh
-    from shadeform.pipeline import INTEGRATORS, METHODS
+    from shadeform.integration import available_integrators
+    from shadeform.solvers import available_methods
 
     scene = synth.scene("sphere", size=24)
-    for method in METHODS:
-        for integrator in (None, *INTEGRATORS):
+    for method in available_methods():
+        for integrator in (None, *available_integrators()):
             to_mesh(reconstruct(scene.image, mask=scene.mask, method=method, integrator=integrator), step=2)
 
 
@@ -534,12 +536,13 @@ def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
     from shadeform.examples import EXAMPLES
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
-    from shadeform.pipeline import INTEGRATORS, METHODS
+    from shadeform.integration import available_integrators
     from shadeform.preprocess import FILTER_KINDS
+    from shadeform.solvers import available_methods
 
     return Options(
-        methods=list(METHODS),
-        integrators=list(INTEGRATORS),
+        methods=[MethodInfo(name=name, description=text) for name, text in available_methods().items()],
+        integrators=[MethodInfo(name=name, description=text) for name, text in available_integrators().items()],
         channels=list(CHANNELS),
         filters=list(FILTER_KINDS),
         formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],

@@ -1,7 +1,7 @@
-"""Depth from normals: ``integrate(normals, mask, method=...)``.
+"""Depth from normals: ``integrate(normals, mask, method=...)``, and the registry of integrators.
 
-Methods
--------
+Integrators
+-----------
 paths
     The 2002 report's method: average of many integration paths from a reference pixel
     (:mod:`shadeform.integration.paths`).
@@ -16,15 +16,69 @@ bilateral
     Discontinuity-preserving integration in the spirit of BiNI (Cao et al., ECCV 2022):
     one-sided differences reweighted by how well each side agrees; orthographic or perspective
     (:mod:`shadeform.integration.bilateral`).
+
+A new integrator is one module with ``function(normals, mask, *, origin) -> depth`` (``z = 0`` at
+``origin``; with ``perspective=True`` also ``K=``) and one :func:`register` line below: the
+pipeline, the CLI's ``--integrator`` and the app's picker list it from here.
 """
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
+from shadeform._checks import check_choice, check_mask
 from shadeform.errors import InputError
 
-METHODS = ("paths", "poisson", "fourier", "bilateral")
+__all__ = ["Integrator", "available_integrators", "integrate", "register"]
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """One integrator of the registry.
+
+    Attributes
+    ----------
+    name : str
+        What users pass (``integrate(method=name)``, ``--integrator name``).
+    function : callable or str
+        ``function(normals, mask, *, origin) -> depth`` (``(H, W)``, NaN off the mask, ``z = 0`` at
+        ``origin``), or ``"module:function"`` naming it (imported on first use).
+    description : str
+        One line in the user's words.
+    perspective : bool
+        Whether it also takes ``K=`` (a pinhole camera) in place of ``origin``.
+    """
+
+    name: str
+    function: Callable[..., np.ndarray] | str
+    description: str
+    perspective: bool = False
+
+    def load(self) -> Callable[..., np.ndarray]:
+        """The function (imports its module the first time)."""
+        if isinstance(self.function, str):
+            module, _, name = self.function.partition(":")
+            return getattr(importlib.import_module(module), name)
+        return self.function
+
+
+_INTEGRATORS: dict[str, Integrator] = {}
+
+
+def register(integrator: Integrator) -> None:
+    """Add (or replace) an integrator."""
+    if not isinstance(integrator, Integrator):
+        raise TypeError(f"register expects an Integrator, got {type(integrator).__name__}")
+    _INTEGRATORS[integrator.name] = integrator
+
+
+def available_integrators() -> dict[str, str]:
+    """Integrator name to a one-line description, in registration order."""
+    return {name: integrator.description for name, integrator in _INTEGRATORS.items()}
 
 
 def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
@@ -36,7 +90,9 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
     normals : (H, W, 3) float
         Unit normals in the camera frame (``docs/conventions.md``), finite on the mask.
     mask : (H, W) bool
-    method : {"paths", "poisson", "fourier", "bilateral"}
+    method : str
+        A registered integrator (:func:`available_integrators`): "paths", "poisson", "fourier",
+        "bilateral".
     origin : (int, int), optional
         (row, col) where ``z = 0`` (orthographic only). For "paths" only the mask's part holding
         the origin is integrated. Default: the most frontal normal's pixel.
@@ -50,39 +106,32 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
         up to an offset. With ``K``: depth along the optical axis up to one scale factor.
     """
     normals = np.asarray(normals, dtype=np.float64)
-    mask = np.asarray(mask, dtype=bool)
-    if normals.ndim != 3 or normals.shape[2] != 3 or normals.shape[:2] != mask.shape:
-        raise InputError(f"normals must be (H, W, 3) and mask (H, W), got {normals.shape} and {mask.shape}")
-    if not mask.any():
-        raise InputError("mask is empty; it must mark the object's pixels")
+    if normals.ndim != 3 or normals.shape[2] != 3:
+        raise InputError(f"normals must be (H, W, 3), got shape {normals.shape}")
+    mask = check_mask(mask, normals.shape[:2], of="the normals")
     if not np.isfinite(normals[mask]).all():
         raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
-    if method not in METHODS:
-        raise InputError(f"unknown integration method {method!r}; choose one of: {', '.join(METHODS)}")
+    integrator = _INTEGRATORS[check_choice(method, tuple(_INTEGRATORS), "integration method")]
     if K is not None:
-        if method != "bilateral":
-            raise InputError(f"a perspective camera (K) needs method='bilateral', not {method!r}")
-        from shadeform.integration.bilateral import integrate_bilateral
-
-        return integrate_bilateral(normals, mask, K=K)
+        if not integrator.perspective:
+            perspective = [name for name, i in _INTEGRATORS.items() if i.perspective]
+            raise InputError(f"a perspective camera (K) needs method={' or '.join(map(repr, perspective))}, "
+                             f"not {method!r}")
+        return integrator.load()(normals, mask, K=K)
     if origin is None:
         origin = np.unravel_index(np.argmax(np.where(mask, normals[..., 2], -np.inf)), mask.shape)
     origin = (int(origin[0]), int(origin[1]))
     if not (0 <= origin[0] < mask.shape[0] and 0 <= origin[1] < mask.shape[1]) or not mask[origin]:
         raise InputError(f"origin (row {origin[0]}, col {origin[1]}) is not on the mask")
-    if method == "paths":
-        from shadeform.integration.paths import integrate_paths
+    return integrator.load()(normals, mask, origin=origin)
 
-        return integrate_paths(normals, mask, origin=origin)
-    if method == "poisson":
-        from shadeform.integration.poisson import integrate_poisson
 
-        return integrate_poisson(normals, mask, origin=origin)
-    if method == "fourier":
-        from shadeform.integration.fourier import integrate_fourier
-
-        depth = integrate_fourier(normals, mask)
-        return depth - depth[origin]
-    from shadeform.integration.bilateral import integrate_bilateral
-
-    return integrate_bilateral(normals, mask, origin=origin)
+register(Integrator("paths", "shadeform.integration.paths:integrate_paths",
+                    "the 2002 report's: the average of many integration paths from the reference"))
+register(Integrator("poisson", "shadeform.integration.poisson:integrate_poisson",
+                    "least squares over the object (multigrid conjugate gradients)"))
+register(Integrator("fourier", "shadeform.integration.fourier:integrate_fourier",
+                    "least squares on the bounding rectangle by one DCT solve: the fastest"))
+register(Integrator("bilateral", "shadeform.integration.bilateral:bilateral_depth",
+                    "keeps depth jumps at occluding edges (bilateral, BiNI); also perspective",
+                    perspective=True))

@@ -34,7 +34,7 @@ the normal ``n`` in the OpenCV frame (``n_cv = (n_x, -n_y, -n_z)`` of the projec
 surface point ``Z (x̄, ȳ, 1)`` has ``d log Z / du = -n_1 / (f_x d)`` and
 ``d log Z / dv = -n_2 / (f_y d)`` with ``d = n_1 x̄ + n_2 ȳ + n_3``: the equations are linear in
 ``log Z`` (the log-depth formulation, e.g. Queau et al. 2018), with ``a = f |d|`` (so residuals
-are in pixel units as in the orthographic case and one ``k`` suits both). Depth is
+are in pixel units as in the orthographic case and one ``k`` (``sharpness``) suits both). Depth is
 ``exp(log Z)``, known up to one scale factor per connected part of the mask.
 
 References
@@ -46,8 +46,11 @@ References
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from shadeform._checks import positive
 from shadeform.errors import InputError
 from shadeform.integration._multigrid import PairHierarchy
 
@@ -68,7 +71,7 @@ MAX_CG = 500
 REBUILD_AFTER = 8
 
 
-def _check(normals, mask, K, k, iterations, tol):
+def _check(normals, mask, K, sharpness, iterations, tol):
     normals = np.asarray(normals, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool)
     if normals.ndim != 3 or normals.shape[2] != 3 or normals.shape[:2] != mask.shape:
@@ -84,8 +87,7 @@ def _check(normals, mask, K, k, iterations, tol):
         if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise InputError("K must be a finite 3x3 pinhole matrix (OpenCV layout: fx 0 cx / "
                              "0 fy cy / 0 0 1) with fx, fy > 0")
-    if not (np.isfinite(k) and k > 0):
-        raise InputError(f"k must be a positive number, got {k!r}")
+    positive(sharpness, "sharpness")
     if int(iterations) != iterations or iterations < 0:
         raise InputError(f"iterations must be a non-negative integer, got {iterations!r}")
     if not (np.isfinite(tol) and tol > 0):
@@ -113,11 +115,34 @@ def _sigmoid(x):
     return 0.5 * (1.0 + np.tanh(0.5 * x))
 
 
+@dataclass(frozen=True, eq=False)
+class BilateralResult:
+    """What :func:`integrate_bilateral` returns.
+
+    Attributes
+    ----------
+    depth : (H, W) float64
+        NaN outside the mask. Orthographic: height in pixel units (larger = nearer the viewer),
+        up to an offset per connected part. Perspective: positive depth along the optical axis
+        (larger = farther), up to a scale factor per part (mean log depth 0 per part).
+    iterations : int
+        Reweighting steps done.
+    cg_iterations : int
+        Conjugate-gradient iterations, all steps together.
+    energy : tuple of float
+        The weighted energy after each step.
+    """
+
+    depth: np.ndarray
+    iterations: int
+    cg_iterations: int
+    energy: tuple[float, ...]
+
+
 def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray | None = None,
-                        k: float = 2.0, iterations: int = 150, tol: float = 1e-4,
+                        sharpness: float = 2.0, iterations: int = 150, tol: float = 1e-4,
                         cg_tol: float = 0.1, min_scale: float = MIN_SCALE,
-                        origin: tuple[int, int] | None = None,
-                        return_info: bool = False):
+                        origin: tuple[int, int] | None = None) -> BilateralResult:
     """Depth from normals that keeps depth discontinuities (bilateral normal integration).
 
     Parameters
@@ -130,7 +155,7 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
     K : (3, 3) float, optional
         Pinhole intrinsics (OpenCV layout, pixel ``(row r, col c)`` at ``u = c, v = r``). Given:
         perspective camera, depth along the optical axis. Default: orthographic camera.
-    k : float
+    sharpness : float
         Sigmoid sharpness of the bilateral weights (BiNI's ``k``; larger trusts one side more
         readily). 2 is the published setting.
     iterations : int
@@ -146,31 +171,24 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
         equations: caps the slope a normal implies at ``1 / min_scale``. In (0, 1].
     origin : (int, int), optional
         Orthographic only: (row, col) where ``z = 0``. Default: mean 0 over each part.
-    return_info : bool
-        Also return a dict with ``iterations`` (reweighting steps done), ``cg_iterations``
-        (total) and ``energy`` (per step).
 
     Returns
     -------
-    depth : (H, W) float64
-        NaN outside the mask. Orthographic: height in pixel units (larger = nearer the viewer),
-        up to an offset per connected part. Perspective: positive depth along the optical axis
-        (larger = farther), up to a scale factor per part (mean log depth 0 per part).
-    info : dict
-        Only with ``return_info``.
+    BilateralResult
+        The depth and how the reweighting went.
 
     Raises
     ------
     InputError
         Shapes that do not match, an empty mask, NaN normals on the mask, a malformed ``K``,
-        non-positive ``k`` or ``tol``, or an origin off the mask.
+        non-positive ``sharpness`` or ``tol``, or an origin off the mask.
 
     References
     ----------
     .. [1] X. Cao, H. Santo, B. Shi, F. Okura, Y. Matsushita, "Bilateral Normal Integration",
        ECCV 2022.
     """
-    normals, mask, K = _check(normals, mask, K, k, iterations, tol)
+    normals, mask, K = _check(normals, mask, K, sharpness, iterations, tol)
     if not (np.isfinite(min_scale) and 0 < min_scale <= 1):
         raise InputError(f"min_scale must be in (0, 1], got {min_scale!r}")
     if not (np.isfinite(cg_tol) and 0 < cg_tol < 1):
@@ -204,7 +222,8 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
     wd = vy * 0.5
     wu = has_u * 0.5
 
-    def system():
+    def system(wr, wl, wd, wu):
+        """The pair-weighted normal equations of the current one-sided weights."""
         cr, cl = wr * ax2, wl * ax2
         cd, cu = wd * ay2, wu * ay2
         px = np.zeros((h, w))
@@ -241,7 +260,7 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
         diffs = ((ax * dx) ** 2, (ax * dxl) ** 2, (ay * dy) ** 2, (ay * dyu) ** 2)
         return res, diffs
 
-    px, py, b = system()
+    px, py, b = system(wr, wl, wd, wu)
     hier = PairHierarchy(m, px, py)
     u, cg_total, _ = hier.solve_pairs(b, np.zeros((h, w)), tol=min(cg_tol, 1e-6), maxiter=MAX_CG)
     energies = []
@@ -253,11 +272,11 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
     for done in range(1, int(iterations) + 1):
         # a missing side counts as a zero difference: a pixel at the mask's edge keeps at most
         # 1/2 on its one equation, less where that side is steep (an occluding contour)
-        sx = _sigmoid(k * (sl - sr))
-        sy = _sigmoid(k * (su - sd))
+        sx = _sigmoid(sharpness * (sl - sr))
+        sy = _sigmoid(sharpness * (su - sd))
         wr, wl = hx * sx, has_l * (1.0 - sx)
         wd, wu = vy * sy, has_u * (1.0 - sy)
-        px, py, b = system()
+        px, py, b = system(wr, wl, wd, wu)
         if rebuild:
             hier = PairHierarchy(m, px, py)
             u, its, _ = hier.solve_pairs(b, u, tol=cg_tol, maxiter=MAX_CG, from_start=True)
@@ -285,7 +304,10 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
             out -= out[tuple(origin)]
     else:
         out[r0:r1, c0:c1][m] = np.exp(u[m])
-    if return_info:
-        return out, {"iterations": done if iterations else 0, "cg_iterations": cg_total,
-                     "energy": energies}
-    return out
+    return BilateralResult(depth=out, iterations=done if iterations else 0, cg_iterations=cg_total,
+                           energy=tuple(energies))
+
+
+def bilateral_depth(normals: np.ndarray, mask: np.ndarray, **options) -> np.ndarray:
+    """:func:`integrate_bilateral`'s depth alone (the integrator registry's contract)."""
+    return integrate_bilateral(normals, mask, **options).depth

@@ -25,7 +25,7 @@ from scipy import fft
 from shadeform.integration._slopes import MIN_NZ, slopes
 
 
-def integrate_fourier(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def integrate_fourier(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int, int] | None = None) -> np.ndarray:
     """Least-squares depth over the mask's bounding rectangle by one DCT solve.
 
     Parameters
@@ -34,11 +34,13 @@ def integrate_fourier(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
         Unit normals in the camera frame, finite on the mask.
     mask : (H, W) bool
         Object pixels; exact when it covers its whole bounding box, approximate otherwise.
+    origin : (int, int), optional
+        (row, col) where ``z = 0``; by default the mean over the bounding box is 0.
 
     Returns
     -------
     depth : (H, W) float64
-        Height in pixel units with mean 0 over the bounding box, NaN outside the mask.
+        Height in pixel units, NaN outside the mask.
     """
     mask = np.asarray(mask, dtype=bool)
     rows = np.flatnonzero(mask.any(axis=1))
@@ -57,6 +59,8 @@ def integrate_fourier(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     height[~mask[box]] = np.nan
     depth = np.full(mask.shape, np.nan)
     depth[box] = height
+    if origin is not None:
+        depth -= depth[tuple(origin)]
     return depth
 
 

@@ -1,0 +1,196 @@
+"""The one registry of shape-from-shading solvers: method name -> :class:`Solver`.
+
+:func:`shadeform.reconstruct` only looks a solver up here; the CLI (``shadeform methods``,
+``--method``), the app's method picker and :func:`available_methods` are generated from the
+registry. A new solver is one module with a ``solve(problem) -> Solution`` function
+(:mod:`shadeform.solvers.problem`) and one :func:`register` line; ``docs/architecture.md`` has the
+recipe.
+
+``method="auto"`` follows one rule (:func:`choose`): the solver of lowest ``auto`` rank that takes
+the light and the image's noise.
+
+This module imports no solver: each is imported the first time it runs, so that listing the
+methods (the CLI's help, the app's options) stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from shadeform._checks import check_choice
+from shadeform.solvers.problem import Problem, Reference, Solution
+
+__all__ = ["AUTO", "NOISY", "Problem", "Reference", "Solution", "Solver", "available_methods",
+           "choose", "get_solver", "register", "solver_names"]
+
+#: The method name that asks :func:`choose` to pick a solver.
+AUTO = "auto"
+
+#: Noise (standard deviation over the object's brightest value, :func:`shadeform.preprocess.noise_level`)
+#: above which an image counts as noisy: a solver's ``max_noise`` and ``denoise`` rules use it.
+#: Chosen on the synthetic scenes of ``benchmarks/results/methods.md`` (noise 0-3 %): unfiltered, 1 %
+#: noise under oblique light takes the oblique solver's depth error from ~1 % to 40-140 %, while
+#: 8-bit quantisation alone (0.1 %) stays below this.
+NOISY = 0.003
+
+LIGHTS = ("any", "frontal")
+
+
+@dataclass(frozen=True)
+class Solver:
+    """One solver of the registry.
+
+    Attributes
+    ----------
+    name : str
+        The method name users pass (``reconstruct(method=name)``, ``--method name``).
+    solve : callable or str
+        ``solve(problem: Problem) -> Solution``, or ``"module:function"`` naming it (imported on
+        first use).
+    description : str
+        One line in the user's words, shown by ``shadeform methods`` and the app.
+    lights : {"any", "frontal"}
+        The lights it takes: any direction, or only (0, 0, 1).
+    integrator : str or None
+        The integrator that turns its normals into depth when the user names none; None when the
+        solver makes its own depth (then ``depth`` says how).
+    depth : str
+        What makes its depth when ``integrator`` is None, for ``Reconstruction.info``.
+    preview_pixels : int
+        Most object pixels a quick look (:func:`shadeform.pipeline.reconstruct_preview`) solves
+        with it: about 0.1 s of its time on one core.
+    denoise : str or None
+        Its noise policy: when the user gives no filter and the image is noisy (:data:`NOISY`), the
+        image is smoothed with this filter (``"KIND:SIZE"``, :func:`shadeform.preprocess.parse_filter`)
+        first. Solvers with a policy are also given the measured
+        ``Problem.noise``.
+    auto : int or None
+        Its rank for ``method="auto"`` (lower is preferred), or None if "auto" never picks it.
+    max_noise : float
+        "auto" passes it over on images noisier than this (relative to the brightest value).
+    """
+
+    name: str
+    solve: Callable[[Problem], Solution] | str
+    description: str
+    lights: str = "any"
+    integrator: str | None = None
+    depth: str = ""
+    preview_pixels: int = 40_000
+    denoise: str | None = None
+    auto: int | None = None
+    max_noise: float = math.inf
+
+    def __post_init__(self):
+        if not self.name.isidentifier() or self.name == AUTO:
+            raise ValueError(f"solver name must be a Python identifier other than {AUTO!r}, got {self.name!r}")
+        if self.lights not in LIGHTS:
+            raise ValueError(f"lights must be one of {LIGHTS}, got {self.lights!r}")
+        if self.integrator is None and not self.depth:
+            raise ValueError("a solver with no default integrator must say what makes its depth")
+
+    def run(self, problem: Problem) -> Solution:
+        """Solve ``problem`` (imports the solver's module the first time)."""
+        solve = self.solve
+        if isinstance(solve, str):
+            module, _, function = solve.partition(":")
+            solve = getattr(importlib.import_module(module), function)
+        return solve(problem)
+
+    def takes(self, light) -> bool:
+        """Whether it takes ``light``: a (3,) direction, or None for a light to be estimated."""
+        return self.lights == "any" or (light is not None and is_frontal(light))
+
+
+_SOLVERS: dict[str, Solver] = {}
+
+
+def register(solver: Solver) -> None:
+    """Add (or replace) a solver: it is then available to ``reconstruct``, the CLI and the app."""
+    if not isinstance(solver, Solver):
+        raise TypeError(f"register expects a Solver, got {type(solver).__name__}")
+    _SOLVERS[solver.name] = solver
+
+
+def solver_names() -> tuple[str, ...]:
+    """The registered solvers' names, in registration order."""
+    return tuple(_SOLVERS)
+
+
+def available_methods() -> dict[str, str]:
+    """Methods ``reconstruct`` takes: ``"auto"`` and every registered solver.
+
+    Returns
+    -------
+    dict of str to str
+        Method name to a one-line description, "auto" first, then in registration order.
+    """
+    rule = ", else ".join(solver.name + _conditions(solver) for solver in _ranked())
+    return {AUTO: f"picks the best measured solver: {rule}",
+            **{name: s.description for name, s in _SOLVERS.items()}}
+
+
+def get_solver(method: str) -> Solver:
+    """The registered solver called ``method`` (not "auto": see :func:`choose`)."""
+    return _SOLVERS[check_choice(method, tuple(_SOLVERS), "method")]
+
+
+def choose(light, *, noise: float = 0.0) -> Solver:
+    """The solver ``method="auto"`` uses: the lowest ``auto`` rank that takes the light and the noise.
+
+    Parameters
+    ----------
+    light : (3,) float or None
+        Unit direction toward the light; None for a light still to be estimated (only solvers for
+        any light qualify).
+    noise : float, keyword-only
+        The image's noise over its brightest object pixel (:func:`shadeform.preprocess.noise_level`).
+
+    Returns
+    -------
+    Solver
+    """
+    for solver in _ranked():
+        if solver.takes(light) and noise <= solver.max_noise:
+            return solver
+    raise LookupError("no registered solver takes this light for method='auto'")
+
+
+def _ranked() -> list[Solver]:
+    """The solvers "auto" may pick, best first."""
+    return sorted((s for s in _SOLVERS.values() if s.auto is not None), key=lambda s: s.auto)
+
+
+def _conditions(solver: Solver) -> str:
+    """When "auto" takes ``solver``, in words: `` (light at the camera, clean image)``."""
+    words = (["light at the camera"] if solver.lights == "frontal" else []) + (
+        ["clean image"] if solver.max_noise < math.inf else [])
+    return f" ({', '.join(words)})" if words else ""
+
+
+def is_frontal(light) -> bool:
+    """Whether the light is at +z (to rounding)."""
+    return bool(np.allclose(np.asarray(light, dtype=np.float64), (0.0, 0.0, 1.0), atol=1e-6))
+
+
+register(Solver(
+    "propagation", "shadeform.solvers.propagation:solve", lights="any", integrator="paths",
+    description="the 2002 ModelBuilder method: normals grown from the brightest pixel, convex "
+                "unless marked, refined for integrability",
+))
+register(Solver(
+    "eikonal", "shadeform.solvers._adapters:solve_eikonal", lights="frontal", depth="eikonal (fast-marching depth)",
+    auto=0, max_noise=NOISY,
+    description="fast marching from the bright caps and marked dents (light at the camera only); "
+                "the most accurate on clean images",
+))
+register(Solver(
+    "oblique", "shadeform.solvers._adapters:solve_oblique", lights="any", depth="oblique (chord-equation descent depth)",
+    preview_pixels=2_500, denoise="gaussian:2", auto=1,
+    description="any light, with attached shadows: marching from the brightest pixels, then descent",
+))

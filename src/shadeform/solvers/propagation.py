@@ -1,7 +1,8 @@
 """Normal field by convexity-guided propagation: the 2002 ModelBuilder algorithm.
 
-Every normal that explains a pixel's brightness ``I = k (N . L)`` lies on a cone around the light
-``L`` with half-angle ``theta = arccos(I / k)``. The report keeps the two cone normals in the plane
+Every normal that explains a pixel's brightness ``I = albedo (N . L)`` (``albedo`` for the
+``k * albedo`` of the image model) lies on a cone around the light ``L`` with half-angle
+``theta = arccos(I / albedo)``. The report keeps the two cone normals in the plane
 spanned by ``L`` and the direction of largest intensity change (the image gradient), and chooses
 between them:
 
@@ -33,6 +34,7 @@ import numba
 import numpy as np
 
 from shadeform.errors import InputError
+from shadeform.solvers.problem import Problem, Solution
 
 #: The convexity vote must be at least this clear (|2 kappa - 1|) to decide on its own.
 AXIS_CLARITY = 0.2
@@ -171,7 +173,7 @@ def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, s
             tail += 1
 
 
-def _prepare(image, mask, light, reference, k, concave_x, concave_y, gradient_floor):
+def _prepare(image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor):
     image = np.asarray(image, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool)
     if image.ndim != 2 or mask.shape != image.shape:
@@ -182,17 +184,17 @@ def _prepare(image, mask, light, reference, k, concave_x, concave_y, gradient_fl
     r, c = reference
     if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
         raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
-    if k <= 0:
+    if albedo <= 0:
         raise InputError("the object is black at the reference; pick a lit reference pixel")
     shape = mask.shape
     cx = np.zeros(shape) if concave_x is None else np.asarray(concave_x, dtype=np.float64)
     cy = np.zeros(shape) if concave_y is None else np.asarray(concave_y, dtype=np.float64)
-    cos_t = np.clip(np.where(mask, image / k, 0.0), 0.0, 1.0)
-    gx, gy = image_gradient(image / k, mask)
+    cos_t = np.clip(np.where(mask, image / albedo, 0.0), 0.0, 1.0)
+    gx, gy = image_gradient(image / albedo, mask)
     return image, mask, light, (int(r), int(c)), cos_t, gx, gy, cx, cy, float(gradient_floor)
 
 
-def propagate_normals(image, mask, *, light, reference, reference_normal=None, k,
+def propagate_normals(image, mask, *, light, reference, reference_normal=None, albedo,
                       concave_x=None, concave_y=None, gradient_floor=1e-6):
     """Grow a normal field over the mask from one reference pixel (compiled).
 
@@ -208,13 +210,13 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, k
         (row, col) of the reference pixel.
     reference_normal : (3,) float, optional
         Its normal; by default the cone normal the rule itself chooses there (which is ``light``
-        at a pixel as bright as ``k``).
-    k : float
-        ``k * albedo``: the brightness of a pixel facing the light.
+        at a pixel as bright as ``albedo``).
+    albedo : float
+        ``k * albedo`` of the image model: the brightness of a pixel facing the light.
     concave_x, concave_y : (H, W) bool, optional
         Where the user marked the surface concave along x / y.
     gradient_floor : float
-        Gradient magnitude (in units of ``k`` per pixel) below which the gradient's direction is
+        Gradient magnitude (in units of ``albedo`` per pixel) below which the gradient's direction is
         not trusted and neighbours decide.
 
     Returns
@@ -223,7 +225,7 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, k
         Unit normals; NaN outside the mask and on mask pixels not connected to the reference.
     """
     image, mask, light, (r, c), cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image, mask, light, reference, k, concave_x, concave_y, gradient_floor)
+        image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor)
     seed = np.empty(3)
     if reference_normal is None:
         _choose_normal(cos_t[r, c], gx[r, c], gy[r, c], g_min, cx[r, c], cy[r, c], *light,
@@ -237,14 +239,14 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, k
     return normals
 
 
-def propagate_normals_reference(image, mask, *, light, reference, reference_normal=None, k,
+def propagate_normals_reference(image, mask, *, light, reference, reference_normal=None, albedo,
                                 concave_x=None, concave_y=None, gradient_floor=1e-6):
     """Slow, plain-Python version of :func:`propagate_normals` (same arguments and result).
 
     Written for clarity, to test the compiled kernel against; use only on small images.
     """
     image, mask, light, (r, c), cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image, mask, light, reference, k, concave_x, concave_y, gradient_floor)
+        image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor)
     choose = _choose_normal.py_func
     h, w = mask.shape
     normals = np.full((h, w, 3), np.nan)
@@ -315,7 +317,7 @@ def refine_by_integrability(normals: np.ndarray, cos_theta: np.ndarray, mask: np
     normals : (H, W, 3) float
         Field from :func:`propagate_normals`; NaN outside ``mask``.
     cos_theta : (H, W) float
-        ``I / k`` clipped to [0, 1].
+        ``I / albedo`` clipped to [0, 1].
     mask : (H, W) bool
     light : (3,) float
     iterations : int
@@ -337,3 +339,41 @@ def refine_by_integrability(normals: np.ndarray, cos_theta: np.ndarray, mask: np
         ok = mask & np.isfinite(surface).all(axis=-1)
         field[ok] = project_to_cone(surface[ok], cos_theta[ok], light)
     return field
+
+
+def solve(problem: Problem) -> Solution:
+    """The 2002 route as a registered solver: a field per reference, integrated from it by
+    ``problem.integrator``, references combined by the report's eq. 7.
+
+    Each connected part of the mask is solved from its own references; with several references
+    per part, reference J's depths are moved into the main reference's frame by ``Z_MJ``, the main
+    reference's depth at J's origin, and the fields and depths averaged.
+    """
+    mask, labels = problem.mask, problem.labels
+    cos_theta = problem.cos_theta if problem.refine else None
+    normals_sum = np.zeros(mask.shape + (3,))
+    depth_sum = np.zeros(mask.shape)
+    depth_count = np.zeros(mask.shape)
+    for part in range(1, problem.parts + 1):
+        part_mask = labels == part
+        depth_main = None
+        for ref in (ref for ref in problem.references if labels[ref.pixel] == part):
+            field = propagate_normals(problem.image, part_mask, light=problem.light, reference=ref.pixel,
+                                      reference_normal=ref.normal, albedo=problem.albedo,
+                                      concave_x=problem.concave_x, concave_y=problem.concave_y)
+            problem.lap("normals")
+            if problem.refine:
+                field = refine_by_integrability(field, cos_theta, part_mask, light=problem.light,
+                                                iterations=problem.refine)
+                problem.lap("refine")
+            depth = problem.integrate(field, part_mask, origin=ref.pixel)
+            problem.lap("depth")
+            if depth_main is None:
+                depth_main = depth
+            depth_sum[part_mask] += depth[part_mask] + depth_main[ref.pixel]
+            depth_count[part_mask] += 1
+            normals_sum[part_mask] += field[part_mask]
+    if len(problem.references) > 1:
+        normals_sum /= np.linalg.norm(normals_sum, axis=-1, keepdims=True).clip(1e-300)
+        depth_sum /= np.maximum(depth_count, 1)
+    return Solution(normals_sum, depth_sum, {"refine": problem.refine})

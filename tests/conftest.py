@@ -1,0 +1,47 @@
+"""Fixtures shared by the test modules."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from shadeform import integration, solvers, synth
+
+#: The repository and the shared data beside it (``../shared/data``: DiLiGenT, MIT-Berkeley).
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """``../shared/data``: the real photos and normals with ground truth."""
+    return SHARED_DATA
+
+
+@pytest.fixture
+def cli():
+    """Run the ``shadeform`` command in-process: ``cli("reconstruct", path, "-o", out)``.
+
+    A wide console, whatever the terminal running the tests, so tables are not wrapped."""
+    from shadeform.cli import app
+
+    def invoke(*args):
+        return CliRunner(env={"COLUMNS": "200"}).invoke(app, [str(arg) for arg in args])
+
+    return invoke
+
+
+@pytest.fixture
+def registries(monkeypatch):
+    """The solver and integrator registries, restored after the test: register freely in it."""
+    monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))
+    monkeypatch.setattr(integration, "_INTEGRATORS", dict(integration._INTEGRATORS))
+    return solvers, integration
+
+
+@pytest.fixture(scope="session")
+def sphere64():
+    """The synthetic sphere, 64 x 64, light +z: image, mask, normals, depth."""
+    return synth.scene("sphere", size=64)

@@ -1,0 +1,143 @@
+"""The solver registry: one module + one ``register`` line makes a solver available everywhere.
+
+The proof: a small solver written here, registered inside the test, runs through the library,
+the CLI and the server without touching any of them.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from PIL import Image
+
+import shadeform
+from shadeform import metrics, synth
+from shadeform.errors import InputError
+from shadeform.solvers import AUTO, Problem, Solution, Solver, available_methods, choose, get_solver
+from shadeform.solvers.propagation import image_gradient
+
+
+def gradient_solve(problem: Problem) -> Solution:
+    """A small solver: each normal on its cone, tilted against the brightness gradient (a convex
+    object), depth by the integrator. Reads the problem's image, mask, light and albedo."""
+    gx, gy = image_gradient(problem.image / problem.albedo, problem.mask)
+    length = np.hypot(gx, gy)
+    cos_theta = problem.cos_theta
+    sin_theta = np.sqrt(1.0 - cos_theta**2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tilt = np.where((length > 0)[..., None], -np.stack([gx, gy], axis=-1) / length[..., None], 0.0)
+    normals = np.dstack([sin_theta[..., None] * tilt, cos_theta])
+    normals[~problem.mask] = (0.0, 0.0, 1.0)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    problem.lap("normals")
+    return Solution(normals, problem.integrate(normals), {"gradient_pixels": int(np.count_nonzero(length))})
+
+
+TINY = Solver("gradient", gradient_solve, lights="frontal", integrator="poisson",
+              description="normals tilted against the brightness gradient (a test solver)")
+
+
+@pytest.fixture
+def tiny(registries):
+    registries[0].register(TINY)
+    return TINY
+
+
+class TestRegistry:
+    def test_builtin_solvers_listed_with_auto_first(self):
+        methods = available_methods()
+        assert list(methods)[0] == AUTO
+        assert {"propagation", "eikonal", "oblique"} <= set(methods)
+        assert all(isinstance(text, str) and text and "\n" not in text for text in methods.values())
+
+    def test_unknown_method_lists_the_registered(self):
+        with pytest.raises(InputError, match="unknown method 'magic'; choose one of: propagation, eikonal"):
+            get_solver("magic")
+
+    def test_auto_rule_is_lights_then_noise_then_rank(self):
+        frontal, oblique = np.array([0.0, 0.0, 1.0]), np.array([0.5, 0.0, 0.866])
+        assert choose(frontal).name == "eikonal"
+        assert choose(frontal, noise=0.01).name == "oblique"
+        assert choose(oblique).name == "oblique"
+        assert choose(None).name == "oblique"
+
+    def test_a_ranked_solver_is_chosen_by_auto(self, registries):
+        registries[0].register(Solver("first", gradient_solve, integrator="poisson", auto=-1,
+                                      description="ranked first"))
+        assert choose(np.array([0.5, 0.0, 0.866])).name == "first"
+        assert "first" in available_methods()[AUTO]
+
+    def test_a_record_must_be_complete(self):
+        with pytest.raises(ValueError, match="identifier"):
+            Solver("two words", gradient_solve, integrator="paths", description="x")
+        with pytest.raises(ValueError, match="lights"):
+            Solver("x", gradient_solve, lights="left", integrator="paths", description="x")
+        with pytest.raises(ValueError, match="depth"):
+            Solver("x", gradient_solve, description="no integrator and no depth of its own")
+
+
+class TestNewSolverEverywhere:
+    def test_library(self, tiny, sphere64):
+        scene = sphere64
+        assert "gradient" in available_methods()
+        rec = shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient")
+        assert rec.info["method"] == "gradient" and rec.info["integrator"] == "poisson"
+        assert rec.info["gradient_pixels"] > 0.9 * scene.mask.sum()
+        assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 3.0
+        assert metrics.depth_error(rec.depth, scene.depth, fit="offset") < 3.0
+        assert np.isnan(rec.depth[~scene.mask]).all()
+        # its own records are honoured: light, integrator, preview budget
+        with pytest.raises(InputError, match="light"):
+            shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", light=(0.5, 0, 0.866))
+        other = shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", integrator="fourier")
+        assert other.info["integrator"] == "fourier"
+        quick = shadeform.pipeline.reconstruct_preview(scene.image, mask=scene.mask, step=2, method="gradient")
+        assert quick.info["method"] == "gradient" and quick.info["preview_step"] == 2
+
+    def test_cli(self, tiny, sphere64, cli, tmp_path):
+        listed = cli("methods", "--json")
+        assert listed.exit_code == 0, listed.output
+        rows = {row["name"]: row for row in json.loads(listed.stdout)["methods"]}
+        assert rows["gradient"]["description"] == TINY.description and rows["gradient"]["depth"] == "poisson"
+        photo = tmp_path / "sphere.png"
+        Image.fromarray(np.rint(sphere64.image * 255).astype(np.uint8)).save(photo)
+        result = cli("reconstruct", photo, "-o", tmp_path / "sphere.ply", "--method", "gradient", "--json")
+        assert result.exit_code == 0, result.output
+        assert json.loads(result.stdout)["info"]["method"] == "gradient"
+        assert (tmp_path / "sphere.ply").stat().st_size > 0
+
+    def test_server(self, tiny):
+        from shadeform.app.server import create_app
+
+        with TestClient(create_app(), base_url="http://127.0.0.1:8000") as client:
+            options = client.get("/api/options").json()
+            assert {"name": "gradient", "description": TINY.description} in options["methods"]
+            image = client.post("/api/examples/synth:sphere?size=48").json()
+            response = client.post("/api/reconstruct", json={"image_id": image["image_id"], "request_id": 1,
+                                                             "params": {"method": "gradient", "step": 2}})
+            assert response.status_code == 200, response.text
+            assert response.json()["info"]["method"] == "gradient"
+
+
+class TestSolverContract:
+    def test_problem_is_what_reconstruct_prepared(self, registries, sphere64):
+        seen = {}
+
+        def spy(problem: Problem) -> Solution:
+            seen["problem"] = problem
+            return Solution(np.tile([0.0, 0.0, 1.0], problem.mask.shape + (1,)), np.zeros(problem.mask.shape))
+
+        registries[0].register(Solver("spy", spy, depth="zero", description="records its problem"))
+        scene = sphere64
+        regions = synth.concave_regions("bowl", size=64)
+        rec = shadeform.reconstruct(scene.image, mask=scene.mask, method="spy", references=[(32, 30)],
+                                    concave=regions, refine=2)
+        problem = seen["problem"]
+        assert problem.given == 1 and problem.main == (32, 30) and problem.references[0].normal is None
+        assert problem.albedo == pytest.approx(scene.image.max())
+        assert problem.concave_x.any() and (problem.concave_x == problem.concave_y).all()
+        assert problem.refine == 2 and problem.integrator is None and problem.noise is None
+        assert rec.info["integrator"] == "zero" and rec.info["references"][0] == (32, 30)
