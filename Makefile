@@ -12,7 +12,7 @@ STATIC   := src/shadeform/app/static
 WEBSTAMP := $(STATIC)/.built-stamp
 WEBSRC   := $(WEB)/index.html $(WEB)/vite.config.ts $(WEB)/tsconfig.json $(wildcard $(WEB)/src/*.ts $(WEB)/src/*.css)
 
-.PHONY: venv demo test bench clean web app
+.PHONY: venv demo test lint format bench clean web app
 
 venv: $(STAMP)
 
@@ -47,8 +47,17 @@ demo: $(STAMP)
 
 # two test workers share the two cores: one BLAS thread each, or OpenBLAS's threads spin against
 # each other (the relief light fit's products ran 10-25x slower that way)
-test: $(STAMP) $(JSSTAMP) $(WEBSTAMP)
+test: lint $(STAMP) $(JSSTAMP) $(WEBSTAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
+
+# ruff: lint and formatting, checked (CI runs this through `make test`); `make format` fixes both
+lint: $(STAMP)
+	$(VENV)/bin/ruff check src tests benchmarks setup.py
+	$(VENV)/bin/ruff format --check src tests benchmarks setup.py
+
+format: $(STAMP)
+	$(VENV)/bin/ruff check --fix src tests benchmarks setup.py
+	$(VENV)/bin/ruff format src tests benchmarks setup.py
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_pipeline.py

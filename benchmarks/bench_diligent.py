@@ -21,6 +21,7 @@ import argparse
 import os
 import platform
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -133,14 +134,14 @@ def main(argv=None) -> str:
     rows = []
     for name in OBJECTS:
         normals, mask, K, gt = load(name)
-        result, t_bi = timed(lambda: integrate_bilateral(normals, mask, K=K, sharpness=2.0), args.repeats)
+        result, t_bi = timed(partial(integrate_bilateral, normals, mask, K=K, sharpness=2.0), args.repeats)
         z = result.depth
-        ls, t_ls = timed(lambda: integrate_bilateral(normals, mask, K=K, iterations=0), args.repeats)
+        ls, t_ls = timed(partial(integrate_bilateral, normals, mask, K=K, iterations=0), args.repeats)
         z_ls = ls.depth
         if args.no_rerun:
             rerun, t_rerun = (np.nan, np.nan), np.nan
         else:
-            z_re, t_rerun = timed(lambda: bini_rerun(normals, mask, K), 1)
+            z_re, t_rerun = timed(partial(bini_rerun, normals, mask, K), 1)
             rerun = (made(z_re, gt, mask, fit="median_scale"), made(z_re, gt, mask))
         row = dict(name=name, pixels=int(mask.sum()),
                    bi=(made(z, gt, mask, fit="median_scale"), made(z, gt, mask)),

@@ -35,6 +35,7 @@ Usage: ``python benchmarks/bench_methods.py [--size 256] [--repeats 3] [--budget
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import math
@@ -122,7 +123,7 @@ def methods() -> list[tuple[str, dict]]:
     return found
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _regions(name: str, size: int) -> dict:
     # built once per scene, outside the timed calls (reconstruct only reads it)
     return synth.concave_regions(name, size=size)
@@ -139,10 +140,8 @@ def warm_up(chosen: Sequence[tuple[str, dict]], lights: Sequence[tuple[str, tupl
     for _, kwargs in chosen:
         for _, light in lights:
             for name in ("sphere", "bowl"):  # convex and concave code paths
-                try:
+                with contextlib.suppress(InputError):  # a light the method refuses
                     solve(synth.scene(name, size=24, light=light), kwargs, 24)
-                except InputError:
-                    pass
 
 
 def timed(fn: Callable[[], object], repeats: int, budget: float):
@@ -204,7 +203,7 @@ def run_grid(
                 pixels = int(scene.mask.sum())
                 for label, kwargs in chosen:
                     try:
-                        rec, seconds, runs = timed(lambda: solve(scene, kwargs, size), repeats, budget)
+                        rec, seconds, runs = timed(functools.partial(solve, scene, kwargs, size), repeats, budget)
                     except InputError as error:
                         row = Row(label, name, light_label, noise, math.nan, math.nan, math.nan, 0,
                                   pixels, note=str(error))

@@ -50,9 +50,9 @@ def main(argv=None) -> int:
     scene = synth.scene("sphere", size=args.size)
     image, mask, light = scene.image, scene.mask, np.asarray(scene.light)
     ref = np.unravel_index(np.argmax(np.where(mask, image, -1)), mask.shape)
-    k = float(image[ref])
-    cos_theta = np.clip(image / k, 0, 1)
-    normals = propagate_normals(image, mask, light=light, reference=ref, k=k)
+    albedo = float(image[ref])
+    cos_theta = np.clip(image / albedo, 0, 1)
+    normals = propagate_normals(image, mask, light=light, reference=ref, albedo=albedo)
     refined = refine_by_integrability(normals, cos_theta, mask, light=light, iterations=3)
     rec = shadeform.reconstruct(image, mask=mask, refine=0)
     mesh = shadeform.to_mesh(rec, step=1)
@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     glb = tmp / "model.glb"
 
     stages = [
-        ("normals: propagation (2002)", lambda: propagate_normals(image, mask, light=light, reference=ref, k=k)),
+        ("normals: propagation (2002)", lambda: propagate_normals(image, mask, light=light, reference=ref, albedo=albedo)),
         ("normals: integrability refinement x3", lambda: refine_by_integrability(
             normals, cos_theta, mask, light=light, iterations=3)),
         ("depth: averaged paths", lambda: integrate_paths(refined, mask, origin=ref)),

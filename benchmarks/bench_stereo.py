@@ -17,6 +17,7 @@ import argparse
 import os
 import platform
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -66,8 +67,8 @@ def synthetic_rows(repeats):
                                         seed=i) for i, light in enumerate(lights)])
         cells = []
         for method in METHODS:
-            result, seconds = timed(lambda: photometric_stereo(images, lights, scene.mask,
-                                                               method=method), repeats)
+            result, seconds = timed(partial(photometric_stereo, images, lights, scene.mask, method=method),
+                                    repeats)
             errors = angles(result.normals, scene.normals, scene.mask)
             cells.append((float(np.nanmean(errors)), float(np.nanmedian(errors)), seconds))
         rows.append((label, int(scene.mask.sum()), cells))
@@ -84,9 +85,8 @@ def ball_rows(repeats):
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
     rows = []
     for method in METHODS[::-1]:
-        result, seconds = timed(lambda: photometric_stereo(ball.images, ball.lights, ball.mask,
-                                                           intensities=ball.intensities,
-                                                           method=method), repeats)
+        result, seconds = timed(partial(photometric_stereo, ball.images, ball.lights, ball.mask,
+                                        intensities=ball.intensities, method=method), repeats)
         errors = angles(result.normals, truth, ball.mask)
         rows.append((method, float(np.nanmean(errors)), float(np.nanmedian(errors)),
                      PUBLISHED[method], seconds, int(ball.mask.sum())))

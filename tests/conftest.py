@@ -34,6 +34,14 @@ def cli():
 
 
 @pytest.fixture
+def out(tmp_path) -> Path:
+    """An empty output folder."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    return folder
+
+
+@pytest.fixture
 def registries(monkeypatch):
     """The solver and integrator registries, restored after the test: register freely in it."""
     monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))

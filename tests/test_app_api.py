@@ -20,14 +20,12 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 from test_io_images import png_with_ihdr
-from typer.testing import CliRunner
 
 import shadeform
 from shadeform import metrics, synth
 from shadeform.app import schema, server
 from shadeform.app.server import AppLimits, create_app
 from shadeform.app.store import LRU
-from shadeform.cli import app as cli_app
 from shadeform.examples import EXAMPLES, load_example
 from shadeform.io.exporters import available_formats
 from shadeform.io.images import CHANNELS
@@ -646,8 +644,6 @@ class TestLRU:
         assert lru.get("big") is None and lru.get("pin") == 0 and len(lru) == 2
 
 
-def invoke(*args):
-    return CliRunner(env={"COLUMNS": "200"}).invoke(cli_app, [str(arg) for arg in args])
 
 
 class TestAppCommand:
@@ -668,8 +664,8 @@ class TestAppCommand:
         for sock in calls.get("sockets", ()):
             sock.close()
 
-    def test_serves_on_loopback(self, served):
-        result = invoke("app", "synth:sphere", "--port", 0, "--no-browser")
+    def test_serves_on_loopback(self, served, cli):
+        result = cli("app", "synth:sphere", "--port", 0, "--no-browser")
         assert result.exit_code == 0, result.output
         port = served["sockets"][0].getsockname()[1]
         assert f"http://127.0.0.1:{port}/" in result.stdout
@@ -683,43 +679,43 @@ class TestAppCommand:
             time.sleep(0.02)
         assert served.get("warmed") is True
 
-    def test_image_file(self, served, tmp_path):
+    def test_image_file(self, served, cli, tmp_path):
         path = tmp_path / "photo.png"
         path.write_bytes(png_bytes(disk_photo()))
-        assert invoke("app", path, "--port", 0).exit_code == 0
+        assert cli("app", path, "--port", 0).exit_code == 0
         with TestClient(served["app"], base_url=LOCAL) as test_client:
             assert test_client.get("/api/options").json()["initial_image"]["name"] == "photo.png"
 
-    def test_remote_needs_the_flag(self, served):
-        result = invoke("app", "--host", "0.0.0.0", "--port", 0)
+    def test_remote_needs_the_flag(self, served, cli):
+        result = cli("app", "--host", "0.0.0.0", "--port", 0)
         assert result.exit_code == 2 and "sockets" not in served
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: ") and "--allow-remote" in lines[0]
 
-    def test_remote_warns(self, served):
-        result = invoke("app", "--host", "0.0.0.0", "--port", 0, "--allow-remote", "--no-browser")
+    def test_remote_warns(self, served, cli):
+        result = cli("app", "--host", "0.0.0.0", "--port", 0, "--allow-remote", "--no-browser")
         assert result.exit_code == 0, result.output
         assert "warning" in result.stderr and "not loopback" in result.stderr
         with TestClient(served["app"], base_url="http://10.1.2.3:8000") as test_client:
             assert test_client.get("/api/options").status_code == 200  # any Host: remote users
 
-    def test_bad_image(self, served, tmp_path):
+    def test_bad_image(self, served, cli, tmp_path):
         for bad, fragment in ((tmp_path / "missing.png", "no such image file or example"),
                               (tmp_path, "no such image file or example")):
-            result = invoke("app", bad, "--port", 0)
+            result = cli("app", bad, "--port", 0)
             assert result.exit_code == 2, result.output
             assert fragment in result.stderr and "Traceback" not in result.output
         (tmp_path / "text.png").write_text("not a picture")
-        result = invoke("app", tmp_path / "text.png", "--port", 0)
+        result = cli("app", tmp_path / "text.png", "--port", 0)
         assert result.exit_code == 2 and "not an image" in result.stderr
 
-    def test_port_in_use(self, served):
+    def test_port_in_use(self, served, cli):
         import socket
 
         with socket.socket() as taken:
             taken.bind(("127.0.0.1", 0))
             taken.listen()
-            result = invoke("app", "--port", taken.getsockname()[1], "--no-browser")
+            result = cli("app", "--port", taken.getsockname()[1], "--no-browser")
         assert result.exit_code == 2 and "choose another --port" in result.stderr
 
 

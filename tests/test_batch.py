@@ -16,7 +16,6 @@ from shadeform.batch import reconstruct_files
 from shadeform.errors import InputError
 from shadeform.io.maps import load_depth
 
-from test_cli import invoke, out  # noqa: F401  (the out fixture: an empty output folder)
 
 
 @pytest.fixture(scope="module")
@@ -103,9 +102,9 @@ class TestReconstructFiles:
 
 
 class TestBatchCommand:
-    def test_json_and_folder_created(self, photos, tmp_path):
+    def test_json_and_folder_created(self, photos, tmp_path, cli):
         folder = tmp_path / "models"
-        result = invoke("batch", *photos, "--out", folder, "--format", "obj", "--normals",
+        result = cli("batch", *photos, "--out", folder, "--format", "obj", "--normals",
                         "--workers", "1", "--json")
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)
@@ -113,10 +112,10 @@ class TestBatchCommand:
         assert all(p["error"] is None for p in report["photos"])
         assert len(list(folder.iterdir())) == 6
 
-    def test_failures_exit_2_with_one_line_each(self, photos, tmp_path):
+    def test_failures_exit_2_with_one_line_each(self, photos, tmp_path, cli):
         bad = tmp_path / "notes.png"
         bad.write_text("not a photo")
-        result = invoke("batch", photos[0], bad, "--out", tmp_path / "m", "--workers", "1")
+        result = cli("batch", photos[0], bad, "--out", tmp_path / "m", "--workers", "1")
         assert result.exit_code == 2
         assert "1 of 2 photos" in result.stdout
         lines = result.stderr.strip().splitlines()
@@ -127,8 +126,8 @@ class TestBatchCommand:
         ("--format", "xyz", "format"), ("--method", "magic", "method"),
         ("--integrator", "magic", "integrator"), ("--filter", "blur:2", "filter"),
     ])
-    def test_bad_option_is_one_line(self, photos, tmp_path, option, value, fragment):
-        result = invoke("batch", *photos, "--out", tmp_path / "m", option, value)
+    def test_bad_option_is_one_line(self, photos, tmp_path, option, value, fragment, cli):
+        result = cli("batch", *photos, "--out", tmp_path / "m", option, value)
         assert result.exit_code == 2 and "Traceback" not in result.output
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and fragment in lines[0], result.stderr

@@ -79,13 +79,6 @@ def sphere(tmp_path_factory) -> dict[str, Path]:
 
 
 @pytest.fixture
-def out(tmp_path) -> Path:
-    folder = tmp_path / "out"
-    folder.mkdir()
-    return folder
-
-
-@pytest.fixture
 def inputs(tmp_path) -> Path:
     folder = tmp_path / "in"
     folder.mkdir()

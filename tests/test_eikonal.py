@@ -1,4 +1,5 @@
-"""Eikonal solver (light at +z): the issue's bars, kernel vs reference, sources and regions, bad input."""
+"""Eikonal solver (light at +z): the issue's bars, kernel vs reference, singular points, references and
+concave regions, bad input."""
 
 import numpy as np
 import pytest
@@ -25,8 +26,10 @@ NECK = {"regions": [{"polygon": [[70, 32], [186, 32], [186, 102], [70, 102]], "a
 DENT = {"regions": [{"polygon": [[41, 141], [101, 141], [101, 201], [41, 201]], "axis": "both"}]}
 
 
-def regions(document, shape=(SIZE, SIZE)):
-    return concave_masks(parse_regions(document), shape)
+def concave(document, shape=(SIZE, SIZE)):
+    """``concave_x=`` and ``concave_y=`` of the regions in ``document``."""
+    concave_x, concave_y = concave_masks(parse_regions(document), shape)
+    return {"concave_x": concave_x, "concave_y": concave_y}
 
 
 def whole(axis="both"):
@@ -34,26 +37,31 @@ def whole(axis="both"):
 
 
 def errors(result, scene):
-    return (metrics.depth_error(result.depth, scene.depth, scene.mask),
-            metrics.angular_error(result.normals, scene.normals, scene.mask))
+    return (
+        metrics.depth_error(result.depth, scene.depth, scene.mask),
+        metrics.angular_error(result.normals, scene.normals, scene.mask),
+    )
 
 
 @pytest.fixture(scope="module")
 def scenes():
-    return {name: synth.scene(name, size=SIZE)
-            for name in ("sphere", "ellipsoid", "cylinder", "vase", "bowl", "bumps")}
+    return {
+        name: synth.scene(name, size=SIZE)
+        for name in ("sphere", "ellipsoid", "cylinder", "vase", "bowl", "bumps")
+    }
 
 
 class TestBars:
     def test_sphere(self, scenes):
-        depth_err, angle_err = errors(eikonal_depth(scenes["sphere"].image, scenes["sphere"].mask),
-                                      scenes["sphere"])
+        depth_err, angle_err = errors(
+            eikonal_depth(scenes["sphere"].image, scenes["sphere"].mask), scenes["sphere"]
+        )
         assert depth_err <= 0.5
         assert angle_err <= 0.5
 
     def test_vase_with_its_neck_marked(self, scenes):
         scene = scenes["vase"]
-        result = eikonal_depth(scene.image, scene.mask, concave=regions(NECK))
+        result = eikonal_depth(scene.image, scene.mask, **concave(NECK))
         depth_err, angle_err = errors(result, scene)
         assert depth_err <= 1.0
         assert angle_err <= 3.0
@@ -66,22 +74,19 @@ class TestBars:
     # not bars of the issue: guards that what is measured now does not slide back
     @pytest.mark.parametrize("name", ["ellipsoid", "cylinder"])
     def test_other_convex_shapes(self, scenes, name):
-        depth_err, angle_err = errors(eikonal_depth(scenes[name].image, scenes[name].mask),
-                                      scenes[name])
+        depth_err, angle_err = errors(eikonal_depth(scenes[name].image, scenes[name].mask), scenes[name])
         assert depth_err <= 0.2
         assert angle_err <= 0.3
 
     def test_bowl_with_its_region(self, scenes):
         scene = scenes["bowl"]
-        depth_err, angle_err = errors(eikonal_depth(scene.image, scene.mask,
-                                                    concave=regions(whole())), scene)
+        depth_err, angle_err = errors(eikonal_depth(scene.image, scene.mask, **concave(whole())), scene)
         assert depth_err <= 0.2
         assert angle_err <= 0.3
 
     def test_bumps_with_the_dent_marked(self, scenes):
         scene = scenes["bumps"]
-        depth_err, angle_err = errors(eikonal_depth(scene.image, scene.mask,
-                                                    concave=regions(DENT)), scene)
+        depth_err, angle_err = errors(eikonal_depth(scene.image, scene.mask, **concave(DENT)), scene)
         assert depth_err <= 0.5
         assert angle_err <= 0.5
 
@@ -93,7 +98,7 @@ class TestArrivalTimes:
         cos_theta = rng.uniform(0.1, 1.0, (height, width))  # f from 0 to ~10: both updates run
         rows, cols = np.mgrid[:height, :width]
         mask = ((rows - height / 2) / (height / 2.2)) ** 2 + ((cols - width / 2) / (width / 2.2)) ** 2 < 1
-        mask[height // 2 - 3, width // 4: width // 2] = False  # a wall to march around
+        mask[height // 2 - 3, width // 4 : width // 2] = False  # a wall to march around
         return cos_theta, mask
 
     @pytest.mark.parametrize("seed", [0, 1])
@@ -110,6 +115,17 @@ class TestArrivalTimes:
         fast = arrival_times(cos_theta, mask, [(9, 10)], steep=1e9)
         slow = arrival_times_reference(cos_theta, mask, [(9, 10)], steep=1e9)
         np.testing.assert_allclose(fast[mask], slow[mask], rtol=0, atol=1e-10)
+
+    def test_kernel_matches_reference_where_times_tie(self):
+        # a symmetric sphere marched from its four top pixels: many pixels reach the same time,
+        # and both pop equal times in the same order (smaller row, then column), so they agree
+        scene = synth.scene("sphere", size=48)
+        cos_theta = np.where(scene.mask, scene.image / scene.image[scene.mask].max(), 0.0)
+        top = [tuple(p) for p in np.argwhere(cos_theta >= cos_theta.max() - 1e-4)]
+        fast = arrival_times(cos_theta, scene.mask, top)
+        slow = arrival_times_reference(cos_theta, scene.mask, top)
+        assert len(top) == 4
+        np.testing.assert_allclose(fast[scene.mask], slow[scene.mask], rtol=0, atol=1e-12)
 
     @pytest.mark.parametrize("cos", [0.6, 0.3])  # slope 1.33: differences; 3.18: arc update
     def test_plane_wave_is_exact(self, cos):
@@ -159,109 +175,109 @@ class TestSolver:
         assert result.depth.shape == (SIZE, SIZE) and result.normals.shape == (SIZE, SIZE, 3)
         assert np.isnan(result.depth[~scene.mask]).all() and np.isnan(result.normals[~scene.mask]).all()
         assert np.isfinite(result.depth[scene.mask]).all()
-        main = result.sources[0]
+        main = result.singular_points[0]
         assert isinstance(main, SingularPoint)
         assert (main.kind, main.origin, main.height) == ("max", "detected", 0.0)
         assert abs(main.row - 127.5) < 1 and abs(main.col - 127.5) < 1
         assert result.depth[main.row, main.col] == 0
         assert np.nanmax(result.depth) <= 1e-9  # a convex object hangs below its top
-        assert result.k == scene.image[scene.mask].max()
+        assert result.albedo == scene.image[scene.mask].max()
 
     def test_normals_lie_on_the_shading_cone(self, scenes):
         scene = scenes["ellipsoid"]
         result = eikonal_depth(scene.image, scene.mask)
         n = result.normals[scene.mask]
         np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-12)
-        cos = np.clip(scene.image[scene.mask] / result.k, 0, 1)
+        cos = np.clip(scene.image[scene.mask] / result.albedo, 0, 1)
         np.testing.assert_allclose(n[:, 2], cos, atol=1e-12)
 
     def test_inputs_are_not_modified(self, scenes):
         scene = scenes["sphere"]
         image, mask = scene.image.copy(), scene.mask.copy()
         image.flags.writeable = mask.flags.writeable = False
-        eikonal_depth(image, mask, concave=regions(whole()))
+        eikonal_depth(image, mask, **concave(whole()))
         np.testing.assert_array_equal(image, scene.image)
 
     def test_bowl_flips_with_its_region(self, scenes):
         scene = scenes["bowl"]
         dome = eikonal_depth(scene.image, scene.mask)
-        bowl = eikonal_depth(scene.image, scene.mask, concave=regions(whole()))
+        bowl = eikonal_depth(scene.image, scene.mask, **concave(whole()))
         rim = tuple(np.argwhere(scene.mask)[0])
         centre = (SIZE // 2, SIZE // 2)
         assert dome.depth[centre] > dome.depth[rim]
         assert bowl.depth[centre] < bowl.depth[rim]
-        assert bowl.sources[0].kind == "min"
+        assert bowl.singular_points[0].kind == "min"
 
-    def test_one_mask_means_both_axes(self, scenes):
+    def test_masks_equal_the_regions_they_come_from(self, scenes):
         scene = scenes["bowl"]
-        pair = eikonal_depth(scene.image, scene.mask, concave=regions(whole()))
-        single = eikonal_depth(scene.image, scene.mask, concave=np.ones((SIZE, SIZE), bool))
-        np.testing.assert_array_equal(pair.depth, single.depth)
+        regions = eikonal_depth(scene.image, scene.mask, **concave(whole()))
+        everywhere = np.ones((SIZE, SIZE), bool)
+        masks = eikonal_depth(scene.image, scene.mask, concave_x=everywhere, concave_y=everywhere)
+        np.testing.assert_array_equal(regions.depth, masks.depth)
 
-    def test_a_source_of_a_given_kind_replaces_the_detected_one(self, scenes):
+    def test_a_reference_of_a_given_kind_replaces_the_detected_point(self, scenes):
         scene = scenes["bowl"]
-        marked = eikonal_depth(scene.image, scene.mask, concave=regions(whole()))
-        told = eikonal_depth(scene.image, scene.mask, sources=[(128, 128, "min")])
-        assert len(told.sources) == 1
-        assert told.sources[0].origin == "user" and told.sources[0].kind == "min"
-        assert (told.sources[0].row, told.sources[0].col) == (128, 128)
+        marked = eikonal_depth(scene.image, scene.mask, **concave(whole()))
+        told = eikonal_depth(scene.image, scene.mask, references=[(128, 128, "min")])
+        assert len(told.singular_points) == 1
+        assert told.singular_points[0].origin == "user" and told.singular_points[0].kind == "min"
+        assert (told.singular_points[0].row, told.singular_points[0].col) == (128, 128)
         assert metrics.depth_error(told.depth, marked.depth, scene.mask) < 0.05
 
-    def test_user_source_takes_its_kind_from_the_regions(self, scenes):
+    def test_a_reference_takes_its_kind_from_the_regions(self, scenes):
         scene = scenes["bowl"]
-        told = eikonal_depth(scene.image, scene.mask, sources=[(127, 127)],
-                             concave=regions(whole()))
-        assert told.sources[0].kind == "min"
+        told = eikonal_depth(scene.image, scene.mask, references=[(127, 127)], **concave(whole()))
+        assert told.singular_points[0].kind == "min"
 
-    def test_vase_sources_and_heights(self, scenes):
+    def test_vase_singular_points_and_heights(self, scenes):
         scene = scenes["vase"]
-        result = eikonal_depth(scene.image, scene.mask, concave=regions(NECK))
-        kinds = sorted((p.row, p.kind) for p in result.sources)
+        result = eikonal_depth(scene.image, scene.mask, **concave(NECK))
+        kinds = sorted((p.row, p.kind) for p in result.singular_points)
         # lip (top row), neck (saddle), belly: rows 13, ~57, ~158 of the 256 px image
         assert [k for _, k in kinds] == ["max", "saddle", "max"]
         (lip_row, _), (neck_row, _), (belly_row, _) = kinds
         assert lip_row <= 15 and 50 <= neck_row <= 62 and 150 <= belly_row <= 165
-        heights = {p.kind + str(p.row < 100): p.height for p in result.sources}
-        true = {p.kind + str(p.row < 100): scene.depth[p.row, p.col] for p in result.sources}
-        main = result.sources[0]
+        heights = {p.kind + str(p.row < 100): p.height for p in result.singular_points}
+        true = {p.kind + str(p.row < 100): scene.depth[p.row, p.col] for p in result.singular_points}
+        main = result.singular_points[0]
         for key in heights:
             assert abs(heights[key] - (true[key] - scene.depth[main.row, main.col])) < 0.3
 
     def test_without_detection_the_brightest_pixel_is_used(self, scenes):
         scene = scenes["sphere"]
         result = eikonal_depth(scene.image, scene.mask, detect=False)
-        assert [p.origin for p in result.sources] == ["brightest"]
+        assert [p.origin for p in result.singular_points] == ["brightest"]
         assert errors(result, scene)[0] <= 0.5
 
-    def test_every_part_gets_a_source_and_its_own_zero(self):
+    def test_every_part_gets_a_singular_point_and_its_own_zero(self):
         left = synth.scene("sphere", size=64)
         image = np.hstack([left.image, 0.8 * left.image])  # the right one is dimmer
         mask = np.hstack([left.mask, left.mask])
-        result = eikonal_depth(image, mask, k=1.0)
+        result = eikonal_depth(image, mask, albedo=1.0)
         assert result.info["parts"] == 2
         assert np.isfinite(result.depth[mask]).all()
-        assert len(result.sources) == 2
-        assert {p.origin for p in result.sources} == {"detected", "brightest"}
-        for p in result.sources:
+        assert len(result.singular_points) == 2
+        assert {p.origin for p in result.singular_points} == {"detected", "brightest"}
+        for p in result.singular_points:
             assert result.depth[p.row, p.col] == 0
 
     def test_noise_is_capped_and_still_finishes(self):
         scene = synth.scene("sphere", size=96, noise=0.05, seed=1)
         result = eikonal_depth(scene.image, scene.mask)
         assert result.info["detected"] > MAX_DETECTED
-        assert len(result.sources) == MAX_DETECTED
+        assert len(result.singular_points) == MAX_DETECTED
         assert np.isfinite(result.depth[scene.mask]).all()
 
     def test_smoothing_finds_one_top_under_noise(self):
         scene = synth.scene("sphere", size=128, noise=0.01, seed=2)
         result = eikonal_depth(scene.image, scene.mask, smooth=2.0, tol=1e-2)
-        assert len(result.sources) == 1
+        assert len(result.singular_points) == 1
         assert metrics.depth_error(result.depth, scene.depth, scene.mask) < 2.0
 
     def test_cone_normals_kernel_matches_reference(self, scenes):
         scene = scenes["vase"]
         result = eikonal_depth(scene.image, scene.mask)
-        cos = np.where(scene.mask, scene.image / result.k, 0.0)
+        cos = np.where(scene.mask, scene.image / result.albedo, 0.0)
         mask = scene.mask.copy()
         mask[100:103, :] = False  # thin strips and isolated pixels: one-sided and no differences
         mask[60, 128] = True
@@ -288,11 +304,14 @@ class TestBadInput:
     def small(self):
         return synth.scene("sphere", size=32)
 
-    @pytest.mark.parametrize("image, message", [
-        ([[0.5, 0.5], [0.5, 0.5]], "numpy array"),
-        (np.zeros((4, 4, 3)), "one channel"),
-        (np.array([["a"]]), "numbers"),
-    ])
+    @pytest.mark.parametrize(
+        "image, message",
+        [
+            ([[0.5, 0.5], [0.5, 0.5]], "numpy array"),
+            (np.zeros((4, 4, 3)), "one channel"),
+            (np.array([["a"]]), "numbers"),
+        ],
+    )
     def test_bad_image(self, image, message):
         with pytest.raises(InputError, match=message):
             eikonal_depth(image, np.ones((4, 4), bool))
@@ -314,52 +333,67 @@ class TestBadInput:
         with pytest.raises(InputError, match="black"):
             eikonal_depth(np.zeros((32, 32)), small.mask)
 
-    @pytest.mark.parametrize("options, message", [
-        ({"k": 0}, "k must be > 0"),
-        ({"k": np.nan}, "k must be finite"),
-        ({"k": "1"}, "k must be a number"),
-        ({"tol": 0}, "tol must be > 0"),
-        ({"tol": 1.0}, "tol must be below 1"),
-        ({"smooth": -1}, "smooth must be >= 0"),
-        ({"steep": 0}, "steep must be > 0"),
-        ({"detect": "yes"}, "detect must be True or False"),
-    ])
+    @pytest.mark.parametrize(
+        "options, message",
+        [
+            ({"albedo": 0}, "albedo must be > 0"),
+            ({"albedo": np.nan}, "albedo must be a finite number"),
+            ({"albedo": "1"}, "albedo must be a finite number"),
+            ({"tol": 0}, r"tol must be in \(0, 1\)"),
+            ({"tol": 1.0}, r"tol must be in \(0, 1\)"),
+            ({"smooth": -1}, "smooth must be >= 0"),
+            ({"steep": 0}, "steep must be > 0"),
+            ({"detect": "yes"}, "detect must be True or False"),
+        ],
+    )
     def test_bad_options(self, small, options, message):
         with pytest.raises(InputError, match=message):
             eikonal_depth(small.image, small.mask, **options)
 
-    @pytest.mark.parametrize("sources, message", [
-        ([(0, 0)], "not on the object"),
-        ([(99, 3)], "not on the object"),
-        ([(16, 16, "peak")], "kind must be one of"),
-        ([(16,)], r"\(row, col\)"),
-        ([(16.5, 16)], "whole-number"),
-        ("16,16", "sequence"),
-    ])
-    def test_bad_sources(self, small, sources, message):
+    @pytest.mark.parametrize(
+        "references, message",
+        [
+            ([(0, 0)], "not on the object"),
+            ([(99, 3)], "not on the object"),
+            ([(16, 16, "peak")], "unknown reference kind"),
+            ([(16,)], r"\(row, col\)"),
+            ([(16.5, 16)], "whole number"),
+            ("16,16", "sequence"),
+        ],
+    )
+    def test_bad_references(self, small, references, message):
         with pytest.raises(InputError, match=message):
-            eikonal_depth(small.image, small.mask, sources=sources)
+            eikonal_depth(small.image, small.mask, references=references)
 
-    @pytest.mark.parametrize("concave, message", [
-        (np.ones((5, 5), bool), "shape"),
-        ((np.ones((32, 32), bool), np.ones((3, 3), bool)), "shape"),
-        ("both", "concave must be"),
-    ])
-    def test_bad_concave(self, small, concave, message):
+    @pytest.mark.parametrize(
+        "masks, message",
+        [
+            ({"concave_x": np.ones((5, 5), bool)}, "concave_x has shape"),
+            (
+                {"concave_x": np.ones((32, 32), bool), "concave_y": np.ones((3, 3), bool)},
+                "concave_y has shape",
+            ),
+            ({"concave_x": "both"}, "concave_x has shape"),
+        ],
+    )
+    def test_bad_concave_masks(self, small, masks, message):
         with pytest.raises(InputError, match=message):
-            eikonal_depth(small.image, small.mask, concave=concave)
+            eikonal_depth(small.image, small.mask, **masks)
 
     def test_messages_are_one_line(self, small):
         with pytest.raises(InputError) as err:
-            eikonal_depth(small.image, small.mask, sources=[(0, 0)])
+            eikonal_depth(small.image, small.mask, references=[(0, 0)])
         assert "\n" not in str(err.value)
 
-    @pytest.mark.parametrize("kwargs, message", [
-        ({"sources": []}, "at least one source"),
-        ({"sources": [(0, 0)]}, "not on the mask"),
-        ({"sources": [(16, 16)], "values": [0.0, 1.0]}, "one per source"),
-        ({"sources": [(16, 16)], "steep": -1}, "steep must be > 0"),
-    ])
+    @pytest.mark.parametrize(
+        "kwargs, message",
+        [
+            ({"sources": []}, "at least one source"),
+            ({"sources": [(0, 0)]}, "not on the mask"),
+            ({"sources": [(16, 16)], "values": [0.0, 1.0]}, "one per source"),
+            ({"sources": [(16, 16)], "steep": -1}, "steep must be > 0"),
+        ],
+    )
     def test_bad_arrival_times_input(self, small, kwargs, message):
         cos = small.image / small.image.max()
         with pytest.raises(InputError, match=message):

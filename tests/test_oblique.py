@@ -10,15 +10,6 @@ from shadeform.light import light_from_slant_tilt
 from shadeform.regions import concave_masks, parse_regions
 from shadeform.solvers.oblique import (
     SHADOW_NZ,
-    _cone_coefficients,
-    _cone_minimum,
-    _caps,
-    _Descent,
-    _double_normals,
-    _fit_pixel,
-    _gather,
-    _local_cost,
-    _serial,
     cone_sweep,
     cone_sweep_reference,
     fill_shadow_normals,
@@ -26,14 +17,20 @@ from shadeform.solvers.oblique import (
     march_cone_reference,
     oblique_depth,
 )
+from shadeform.solvers.oblique.caps import cap_datums
+from shadeform.solvers.oblique.descent import Descent, _cone_coefficients, _cone_minimum, _serial
+from shadeform.solvers.oblique.march import _fit_pixel, _fit_work, _gather, _local_cost
+from shadeform.solvers.oblique.solver import _double_normals
 
 LIGHT = (5.0, 5.0, 7.0)
 
 
 def errors(rec, scene):
     """The two numbers of ``shadeform evaluate``: depth % (offset fitted) and mean angle."""
-    return (metrics.depth_error(rec.depth, scene.depth, fit="offset"),
-            metrics.angular_error(rec.normals, scene.normals))
+    return (
+        metrics.depth_error(rec.depth, scene.depth, fit="offset"),
+        metrics.angular_error(rec.normals, scene.normals),
+    )
 
 
 class TestBars:
@@ -49,8 +46,13 @@ class TestBars:
 
     def test_vase_with_its_neck_marked(self):
         scene = synth.scene("vase", size=256, light=LIGHT)
-        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, method="oblique",
-                          concave=synth.concave_regions("vase", size=256))
+        rec = reconstruct(
+            scene.image,
+            mask=scene.mask,
+            light=scene.light,
+            method="oblique",
+            concave=synth.concave_regions("vase", size=256),
+        )
         depth, angle = errors(rec, scene)
         assert depth <= 4.0
         assert angle <= 6.0
@@ -64,8 +66,9 @@ class TestBars:
 
     def test_another_integrator_can_give_the_depth(self):
         scene = synth.scene("sphere", size=64, light=LIGHT)
-        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, method="oblique",
-                          integrator="poisson")
+        rec = reconstruct(
+            scene.image, mask=scene.mask, light=scene.light, method="oblique", integrator="poisson"
+        )
         assert rec.info["integrator"] == "poisson"
         assert errors(rec, scene)[0] < 3.0
 
@@ -79,8 +82,19 @@ class TestCoarseToFine:
         assert metrics.depth_error(result.depth, scene.depth, fit="offset") < 1.0
         assert metrics.angular_error(result.normals, scene.normals) < 1.0
         lit = result.lit
-        np.testing.assert_allclose(result.normals[lit] @ scene.light,
-                                   scene.image[lit] / scene.image[scene.mask].max(), atol=1e-9)
+        np.testing.assert_allclose(
+            result.normals[lit] @ scene.light, scene.image[lit] / scene.image[scene.mask].max(), atol=1e-9
+        )
+
+    def test_one_concave_axis_alone_goes_down_the_levels(self):
+        scene = synth.scene("bowl", size=64, light=LIGHT)
+        concave_y = np.zeros(scene.mask.shape, bool)
+        concave_y[:, :32] = True
+        result = oblique_depth(
+            scene.image, scene.mask, light=scene.light, concave_y=concave_y, coarse=40, iterations=0
+        )
+        assert result.info["levels"] == 2
+        assert np.isfinite(result.depth[scene.mask]).all()
 
     def test_doubled_normals_lie_on_their_cones(self):
         scene = synth.scene("sphere", size=64, light=LIGHT)
@@ -143,8 +157,7 @@ class TestKernels:
         concave = np.zeros(lit.shape, bool)
         concave[:8] = True
         fast = march_cone(cos_theta, lit, light=scene.light, sources=sources, concave_y=concave)
-        slow = march_cone_reference(cos_theta, lit, light=scene.light, sources=sources,
-                                    concave_y=concave)
+        slow = march_cone_reference(cos_theta, lit, light=scene.light, sources=sources, concave_y=concave)
         for a, b in zip(fast, slow):
             np.testing.assert_allclose(a, b, atol=1e-9, equal_nan=True)
         assert np.isfinite(fast[1][lit]).all()
@@ -172,10 +185,10 @@ class TestKernels:
         cos_theta = np.full(lit.shape, 0.9)
         cos_theta[seeds] = 1.0
         cos_theta[3:6, 2:7] = np.maximum(cos_theta[3:6, 2:7], 0.999)  # 4 px at 1e-3: 0.18 px
-        caps = _caps(seeds, cos_theta, lit)
+        caps = cap_datums(seeds, cos_theta, lit)
         assert caps[4, 2] == caps[4, 6] != caps[4, 30]  # 24 px at 0.1: up to 10.6 px
         cos_theta[3:6, 2:7] = np.where(seeds[3:6, 2:7], 1.0, 0.9)  # 4 px at 0.1: up to 1.8 px
-        caps = _caps(seeds, cos_theta, lit)
+        caps = cap_datums(seeds, cos_theta, lit)
         assert len({caps[4, 2], caps[4, 6], caps[4, 30]}) == 3
 
     def test_vase_belly_and_neck_are_separate_caps(self):
@@ -183,7 +196,7 @@ class TestKernels:
         cos_theta = scene.image / scene.image.max()
         lit = scene.mask & (cos_theta > 0)
         seeds = lit & (cos_theta >= 1 - 2e-3)
-        caps = _caps(seeds, cos_theta, lit)
+        caps = cap_datums(seeds, cos_theta, lit)
         assert len(np.unique(caps[seeds])) == 2
 
     def test_hinge_costs_only_a_turn_against_the_convexity(self):
@@ -199,8 +212,7 @@ class TestKernels:
         out = np.empty(1)
 
         def cost(phi, hinge, cx):
-            return _local_cost(phi, a0, a1, a2, nb, db, zb, wb, 1, 0.0, np.zeros(2), hinge, cx,
-                               1.0, out)
+            return _local_cost(phi, a0, a1, a2, nb, db, zb, wb, 1, 0.0, np.zeros(2), hinge, cx, 1.0, out)
 
         low, high = np.arcsin(-0.2), np.arcsin(0.3)  # n_x = -0.2 and 0.3 beside n_b,x = 0.1
         # convex along x: n_x must not exceed the right neighbour's
@@ -227,24 +239,27 @@ class TestKernels:
         convex_x = np.ones((3, 3))
         convex_y = np.ones((3, 3))
         convex_y[2] = -1.0  # the row below is marked concave along y
-        work = (np.empty((8, 3)), np.empty((8, 2)), np.empty(8), np.empty(8), np.empty(2))
+        state = (z, normals, done, datum)
+        convex = (convex_x, convex_y)
+        work = _fit_work()
         labels = np.empty(8, np.int64)
         gather = _gather if compiled else _gather.py_func
-        count, spans = gather(1, 1, z, normals, done, datum, convex_x, convex_y, kappa, *work[:4],
-                              labels, work[4])
+        count, spans = gather(1, 1, state, convex, kappa, work, labels)
         assert count == 8 and spans
         np.testing.assert_allclose(work[4], [0.0, -2.0 * kappa], atol=1e-15)
         # the local fit recomputes the pull over its datum's neighbours: the same, so on this
         # flat patch (the chords are symmetric in n_y) the fitted normal leans down the cone
         light = np.array([0.0, 0.0, 1.0])
-        cos_theta = np.full((3, 3), 0.95)
-        limits = np.full((3, 3), np.pi)
-        e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-        fit_work = work + (np.empty(3), np.empty(3), np.empty(3), np.empty(1))
+        cone = (
+            np.full((3, 3), 0.95),
+            np.full((3, 3), np.pi),
+            light,
+            np.array([1.0, 0.0, 0.0]),
+            np.array([0.0, 1.0, 0.0]),
+        )
         out = np.empty(6)
         fit = _fit_pixel if compiled else _fit_pixel.py_func
-        fit(1, 1, z, normals, done, datum, cos_theta, limits, light, e1, e2, convex_x, convex_y,
-            0.05, kappa, 0.0, 72, fit_work, labels, out)
+        fit(1, 1, state, cone, convex, (0.05, kappa, 0.0), 72, work, labels, out)
         assert out[1] < -0.3 and abs(out[0]) < 1e-6
 
     def test_sweep_matches_its_reference(self):
@@ -252,7 +267,7 @@ class TestKernels:
         mask = scene.mask
         cos_theta = np.where(mask, scene.image / scene.image.max(), 0.0)
         lit = mask & (cos_theta > 0)
-        descent = _Descent(mask, cos_theta, lit, scene.light, 0.01, 0.1)
+        descent = Descent(mask, cos_theta, lit, scene.light, 0.01, 0.1)
         box = descent.box
         rng = np.random.default_rng(1)
         normals = np.nan_to_num(scene.normals[box]) + 0.05 * rng.normal(size=descent.mask.shape + (3,))
@@ -266,9 +281,9 @@ class TestKernels:
         assert np.max(np.abs(fast - slow)) < 5e-3
         # and the sweep lowers the energy (block-coordinate descent)
         assert descent.energy(z, fast) < descent.energy(z, normals)
-        np.testing.assert_allclose((fast @ scene.light)[descent.lit], descent.cos_theta[descent.lit],
-                                   atol=1e-12)
-
+        np.testing.assert_allclose(
+            (fast @ scene.light)[descent.lit], descent.cos_theta[descent.lit], atol=1e-12
+        )
 
     def test_cone_coefficients_are_the_quadratic_up_to_a_constant(self):
         rng = np.random.default_rng(3)
@@ -310,13 +325,24 @@ class TestBadInput:
         with pytest.raises(InputError, match="z"):
             reconstruct(self.scene.image, mask=self.scene.mask, light=(1, 0, -1), method="oblique")
 
-    @pytest.mark.parametrize("options, message", [
-        ({"tol": 0}, "tol"), ({"tol": 1.5}, "tol"), ({"dark": 1.0}, "dark"),
-        ({"smooth": -1}, "smooth"), ({"shadow_weight": 0}, "shadow_weight"),
-        ({"iterations": -1}, "iterations"), ({"iterations": 2.5}, "iterations"),
-        ({"k": 0}, "k"), ({"concave": np.zeros((3, 3), bool)}, "concave"),
-        ({"k": 1e6, "dark": 0.5}, "shadow"), ({"coarse": 8}, "coarse"), ({"coarse": 1.5}, "coarse"),
-    ])
+    @pytest.mark.parametrize(
+        "options, message",
+        [
+            ({"tol": 0}, "tol"),
+            ({"tol": 1.5}, "tol"),
+            ({"dark": 1.0}, "dark"),
+            ({"smooth": -1}, "smooth"),
+            ({"shadow_weight": 0}, "shadow_weight"),
+            ({"iterations": -1}, "iterations"),
+            ({"iterations": 2.5}, "iterations"),
+            ({"albedo": 0}, "albedo"),
+            ({"concave_x": np.zeros((3, 3), bool)}, "concave_x"),
+            ({"concave_y": np.zeros((3, 3), bool)}, "concave_y"),
+            ({"albedo": 1e6, "dark": 0.5}, "shadow"),
+            ({"coarse": 8}, "coarse"),
+            ({"coarse": 1.5}, "coarse"),
+        ],
+    )
     def test_options(self, options, message):
         with pytest.raises(InputError, match=message):
             oblique_depth(self.scene.image, self.scene.mask, light=self.scene.light, **options)
@@ -326,7 +352,13 @@ class TestBadInput:
             oblique_depth(self.scene.image, np.ones((8, 8), bool), light=self.scene.light)
 
     def test_concave_masks_from_regions_are_accepted(self):
-        regions = concave_masks(parse_regions(synth.concave_regions("bowl", size=32)), (32, 32))
-        result = oblique_depth(self.scene.image, self.scene.mask, light=self.scene.light,
-                               concave=regions, iterations=0)
+        concave_x, concave_y = concave_masks(parse_regions(synth.concave_regions("bowl", size=32)), (32, 32))
+        result = oblique_depth(
+            self.scene.image,
+            self.scene.mask,
+            light=self.scene.light,
+            concave_x=concave_x,
+            concave_y=concave_y,
+            iterations=0,
+        )
         assert np.isfinite(result.depth[self.scene.mask]).all()

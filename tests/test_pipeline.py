@@ -1,5 +1,6 @@
 """reconstruct(): the 2002 pipeline end to end, and the issue's accuracy bars (256x256, light +z)."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -92,8 +93,8 @@ class TestReconstruct:
         assert rec.info["method_requested"] == "auto" and rec.info["method"] == "eikonal"
         assert set(rec.info["timings"]) >= {"mask", "normals", "depth"}
         assert rec.albedo == pytest.approx(scene.image.max())
-        with pytest.raises(Exception):
-            rec.depth = None  # frozen
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            rec.depth = None
 
     def test_auto_mask_matches_truth(self):
         scene = synth.scene("sphere", size=128)

@@ -29,6 +29,7 @@ _EXPORTS = {
     "load_depth": "shadeform.io.maps",
     "export": "shadeform.io.exporters",
     "available_formats": "shadeform.io.exporters",
+    "available_methods": "shadeform.solvers",
     "reconstruct": "shadeform.pipeline",
     "estimate_light": "shadeform.light",
     "LightEstimate": "shadeform.light",

@@ -119,7 +119,7 @@ def reconstruct(
     solver = None if method == AUTO else get_solver(method)
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
-    refine = whole(refine, "refine (iterations)")
+    refine = whole(refine, "refine")
     user_filter = parse_filter(filter) if filter else None
 
     mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
@@ -290,7 +290,7 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     True
     """
     image = _check_image(image)
-    step = whole(step, "step (pixels)", minimum=1)
+    step = whole(step, "step", minimum=1)
     mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
     _check_shading(image, mask)
     if step == 1:

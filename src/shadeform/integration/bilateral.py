@@ -269,7 +269,8 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
     if iterations > 0:
         (rr, rl, rd, ru), (sr, sl, sd, su) = residuals(u)
         energies.append(float(np.sum(wr * rr + wl * rl + wd * rd + wu * ru)))
-    for done in range(1, int(iterations) + 1):
+    for step in range(1, int(iterations) + 1):
+        done = step
         # a missing side counts as a zero difference: a pixel at the mask's edge keeps at most
         # 1/2 on its one equation, less where that side is steep (an occluding contour)
         sx = _sigmoid(sharpness * (sl - sr))

@@ -6,6 +6,7 @@ existing good file (``docs/conventions.md``, "Errors").
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import stat
@@ -81,7 +82,7 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
         permissions = 0o666 & ~_UMASK
     text_options = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
 
-    tmp = tempfile.NamedTemporaryFile(
+    tmp = tempfile.NamedTemporaryFile(  # noqa: SIM115 (the with below closes it)
         mode=mode,
         delete=False,
         dir=parent,
@@ -135,10 +136,8 @@ class OutputSet:
     def __exit__(self, *exc) -> None:
         self._discard()
         if self._made_folder is not None and exc[0] is not None:
-            try:
+            with contextlib.suppress(OSError):
                 self._made_folder.rmdir()  # only if still empty
-            except OSError:
-                pass
 
     def make_folder(self, folder: Path) -> None:
         """Create ``folder`` (and parents) if missing; removed again if the command fails."""

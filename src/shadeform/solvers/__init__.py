@@ -184,13 +184,13 @@ register(Solver(
                 "unless marked, refined for integrability",
 ))
 register(Solver(
-    "eikonal", "shadeform.solvers._adapters:solve_eikonal", lights="frontal", depth="eikonal (fast-marching depth)",
+    "eikonal", "shadeform.solvers.eikonal:solve", lights="frontal", depth="eikonal (fast-marching depth)",
     auto=0, max_noise=NOISY,
     description="fast marching from the bright caps and marked dents (light at the camera only); "
                 "the most accurate on clean images",
 ))
 register(Solver(
-    "oblique", "shadeform.solvers._adapters:solve_oblique", lights="any", depth="oblique (chord-equation descent depth)",
+    "oblique", "shadeform.solvers.oblique:solve", lights="any", depth="oblique (chord-equation descent depth)",
     preview_pixels=2_500, denoise="gaussian:2", auto=1,
     description="any light, with attached shadows: marching from the brightest pixels, then descent",
 ))
