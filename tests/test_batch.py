@@ -11,10 +11,10 @@ import pytest
 import trimesh
 
 import shadeform
-from shadeform import cli, synth
+from shadeform import synth
 from shadeform.batch import reconstruct_files
 from shadeform.errors import InputError
-from shadeform.io.maps import load_depth
+from shadeform.io.maps import load_depth, save_gray
 
 
 
@@ -24,7 +24,7 @@ def photos(tmp_path_factory) -> list[Path]:
     paths = []
     for name in ("sphere", "ellipsoid", "vase"):
         path = folder / f"{name}.png"
-        cli._write_gray_png(synth.scene(name, size=48).image, path, bitdepth=16)
+        save_gray(synth.scene(name, size=48).image, path, bitdepth=16)
         paths.append(path)
     return paths
 
@@ -54,7 +54,7 @@ class TestReconstructFiles:
         path = tmp_path / "srgb.png"
         encoded = np.where(scene.image <= 0.0031308, 12.92 * scene.image,
                            1.055 * scene.image ** (1 / 2.4) - 0.055)
-        cli._write_gray_png(encoded, path, bitdepth=16)
+        save_gray(encoded, path, bitdepth=16)
         reconstruct_files([path], out, suffix=".ply", depth=True, srgb=True, workers=1)
         linear = shadeform.reconstruct(shadeform.preprocess.srgb_to_linear(shadeform.load_image(path)))
         np.testing.assert_allclose(load_depth(out / "srgb_depth.tiff"), linear.depth, atol=1e-4,
@@ -62,7 +62,7 @@ class TestReconstructFiles:
 
     def test_a_bad_photo_fails_alone(self, photos, out, tmp_path):
         bad = tmp_path / "black.png"
-        cli._write_gray_png(np.zeros((20, 20)), bad, bitdepth=8)
+        save_gray(np.zeros((20, 20)), bad, bitdepth=8)
         old = out / "black.glb"
         old.write_bytes(b"a good model from before")
         results = reconstruct_files([photos[0], bad], out, workers=1)

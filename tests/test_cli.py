@@ -29,7 +29,7 @@ from shadeform import cli, metrics, synth
 from shadeform.cli import app
 from shadeform.errors import InputError
 from shadeform.examples import EXAMPLES, load_example
-from shadeform.io.maps import load_depth, load_normal_map
+from shadeform.io.maps import load_depth, load_normal_map, save_gray
 
 FORMATS = tuple(shadeform.available_formats())
 SIZE = 40  # side of the synthetic test image: small, so each run takes milliseconds
@@ -535,7 +535,7 @@ def photo_set(tmp_path_factory) -> dict:
     photos = []
     for i, light in enumerate(lights):
         path = folder / f"{i:03d}.png"
-        cli._write_gray_png(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path,
+        save_gray(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path,
                             bitdepth=16)
         photos.append(path)
     np.savetxt(folder / "light_directions.txt", lights)
@@ -608,7 +608,7 @@ class TestStereo:
 
     def test_photos_of_different_sizes(self, photo_set, inputs, out):
         odd = inputs / "odd.png"
-        cli._write_gray_png(np.ones((SIZE, SIZE + 3)) * 0.5, odd, bitdepth=8)
+        save_gray(np.ones((SIZE, SIZE + 3)) * 0.5, odd, bitdepth=8)
         result = invoke("stereo", *photo_set["photos"][:5], odd, "--lights", photo_set["lights"],
                         "-o", out / "m.glb")
         assert_fails(result, out, "one still camera")
@@ -624,8 +624,8 @@ class TestSrgb:
     def test_reconstruct(self, tmp_path, out):
         scene = synth.scene("sphere", size=64)
         path, mask = tmp_path / "photo.png", tmp_path / "mask.png"
-        cli._write_gray_png(self.encoded(scene.image), path, bitdepth=8)
-        cli._write_gray_png(scene.mask.astype(float), mask, bitdepth=8)
+        save_gray(self.encoded(scene.image), path, bitdepth=8)
+        save_gray(scene.mask.astype(float), mask, bitdepth=8)
         errors = {}
         for flag in ((), ("--srgb",)):
             normals = out / f"n{len(flag)}.png"
@@ -641,7 +641,7 @@ class TestSrgb:
         folder.mkdir()
         for photo in photo_set["photos"]:
             linear = shadeform.load_image(photo)
-            cli._write_gray_png(self.encoded(linear), folder / photo.name, bitdepth=8)
+            save_gray(self.encoded(linear), folder / photo.name, bitdepth=8)
         errors = {}
         scene = photo_set["scene"]
         inner = scene.mask & (scene.normals[..., 2] > 0.3)

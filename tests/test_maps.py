@@ -11,7 +11,8 @@ import tifffile
 from PIL import Image
 
 from shadeform.errors import InputError
-from shadeform.io.maps import load_depth, load_normal_map, save_depth, save_normal_map
+from shadeform.io.images import load_image
+from shadeform.io.maps import load_depth, load_normal_map, save_depth, save_gray, save_normal_map
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 CAT = DATA / "diligent-normals" / "cat"
@@ -225,3 +226,31 @@ class TestLoadDepth:
         np.save(tmp_path / "cube.npy", np.zeros((2, 2, 2)))
         with pytest.raises(InputError, match=r"shape \(2, 2, 2\)"):
             load_depth(tmp_path / "cube.npy")
+
+
+class TestSaveGray:
+    @pytest.mark.parametrize("bitdepth", [8, 16])
+    def test_round_trip_through_an_independent_reader(self, tmp_path, bitdepth):
+        ramp = np.linspace(0.0, 1.0, 40 * 30).reshape(30, 40)
+        path = save_gray(ramp, tmp_path / "ramp.png", bitdepth=bitdepth)
+        stored = np.asarray(Image.open(path), dtype=np.float64) / (2**bitdepth - 1)
+        np.testing.assert_allclose(stored, ramp, atol=0.5 / (2**bitdepth - 1) + 1e-12)
+        np.testing.assert_allclose(load_image(path), ramp, atol=0.5 / (2**bitdepth - 1) + 1e-6)
+
+    def test_clips_and_takes_a_mask(self, tmp_path):
+        values = np.array([[-1.0, 0.5], [2.0, 1.0]])
+        stored = np.asarray(Image.open(save_gray(values, tmp_path / "c.png", bitdepth=8)))
+        np.testing.assert_array_equal(stored, [[0, 128], [255, 255]])
+        mask = np.array([[True, False], [False, True]])
+        stored = np.asarray(Image.open(save_gray(mask, tmp_path / "m.png", bitdepth=8)))
+        np.testing.assert_array_equal(stored, [[255, 0], [0, 255]])
+
+    @pytest.mark.parametrize(("image", "name", "bitdepth", "message"), [
+        (np.zeros((4, 4)), "x.jpg", 8, ".png"),
+        (np.zeros((4, 4)), "x.png", 12, "bitdepth must be 8 or 16"),
+        (np.zeros((4, 4, 3)), "x.png", 8, "must be (H, W)"),
+    ])
+    def test_bad_input_writes_nothing(self, tmp_path, image, name, bitdepth, message):
+        with pytest.raises(InputError, match=message.replace("(", r"\(").replace(")", r"\)")):
+            save_gray(image, tmp_path / name, bitdepth=bitdepth)
+        assert list(tmp_path.iterdir()) == []

@@ -164,19 +164,6 @@ def _check_suffix(path: Path, allowed, what: str) -> None:
         raise InputError(f"cannot write {what} '{path.name}': {given}; use one of {', '.join(allowed)}")
 
 
-def _write_gray_png(image: np.ndarray, path: Path, *, bitdepth: int) -> None:
-    """An (H, W) image in [0, 1] as an 8- or 16-bit grey PNG, written atomically."""
-    import png
-
-    from shadeform.io.atomic import atomic_write
-
-    top = 2**bitdepth - 1
-    samples = np.rint(np.clip(image, 0.0, 1.0) * top).astype(">u2" if bitdepth == 16 else np.uint8)
-    writer = png.Writer(width=image.shape[1], height=image.shape[0], greyscale=True, bitdepth=bitdepth)
-    with atomic_write(path) as file_obj:
-        writer.write_packed(file_obj, (row.tobytes() for row in samples))
-
-
 def _write_rgb_png(pixels: np.ndarray, path: Path) -> None:
     """An (H, W, 3) uint8 picture as a PNG, written atomically."""
     from PIL import Image
@@ -566,7 +553,7 @@ def synth(
     STEM_normals.png (16-bit normal map).
     """
     from shadeform import synth as synth_module
-    from shadeform.io.maps import save_depth, save_normal_map
+    from shadeform.io.maps import save_depth, save_gray, save_normal_map
 
     _check_suffix(output, (".png",), "the image to")
     if depth_format not in ("npy", "tiff"):
@@ -583,8 +570,8 @@ def synth(
     }
     with OutputSet() as outputs:
         temps = {key: outputs.temp(path) for key, path in targets.items()}
-        _write_gray_png(rendered.image, temps["image"], bitdepth=16)
-        _write_gray_png(rendered.mask.astype(np.float64), temps["mask"], bitdepth=8)
+        save_gray(rendered.image, temps["image"], bitdepth=16)
+        save_gray(rendered.mask.astype(np.float64), temps["mask"], bitdepth=8)
         save_depth(rendered.depth, temps["depth"])
         save_normal_map(rendered.normals, temps["normals"])
         outputs.commit()
@@ -757,7 +744,7 @@ def demo(
     """Reconstruct a shipped example photo: writes meshes, the normal map and result.png."""
     import shadeform
     from shadeform.examples import load_example
-    from shadeform.io.maps import save_normal_map
+    from shadeform.io.maps import save_gray, save_normal_map
     from shadeform.render import result_picture
 
     err = _stderr()
@@ -784,7 +771,7 @@ def demo(
     with _step(err, "writing files", timings, "write"), OutputSet() as outputs:
         outputs.make_folder(out)
         temps = {name: outputs.temp(out / name) for name, _ in files}
-        _write_gray_png(image, temps["input.png"], bitdepth=16)
+        save_gray(image, temps["input.png"], bitdepth=16)
         save_normal_map(rec.normals, temps["normals.png"])
         for name in ("model.wrl", "model.iv", "model.glb"):
             shadeform.export(mesh, temps[name])

@@ -48,6 +48,9 @@ from shadeform._checks import check_choice, check_mask
 from shadeform.errors import InputError
 
 METHODS = ("robust", "least_squares")
+# The robust fit's thresholds below were chosen on synthetic Blinn-Phong spheres
+# (benchmarks/bench_stereo.py), not on the real photos it is reported on.
+
 #: Smallest ``n . l`` of an image the robust fit uses: dimmer readings are shadowed or grazing.
 MIN_SHADING = 0.1
 #: Degrees: an image whose half vector lies within this of the normal may hold a highlight.

@@ -56,14 +56,9 @@ from shadeform.integration._multigrid import PairHierarchy
 
 #: Smallest equation scale ``a / f`` (``n_z`` orthographic, ``|d|`` perspective): caps the slope a
 #: normal implies at ``1 / MIN_SCALE`` (as ``MIN_NZ`` does for the Poisson integrator), so the
-#: nearly grazing normals at occluding contours cannot pull the surface around. Chosen on
-#: DiLiGenT, to which the result is sensitive (benchmarks/results/diligent.md): 0.1 favours
-#: buddha, 0.15 bear, cat and pot1; 0.12 is the compromise, at or below BiNI's published MADE on
-#: all six objects. Without the clamp these are BiNI's own equations, and their IRLS fixed point
-#: (each step solved exactly) is worse than BiNI's published figures on four of the six objects;
-#: BiNI's loose CG (Jacobi, 1e-3 per step) stops short of that point. The errors left sit in the
-#: offsets of whole parts across occluding contours (bear's head against its body, reading's
-#: book), which the normals there, nearly grazing, barely determine.
+#: nearly grazing normals at occluding contours cannot pull the surface around. Chosen on the six
+#: DiLiGenT objects of ``benchmarks/results/diligent.md`` (bear, buddha, cat, cow, pot1, reading),
+#: which also holds the sweep and why the clamp is needed.
 MIN_SCALE = 0.12
 #: Conjugate-gradient iterations per solve at most.
 MAX_CG = 500

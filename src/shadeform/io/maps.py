@@ -86,6 +86,38 @@ def save_normal_map(normals: np.ndarray, path: str | os.PathLike[str]) -> Path:
     return path
 
 
+def save_gray(image: np.ndarray, path: str | os.PathLike[str], *, bitdepth: int = 16) -> Path:
+    """Write a one-channel image in [0, 1] (a photo, a mask) as an 8- or 16-bit grey PNG.
+
+    Parameters
+    ----------
+    image : (H, W) float
+        Values in [0, 1]; outside that range they are clipped. A bool mask gives 0 and full white.
+    path : str or path-like
+        A ``.png`` file, written atomically.
+    bitdepth : {8, 16}, keyword-only
+        Bits per sample.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    path = Path(path)
+    _check_png_suffix(path)
+    if bitdepth not in (8, 16):
+        raise InputError(f"bitdepth must be 8 or 16, got {bitdepth!r}")
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim != 2:
+        raise InputError(f"a grey image must be (H, W), got shape {image.shape}")
+    top = 2**bitdepth - 1
+    samples = np.rint(np.clip(image, 0.0, 1.0) * top).astype(">u2" if bitdepth == 16 else np.uint8)
+    writer = png.Writer(width=image.shape[1], height=image.shape[0], greyscale=True, bitdepth=bitdepth)
+    with atomic_write(path) as file_obj:
+        writer.write_packed(file_obj, (row.tobytes() for row in samples))
+    return path
+
+
 def _read_png(path: Path) -> tuple[np.ndarray, int]:
     """Pixels ``(H, W, planes)`` as unsigned integers and the bit depth."""
     if not path.is_file():
