@@ -12,7 +12,7 @@ The grid is method x scene x light x noise:
 - lights: +z, and slant 30 and 45 degrees at tilt 45 degrees (from the upper right);
 - noise: Gaussian, 0, 1% and 3% of the albedo (seed 0).
 
-Errors are those of ``shadeform evaluate`` (``src/shadeform/cli.py``): RMSE of the depth as a
+Errors are those of ``shadeform evaluate`` (``src/shadeform/cli/tools.py``): RMSE of the depth as a
 percent of the true depth range after fitting the free offset
 (:func:`shadeform.metrics.depth_error`), and the mean angle between recovered and true normals
 (:func:`shadeform.metrics.angular_error`). A method that refuses a light with

@@ -25,7 +25,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 import shadeform
-from shadeform import cli, metrics, synth
+from shadeform import metrics, synth
 from shadeform.cli import app
 from shadeform.errors import InputError
 from shadeform.examples import EXAMPLES, load_example
@@ -226,7 +226,7 @@ class TestBadOutputs:
                     raise PermissionError(errno.EACCES, "Permission denied", str(dst))
             return real_replace(src, dst)
 
-        monkeypatch.setattr(cli.os, "replace", flaky_replace)
+        monkeypatch.setattr(os, "replace", flaky_replace)
         assert_fails(invoke(*reconstruct_args(sphere["image"], out)), out, "permission denied")
         assert len(finals) == 2
 

@@ -256,9 +256,8 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     solve runs. Filter sizes, references and concave regions are carried to
     the coarse grid; depth is scaled back to pixels of the input image. A bright cap that falls
     between grid points (a singular point on a thin rim or on the object's top row) is kept at the
-    nearest grid point, so the solvers still start from it (vase 256 px, eikonal, step 2: 0.12 %
-    depth error, 6.3 % without). Other features narrower than the grid are lost until the full
-    result replaces the preview.
+    nearest grid point, so the solvers still start from it. Other features narrower than the grid
+    are lost until the full result replaces the preview.
 
     Parameters
     ----------
@@ -332,8 +331,8 @@ def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:
     solver's tolerance of the object's brightest value, where the eikonal and oblique solvers
     find their singular points) that no grid point samples (the vase's lip on the top row, a thin
     rim) gives its brightest value to the grid point on the object nearest to it. Without it the
-    quick look loses that singular point and marches the region from elsewhere (vase 256 px,
-    step 2: 6.3 % depth error)."""
+    quick look loses that singular point and marches the region from elsewhere (the tests bound
+    the vase's and the bumps' quick looks)."""
     from scipy.spatial import cKDTree
 
     from shadeform.solvers.eikonal import TOL

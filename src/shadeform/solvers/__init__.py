@@ -178,6 +178,10 @@ def is_frontal(light) -> bool:
     return bool(np.allclose(np.asarray(light, dtype=np.float64), (0.0, 0.0, 1.0), atol=1e-6))
 
 
+# The built-in solvers. "auto" ranks and noise limits: the best measured on the synthetic scenes of
+# benchmarks/results/methods.md. Preview budgets: about 0.1 s of solver time on one core of the
+# 2-core machine of benchmarks/results/app.md (the oblique descent costs ~50x more per pixel than
+# fast marching on grids this small).
 register(Solver(
     "propagation", "shadeform.solvers.propagation:solve", lights="any", integrator="paths",
     description="the 2002 ModelBuilder method: normals grown from the brightest pixel, convex "

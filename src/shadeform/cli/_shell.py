@@ -1,0 +1,268 @@
+"""The command line's shell: the typer app, the one error handler, and the helpers and option
+types its commands share (printing, timing, output files written together or not at all)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperGroup
+
+from shadeform.errors import InputError
+from shadeform.integration import available_integrators
+from shadeform.io.atomic import OutputSet
+from shadeform.solvers import available_methods
+
+#: Exit code of every user error (the same as a command-line usage error).
+USAGE_EXIT = 2
+
+# File kinds the side outputs accept (docs/conventions.md: normal maps are 16-bit PNG; depth maps
+# float32 TIFF or .npy, see shadeform.io.maps.save_depth).
+NORMAL_SUFFIXES = (".png",)
+DEPTH_SUFFIXES = (".tif", ".tiff", ".npy")
+
+
+class _Group(TyperGroup):
+    """The app's command group; the one place where errors become ``error: ...`` and exit 2."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except InputError as err:
+            message = str(err)
+        except json.JSONDecodeError as err:
+            message = f"invalid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
+        except OSError as err:
+            message = _os_error_message(err)
+        typer.echo(f"error: {' '.join(message.split())}", err=True)
+        raise typer.Exit(USAGE_EXIT)
+
+
+def _os_error_message(err: OSError) -> str:
+    where = f" '{err.filename}'" if err.filename else ""
+    if isinstance(err, FileNotFoundError):
+        return f"no such file or folder{where}; check the path"
+    if isinstance(err, PermissionError):
+        return f"permission denied{where}; check the file's and folder's permissions"
+    if isinstance(err, IsADirectoryError):
+        return f"{where.strip()} is a folder; give a file name"
+    reason = err.strerror or type(err).__name__
+    return f"{reason}{where}"
+
+
+app = typer.Typer(
+    cls=_Group,
+    name="shadeform",
+    help="Recover 3D shape from a photo by shading: normals, depth map, mesh.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_show_locals=False,
+)
+
+
+def main() -> None:
+    """Console-script entry point (``[project.scripts] shadeform``)."""
+    app(prog_name="shadeform")
+
+
+# --- small helpers -----------------------------------------------------------------------------
+
+
+def stdout_console() -> Console:
+    # soft wrap: lines (paths!) are never cut or broken by rich; the terminal wraps them
+    console = Console(highlight=False, soft_wrap=True)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = 120  # piped or captured: rich would assume 80 columns and wrap the tables
+    return console
+
+
+def stderr_console() -> Console:
+    return Console(stderr=True, highlight=False)
+
+
+@contextmanager
+def stage(console: Console, text: str, timings: dict[str, float], name: str) -> Iterator[None]:
+    """Show a spinner on stderr while a long step runs and record its wall time."""
+    start = time.perf_counter()
+    with console.status(text, spinner="dots"):
+        yield
+    timings[name] = time.perf_counter() - start
+
+
+def resolve_light(light: str | None, slant: float | None, tilt: float | None) -> np.ndarray | str:
+    from shadeform.light import as_light, light_from_slant_tilt, parse_light
+
+    if light is not None and (slant is not None or tilt is not None):
+        raise InputError("give the light either as --light X,Y,Z or as --slant/--tilt, not both")
+    if light is not None:
+        return "estimate" if light.strip().lower() == "estimate" else parse_light(light)
+    if tilt is not None and slant is None:
+        raise InputError("--tilt needs --slant too (the angle of the light from the viewing direction)")
+    if slant is not None:
+        return light_from_slant_tilt(slant, 0.0 if tilt is None else tilt)
+    return as_light((0.0, 0.0, 1.0))
+
+
+def parse_reference(text: str) -> tuple:
+    """``"ROW,COL"`` or ``"ROW,COL,NX,NY,NZ"`` -> a reference for :func:`shadeform.reconstruct`."""
+    usage = (
+        "give ROW,COL (pixel row and column counted from 0 at the top left, e.g. '40,52'), "
+        "or ROW,COL,NX,NY,NZ to give its normal too"
+    )
+    parts = [part.strip() for part in text.split(",")]
+    if len(parts) not in (2, 5):
+        raise InputError(f"bad --reference {text!r}: {usage}")
+    try:
+        row, col = int(parts[0]), int(parts[1])
+    except ValueError:
+        raise InputError(f"bad --reference {text!r}: row and column must be whole numbers; {usage}") from None
+    if len(parts) == 2:
+        return (row, col)
+    try:
+        normal = tuple(float(part) for part in parts[2:])
+    except ValueError:
+        raise InputError(f"bad --reference {text!r}: the normal must be three numbers; {usage}") from None
+    return (row, col, normal)
+
+
+def check_suffix(path: Path, allowed, what: str) -> None:
+    if path.suffix.lower() not in allowed:
+        given = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
+        raise InputError(f"cannot write {what} '{path.name}': {given}; use one of {', '.join(allowed)}")
+
+
+def write_rgb_png(pixels: np.ndarray, path: Path) -> None:
+    """An (H, W, 3) uint8 picture as a PNG, written atomically."""
+    from PIL import Image
+
+    from shadeform.io.atomic import atomic_write
+
+    with atomic_write(path) as file_obj:
+        Image.fromarray(pixels, mode="RGB").save(file_obj, format="PNG", optimize=True)
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON types (tuples -> lists, numpy scalars -> numbers, non-finite -> null)."""
+    if isinstance(value, dict):
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [jsonable(item) for item in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def print_json(document: dict) -> None:
+    typer.echo(json.dumps(jsonable(document), indent=2))
+
+
+def format_seconds(value: float) -> str:
+    return f"{value:.2f} s" if value >= 0.01 else f"{value * 1000:.1f} ms"
+
+
+def format_vector(values) -> str:
+    return "(" + ", ".join(f"{float(v):.3g}" for v in values) + ")"
+
+
+def print_files(console: Console, rows: list[tuple[Path, str]]) -> None:
+    """One line per file, path first; never wrapped or shortened, so it can be copied."""
+    width = max(len(str(path)) for path, _ in rows)
+    for path, what in rows:
+        console.print(f"  [bold]{escape(str(path).ljust(width))}[/]  {escape(what)}")
+
+
+# --- reconstruct -------------------------------------------------------------------------------
+
+
+def check_outputs(output: Path, depth: Path | None, normals: Path | None) -> None:
+    """The suffixes of the mesh and of the optional depth and normal maps."""
+    from shadeform.io.exporters import available_formats
+
+    check_suffix(output, tuple(available_formats()), "a mesh to")
+    if depth is not None:
+        check_suffix(depth, DEPTH_SUFFIXES, "a depth map to")
+    if normals is not None:
+        check_suffix(normals, NORMAL_SUFFIXES, "a normal map to")
+
+
+def output_temps(outputs: OutputSet, *targets: Path | None) -> dict[Path, Path]:
+    """Temporary paths for the mesh and the optional maps, taken before any work so that a bad
+    output path fails first."""
+    return {target: outputs.temp(target) for target in targets if target is not None}
+
+
+def write_model(
+    err: Console,
+    timings: dict[str, float],
+    rec,
+    temps: dict[Path, Path],
+    *,
+    step: int,
+    output: Path,
+    depth: Path | None,
+    normals: Path | None,
+):
+    """Mesh a reconstruction and write it, and the depth and normal maps asked for, to their
+    temporaries; returns the mesh and the (file, description) rows to print."""
+    import shadeform
+    from shadeform.io.maps import save_depth, save_normal_map
+
+    with stage(err, "building the mesh", timings, "mesh"):
+        mesh = shadeform.to_mesh(rec, step=step)
+    with stage(err, "writing files", timings, "write"):
+        shadeform.export(mesh, temps[output])
+        written = [(output, shadeform.available_formats()[output.suffix.lower()])]
+        if depth is not None:
+            save_depth(rec.depth, temps[depth])
+            written.append((depth, "depth map, pixel units, NaN off the object"))
+        if normals is not None:
+            save_normal_map(rec.normals, temps[normals])
+            written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+    return mesh, written
+
+
+# options shared by the commands that build meshes
+StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
+MethodOption = Annotated[
+    str,
+    typer.Option(help=f"Solver: {', '.join(available_methods())} (`shadeform methods` says what each does)."),
+]
+IntegratorOption = Annotated[
+    str | None,
+    typer.Option(
+        help=f"Depth from normals: {', '.join(available_integrators())} (default: the solver's own)."
+    ),
+]
+RefineOption = Annotated[
+    int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")
+]
+SrgbOption = Annotated[
+    bool,
+    typer.Option(
+        "--srgb", help="Undo the sRGB encoding of 8-bit photos (JPEG) first: shading needs linear light."
+    ),
+]
+FilterOption = Annotated[
+    str | None,
+    typer.Option(
+        "--filter",
+        metavar="KIND:SIZE",
+        help="Smoothing: gaussian:SIGMA, mean:R, median:R, minimum:R or none.",
+    ),
+]

@@ -1,0 +1,400 @@
+"""The commands that turn photos into models: ``reconstruct`` (one photo), ``stereo`` (several
+photos under known lights) and ``batch`` (many photos in parallel)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from shadeform.cli._shell import (
+    FilterOption,
+    IntegratorOption,
+    MethodOption,
+    RefineOption,
+    SrgbOption,
+    StepOption,
+    app,
+    check_outputs,
+    format_seconds,
+    format_vector,
+    output_temps,
+    parse_reference,
+    print_files,
+    print_json,
+    resolve_light,
+    stage,
+    stderr_console,
+    stdout_console,
+    write_model,
+)
+from shadeform.integration import available_integrators
+from shadeform.io.atomic import OutputSet
+
+
+@app.command()
+def reconstruct(
+    image: Annotated[
+        Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o", "--output", help="Mesh file; the suffix picks the format (see `shadeform formats`)."
+        ),
+    ],
+    step: StepOption = 1,
+    filter: FilterOption = None,
+    light: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,Z",
+            help='Direction toward the light in the camera frame, or "estimate" to estimate it from the image; 0,0,1 if not given.',
+        ),
+    ] = None,
+    slant: Annotated[
+        float | None, typer.Option(metavar="DEGREES", help="Light slant: angle from the viewing direction.")
+    ] = None,
+    tilt: Annotated[
+        float | None,
+        typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant."),
+    ] = None,
+    channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
+    srgb: SrgbOption = False,
+    concave: Annotated[
+        Path | None,
+        typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False),
+    ] = None,
+    reference: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--reference",
+            metavar="ROW,COL",
+            help="Reference pixel ROW,COL (or ROW,COL,NX,NY,NZ with its normal); repeat for several.",
+            show_default=False,
+        ),
+    ] = None,
+    mask: Annotated[
+        Path | None,
+        typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
+    ] = None,
+    depth: Annotated[
+        Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
+    ] = None,
+    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
+    ] = False,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
+) -> None:
+    """Reconstruct a mesh from one photo of a matte object under one light."""
+    import shadeform
+    from shadeform.preprocess import srgb_to_linear
+    from shadeform.regions import parse_regions
+
+    # everything the user typed is checked before any work
+    check_outputs(output, depth, normals)
+    light_vector = resolve_light(light, slant, tilt)
+    references = [parse_reference(text) for text in reference or ()]
+    regions = parse_regions(concave) if concave is not None else None
+
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        temps = output_temps(outputs, output, depth, normals)
+        with stage(err, f"loading {escape(str(image))}", timings, "load"):
+            pixels = shadeform.load_image(image, channel=channel)
+            if srgb:
+                pixels = srgb_to_linear(pixels)
+            object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
+        with stage(err, f"reconstructing ({method})", timings, "reconstruct"):
+            rec = shadeform.reconstruct(
+                pixels,
+                light=light_vector,
+                method=method,
+                mask=object_mask,
+                filter=filter,
+                references=references or None,
+                concave=regions,
+                integrator=integrator,
+                refine=refine,
+            )
+        mesh, written = write_model(
+            err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+        )
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+
+    height, width = pixels.shape
+    if as_json:
+        print_json(
+            {
+                "command": "reconstruct",
+                "input": {"path": image, "width": width, "height": height, "channel": channel},
+                "files": {"mesh": output, "depth": depth, "normals": normals},
+                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
+                "object_pixels": int(rec.mask.sum()),
+                "light": rec.light,
+                "info": rec.info,
+                "timings": timings,
+            }
+        )
+        return
+
+    out = stdout_console()
+    info = rec.info
+    refs = ", ".join(f"({r}, {c})" for r, c in info["references"])
+    stages = ", ".join(f"{name} {format_seconds(t)}" for name, t in info["timings"].items())
+    out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {channel})")
+    out.print(
+        f"  {info['method']} (refine {info['refine']}), {info['integrator']} integration, "
+        f"filter {info['filter']}, light {format_vector(rec.light)}"
+    )
+    out.print(
+        f"  object {int(rec.mask.sum()):,} pixels in {info['parts']} part(s), reference pixel(s) {refs}"
+    )
+    out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
+    out.print(
+        f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
+        f"reconstruct {format_seconds(timings['reconstruct'])} ({stages}), mesh {format_seconds(timings['mesh'])}, "
+        f"write {format_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, written)
+
+
+# --- stereo ------------------------------------------------------------------------------------
+
+
+@app.command()
+def stereo(
+    sources: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Three or more photos under different lights, or one folder holding "
+            "them with light_directions.txt (and optionally filenames.txt, "
+            "light_intensities.txt, mask.png).",
+            show_default=False,
+        ),
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o", "--output", help="Mesh file; the suffix picks the format (see `shadeform formats`)."
+        ),
+    ],
+    lights: Annotated[
+        Path | None,
+        typer.Option(help="Text file: one direction toward the light per photo (x y z, camera frame)."),
+    ] = None,
+    intensities: Annotated[
+        Path | None,
+        typer.Option(help="Text file: each photo's light strength (one number, or R G B, per photo)."),
+    ] = None,
+    mask: Annotated[
+        Path | None,
+        typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
+    ] = None,
+    method: Annotated[
+        str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")
+    ] = "robust",
+    integrator: Annotated[
+        str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")
+    ] = "poisson",
+    step: StepOption = 1,
+    srgb: SrgbOption = False,
+    depth: Annotated[
+        Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
+    ] = None,
+    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
+    ] = False,
+) -> None:
+    """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
+    from shadeform._checks import check_choice
+    from shadeform.io.photoset import load_photo_set
+    from shadeform.photometric import METHODS, reconstruct_stereo
+
+    # everything the user typed is checked before the photos are read
+    check_outputs(output, depth, normals)
+    check_choice(method, METHODS, "method")
+    check_choice(integrator, tuple(available_integrators()), "integrator")
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        temps = output_temps(outputs, output, depth, normals)
+        with stage(err, "loading the photos", timings, "load"):
+            photos = load_photo_set(sources, lights=lights, intensities=intensities, mask=mask, srgb=srgb)
+        with stage(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
+            rec = reconstruct_stereo(
+                photos.images,
+                photos.lights,
+                photos.mask,
+                intensities=photos.intensities,
+                method=method,
+                integrator=integrator,
+            )
+        mesh, written = write_model(
+            err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+        )
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+
+    height, width = rec.shape
+    if as_json:
+        print_json(
+            {
+                "command": "stereo",
+                "input": {"photos": [str(p) for p in photos.paths], "width": width, "height": height},
+                "files": {"mesh": output, "depth": depth, "normals": normals},
+                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
+                "object_pixels": int(rec.mask.sum()),
+                "info": rec.info,
+                "timings": timings,
+            }
+        )
+        return
+    out = stdout_console()
+    out.print(
+        f"[bold]reconstructed[/] {len(photos.paths)} photos ({width}x{height}) by {rec.info['method']}, "
+        f"{integrator} integration"
+    )
+    out.print(
+        f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
+    )
+    out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
+    out.print(
+        f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
+        f"reconstruct {format_seconds(timings['reconstruct'])}, mesh {format_seconds(timings['mesh'])}, "
+        f"write {format_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, written)
+
+
+# --- batch -------------------------------------------------------------------------------------
+
+
+@app.command()
+def batch(
+    photos: Annotated[
+        list[Path], typer.Argument(help="Photos to reconstruct, each on its own.", show_default=False)
+    ],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the models (created if missing).")],
+    format: Annotated[
+        str, typer.Option("--format", help="Mesh format: a suffix from `shadeform formats`.")
+    ] = ".glb",
+    step: StepOption = 1,
+    filter: FilterOption = None,
+    light: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,Z", help='Direction toward the light, or "estimate" (per photo); 0,0,1 if not given.'
+        ),
+    ] = None,
+    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
+    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
+    srgb: SrgbOption = False,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
+    depth: Annotated[bool, typer.Option("--depth", help="Also write NAME_depth.tiff per photo.")] = False,
+    normals: Annotated[
+        bool, typer.Option("--normals", help="Also write NAME_normals.png per photo.")
+    ] = False,
+    workers: Annotated[
+        int | None, typer.Option(min=1, help="Worker processes (default: one per CPU).")
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
+    ] = False,
+) -> None:
+    """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
+    from shadeform.batch import reconstruct_files
+
+    suffix = format if format.startswith(".") else f".{format}"
+    light_vector = resolve_light(light, slant, tilt)
+    err = stderr_console()
+    total = time.perf_counter()
+    # the folder is made for the run and removed again if the run is refused (bad options)
+    with (
+        OutputSet() as outputs,
+        Progress(
+            TextColumn("reconstructing"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err,
+            transient=True,
+        ) as bar,
+    ):
+        outputs.make_folder(out)
+        task = bar.add_task("photos", total=len(photos))
+        results = reconstruct_files(
+            photos,
+            out,
+            suffix=suffix,
+            step=step,
+            channel=channel,
+            srgb=srgb,
+            depth=depth,
+            normals=normals,
+            workers=workers,
+            progress=lambda done, _: bar.update(task, completed=done),
+            light=light_vector,
+            method=method,
+            filter=filter,
+            integrator=integrator,
+            refine=refine,
+        )
+    seconds = time.perf_counter() - total
+    failed = [r for r in results if r.error is not None]
+    if as_json:
+        print_json(
+            {
+                "command": "batch",
+                "seconds": seconds,
+                "photos": [
+                    {
+                        "photo": r.photo,
+                        "files": list(r.files),
+                        "vertices": r.vertices,
+                        "faces": r.faces,
+                        "seconds": r.seconds,
+                        "error": r.error,
+                    }
+                    for r in results
+                ],
+            }
+        )
+    else:
+        table = Table("photo", "vertices", "triangles", "seconds", "written")
+        for r in results:
+            table.add_row(
+                escape(str(r.photo)),
+                f"{r.vertices:,}",
+                f"{r.faces:,}",
+                format_seconds(r.seconds),
+                escape(", ".join(p.name for p in r.files)) if r.files else "[red]failed[/]",
+            )
+        out_console = stdout_console()
+        out_console.print(table)
+        out_console.print(
+            f"{len(results) - len(failed)} of {len(results)} photos in "
+            f"{format_seconds(seconds)}, models in {escape(str(out))}"
+        )
+    for r in failed:
+        err.print(f"error: {escape(str(r.photo))}: {escape(r.error)}", soft_wrap=True)
+    if failed:
+        raise typer.Exit(2)

@@ -1,0 +1,457 @@
+"""The other commands: synthetic scenes and their evaluation, the registries' listings, the demo
+and the browser app."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.markup import escape
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from shadeform.cli._shell import (
+    app,
+    check_suffix,
+    format_seconds,
+    format_vector,
+    print_files,
+    print_json,
+    resolve_light,
+    stage,
+    stderr_console,
+    stdout_console,
+    write_rgb_png,
+)
+from shadeform.errors import InputError
+from shadeform.integration import available_integrators
+from shadeform.io.atomic import OutputSet
+from shadeform.solvers import available_methods
+
+# --- synth -------------------------------------------------------------------------------------
+
+
+@app.command()
+def synth(
+    scene: Annotated[
+        str, typer.Argument(help="Scene: sphere, ellipsoid, cylinder, vase, bowl, saddle, bumps.")
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="The image, a .png (written 16-bit).")],
+    light: Annotated[
+        str | None, typer.Option(metavar="X,Y,Z", help="Direction toward the light; 0,0,1 if not given.")
+    ] = None,
+    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
+    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    noise: Annotated[float, typer.Option(help="Gaussian noise sigma, as a fraction of the albedo.")] = 0.0,
+    size: Annotated[int, typer.Option(help="Image side in pixels.")] = 256,
+    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
+    depth_format: Annotated[str, typer.Option(help="File type of the true depth: npy or tiff.")] = "npy",
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
+    ] = False,
+) -> None:
+    """Render a synthetic scene and write its ground truth next to it.
+
+    Writes IMAGE (16-bit grey PNG) and, beside it, STEM_mask.png, STEM_depth.npy (or .tiff) and
+    STEM_normals.png (16-bit normal map).
+    """
+    from shadeform import synth as synth_module
+    from shadeform.io.maps import save_depth, save_gray, save_normal_map
+
+    check_suffix(output, (".png",), "the image to")
+    if depth_format not in ("npy", "tiff"):
+        raise InputError(f"bad --depth-format {depth_format!r}; choose npy or tiff")
+    light_vector = resolve_light(light, slant, tilt)
+    rendered = synth_module.scene(scene, size=size, light=light_vector, noise=noise, seed=seed)
+
+    stem = output.with_suffix("")
+    targets = {
+        "image": output,
+        "mask": Path(f"{stem}_mask.png"),
+        "depth": Path(f"{stem}_depth.{depth_format}"),
+        "normals": Path(f"{stem}_normals.png"),
+    }
+    with OutputSet() as outputs:
+        temps = {key: outputs.temp(path) for key, path in targets.items()}
+        save_gray(rendered.image, temps["image"], bitdepth=16)
+        save_gray(rendered.mask.astype(np.float64), temps["mask"], bitdepth=8)
+        save_depth(rendered.depth, temps["depth"])
+        save_normal_map(rendered.normals, temps["normals"])
+        outputs.commit()
+
+    if as_json:
+        print_json(
+            {
+                "command": "synth",
+                "scene": scene,
+                "size": size,
+                "light": rendered.light,
+                "noise": noise,
+                "seed": seed,
+                "files": targets,
+            }
+        )
+        return
+    out = stdout_console()
+    out.print(
+        f"[bold]rendered[/] {scene} ({size}x{size}, light {format_vector(rendered.light)}, noise {noise:g})"
+    )
+    print_files(
+        out,
+        [
+            (targets["image"], "image, 16-bit grey"),
+            (targets["mask"], "true mask (white = object)"),
+            (targets["depth"], "true depth, pixel units, NaN off the object"),
+            (targets["normals"], "true normals, 16-bit normal map"),
+        ],
+    )
+
+
+# --- evaluate ----------------------------------------------------------------------------------
+
+
+#: (label, keyword arguments of reconstruct) of every method the table compares.
+_METHODS = (
+    ("propagation", {"method": "propagation", "refine": 3, "integrator": "paths"}),
+    ("propagation (2002, no refinement)", {"method": "propagation", "refine": 0, "integrator": "paths"}),
+    ("eikonal", {"method": "eikonal"}),
+)
+
+
+@app.command()
+def evaluate(
+    size: Annotated[int, typer.Option(help="Side of the synthetic images in pixels.")] = 256,
+    scenes: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--scenes", metavar="NAMES", help="Scenes to run, comma-separated or repeated; all if not given."
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
+    ] = False,
+) -> None:
+    """Run the methods on the synthetic scenes (light +z, no noise) and print their errors."""
+
+    import shadeform
+    from shadeform import metrics
+    from shadeform import synth as synth_module
+
+    names = [name.strip() for item in scenes or () for name in item.split(",") if name.strip()]
+    names = names or list(synth_module.SCENES)
+    for name in names:
+        if name not in synth_module.SCENES:
+            raise InputError(f"unknown scene {name!r}; choose from: {', '.join(synth_module.SCENES)}")
+
+    runs = []  # (scene name, concave regions given, method label, reconstruct kwargs)
+    for name in names:
+        marked = bool(synth_module.concave_regions(name, size=size)["regions"])
+        for label, kwargs in _METHODS:
+            runs.append((name, False, label, kwargs))
+            if marked:
+                runs.append((name, True, label, kwargs))
+
+    rows = []
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+        console=stderr_console(),
+        transient=True,
+    ) as progress:
+        task = progress.add_task("compiling", total=len(runs))
+        # one tiny run first, so the compile/cache-load time is not billed to the first row
+        warm = synth_module.scene("sphere", size=16)
+        shadeform.reconstruct(warm.image, mask=warm.mask)
+        for name, with_region, label, kwargs in runs:
+            progress.update(task, description=f"{name}: {label}")
+            scene = synth_module.scene(name, size=size)
+            concave = synth_module.concave_regions(name, size=size) if with_region else None
+            start = time.perf_counter()
+            rec = shadeform.reconstruct(
+                scene.image, mask=scene.mask, light=scene.light, concave=concave, **kwargs
+            )
+            seconds = time.perf_counter() - start
+            rows.append(
+                {
+                    "scene": name,
+                    "concave_region": with_region,
+                    "label": label,
+                    **kwargs,
+                    "angular_error_deg": metrics.angular_error(rec.normals, scene.normals),
+                    "depth_error_pct": metrics.depth_error(rec.depth, scene.depth, fit="offset"),
+                    "seconds": seconds,
+                }
+            )
+            progress.advance(task)
+
+    if as_json:
+        print_json({"command": "evaluate", "size": size, "light": [0, 0, 1], "noise": 0, "rows": rows})
+        return
+    table = Table(
+        title=f"Synthetic scenes, {size}x{size}, light +z, no noise",
+        caption="angle: mean angular error of the normals; depth: RMSE as % of the true depth range, "
+        "after fitting the free offset",
+    )
+    table.add_column("scene")
+    table.add_column("method")
+    table.add_column("angle (°)", justify="right", no_wrap=True, min_width=9)
+    table.add_column("depth (%)", justify="right", no_wrap=True, min_width=9)
+    table.add_column("time", justify="right", no_wrap=True, min_width=7)
+    for row in rows:
+        scene_label = row["scene"]
+        if row["concave_region"]:
+            scene_label += ", concave regions drawn"
+        table.add_row(
+            scene_label,
+            row["label"],
+            f"{row['angular_error_deg']:.2f}",
+            f"{row['depth_error_pct']:.2f}",
+            format_seconds(row["seconds"]),
+        )
+    stdout_console().print(table)
+
+
+# --- formats -----------------------------------------------------------------------------------
+
+
+@app.command()
+def formats(
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
+    ] = False,
+) -> None:
+    """List the mesh formats `reconstruct -o` can write."""
+    from shadeform import available_formats
+
+    registry = available_formats()
+    if as_json:
+        print_json({"command": "formats", "formats": registry})
+        return
+    table = Table(title="Mesh formats (picked by the -o suffix)")
+    table.add_column("suffix", style="bold")
+    table.add_column("format")
+    for suffix, description in registry.items():
+        table.add_row(suffix, description)
+    stdout_console().print(table)
+
+
+# --- methods -----------------------------------------------------------------------------------
+
+
+@app.command()
+def methods(
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the tables.")
+    ] = False,
+) -> None:
+    """List the solvers `reconstruct --method` takes and the integrators of `--integrator`."""
+    from shadeform.solvers import AUTO, get_solver, solver_names
+
+    rows = [
+        {
+            "name": AUTO,
+            "lights": "any",
+            "depth": "the chosen solver's",
+            "description": available_methods()[AUTO],
+        }
+    ]
+    rows += [
+        {"name": s.name, "lights": s.lights, "depth": s.integrator or s.depth, "description": s.description}
+        for s in map(get_solver, solver_names())
+    ]
+    if as_json:
+        print_json({"command": "methods", "methods": rows, "integrators": available_integrators()})
+        return
+    table = Table(title="Solvers (--method)")
+    for column in ("method", "lights", "depth by", "what it does"):
+        table.add_column(column, style="bold" if column == "method" else None)
+    for row in rows:
+        table.add_row(row["name"], row["lights"], row["depth"], row["description"])
+    out = stdout_console()
+    out.print(table)
+    table = Table(title="Integrators (--integrator)")
+    table.add_column("integrator", style="bold")
+    table.add_column("what it does")
+    for name, text in available_integrators().items():
+        table.add_row(name, text)
+    out.print(table)
+
+
+# --- demo --------------------------------------------------------------------------------------
+
+
+@app.command()
+def demo(
+    out: Annotated[Path, typer.Option("--out", help="Folder for the results (created if missing).")] = Path(
+        "out/demo"
+    ),
+    example: Annotated[str, typer.Option(help="Example to run: coin, or synth:SCENE.")] = "coin",
+    step: Annotated[
+        int | None, typer.Option(min=1, help="Mesh step in pixels; the example's own if not given.")
+    ] = None,
+    size: Annotated[int | None, typer.Option(help="Image side for synth: examples.")] = None,
+) -> None:
+    """Reconstruct a shipped example photo: writes meshes, the normal map and result.png."""
+    import shadeform
+    from shadeform.examples import load_example
+    from shadeform.io.maps import save_gray, save_normal_map
+    from shadeform.render import result_picture
+
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    image, info = load_example(example, size=size)
+    mesh_step = info["step"] if step is None else step
+    with stage(
+        err,
+        f"reconstructing the example '{escape(example)}' (the very first run also compiles the numba kernels: about a minute)",
+        timings,
+        "reconstruct",
+    ):
+        rec = shadeform.reconstruct(
+            image, light=info["light"], mask=info["mask"], filter=info["filter"], method=info["method"]
+        )
+    with stage(err, "building the mesh", timings, "mesh"):
+        mesh = shadeform.to_mesh(rec, step=mesh_step)
+    with stage(err, "drawing result.png", timings, "picture"):
+        picture = result_picture(image, rec.normals, mesh)
+
+    files = [
+        ("input.png", "the input photo (16-bit grey)"),
+        ("normals.png", "recovered normal map (16-bit, RGB = (n + 1) / 2)"),
+        ("model.wrl", "mesh, VRML 2.0"),
+        ("model.iv", "mesh, Open Inventor 2.1"),
+        ("model.glb", "mesh, glTF 2.0 binary"),
+        ("result.png", "input | normal map | shaded 3D view"),
+    ]
+    with stage(err, "writing files", timings, "write"), OutputSet() as outputs:
+        outputs.make_folder(out)
+        temps = {name: outputs.temp(out / name) for name, _ in files}
+        save_gray(image, temps["input.png"], bitdepth=16)
+        save_normal_map(rec.normals, temps["normals.png"])
+        for name in ("model.wrl", "model.iv", "model.glb"):
+            shadeform.export(mesh, temps[name])
+        write_rgb_png(picture, temps["result.png"])
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+
+    console = stdout_console()
+    console.print(f"[bold]demo[/] {escape(info['description'])}")
+    console.print(f"  source {escape(info['source'])}")
+    console.print(
+        f"  {int(rec.mask.sum()):,} object pixels -> {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles "
+        f"(step {mesh_step}) in {format_seconds(timings['total'])}"
+    )
+    console.print(f"[bold]wrote[/] to {escape(str(out))}/")
+    print_files(console, [(out / name, what) for name, what in files])
+    console.print(
+        "  open result.png to see it; view the .glb in any glTF viewer (e.g. Blender) or the .wrl in a "
+        "VRML viewer; try your own photo with: shadeform reconstruct PHOTO -o model.glb"
+    )
+
+
+# --- app ---------------------------------------------------------------------------------------
+
+
+@app.command("app")
+def app_command(
+    image: Annotated[
+        str | None,
+        typer.Argument(
+            help="Photo to open at start, or a shipped example (coin, synth:bowl, ...).", show_default=False
+        ),
+    ] = None,
+    port: Annotated[int, typer.Option(min=0, max=65535, help="Port to serve on (0: any free port).")] = 8000,
+    host: Annotated[str, typer.Option(help="Address to bind; loopback unless --allow-remote.")] = "127.0.0.1",
+    allow_remote: Annotated[
+        bool,
+        typer.Option(
+            "--allow-remote",
+            help="Allow binding a non-loopback address: anyone who can reach it can use the app.",
+        ),
+    ] = False,
+    no_browser: Annotated[bool, typer.Option("--no-browser", help="Do not open a web browser.")] = False,
+) -> None:
+    """Start the browser app: open a photo, draw concave regions, see and export the 3D model."""
+    import ipaddress
+    import socket
+    import threading
+    import webbrowser
+
+    try:
+        import uvicorn
+
+        from shadeform.app.server import LOOPBACK_HOSTS, create_app
+    except ImportError as missing:
+        raise InputError(
+            f"the app needs {missing.name or 'its web server'}, which is not installed; "
+            "install shadeform with its app extra: pip install 'shadeform[app]'"
+        ) from None
+    from shadeform.examples import EXAMPLES
+
+    try:
+        loopback = host == "localhost" or ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        loopback = False
+    if not loopback and not allow_remote:
+        raise InputError(
+            f"--host {host} is not a loopback address; other machines could use the app. "
+            "Add --allow-remote if that is what you want"
+        )
+    initial = None
+    if image is not None:
+        # the user's own argument: a file, else an example name
+        if Path(image).exists() or image not in EXAMPLES:
+            initial = Path(image)
+            if not initial.is_file():
+                raise InputError(
+                    f"no such image file or example: '{image}'; give a photo's path or one "
+                    f"of: {', '.join(EXAMPLES)}"
+                )
+        else:
+            initial = image
+    err = stderr_console()
+    with err.status("opening the image", spinner="dots"):
+        # warm: the numba kernels compile (or load) in the background, so the first click does not wait
+        application = create_app(
+            initial_image=initial, allowed_hosts=None if allow_remote else LOOPBACK_HOSTS, warm=True
+        )
+    # bind first, so that the printed address (and port 0's pick) is the one that answers
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host.strip("[]"), port))
+    except OSError as error:
+        sock.close()
+        raise InputError(
+            f"cannot listen on {host}:{port} ({error.strerror}); choose another --port"
+        ) from None
+    bound_port = sock.getsockname()[1]
+    shown_host = f"[{host.strip('[]')}]" if ":" in host else host
+    url = f"http://{shown_host}:{bound_port}/"
+    if not loopback:
+        err.print(
+            f"[bold yellow]warning:[/] serving on {escape(host)}, not loopback: anyone who can reach "
+            "this address can use the app and read the images opened in it"
+        )
+    stdout_console().print(f"[bold]shadeform app[/] at {escape(url)}  (Ctrl+C stops it)")
+    if not no_browser and _has_display():
+        threading.Timer(0.5, webbrowser.open, args=(url,)).start()
+    config = uvicorn.Config(application, log_level="warning")
+    uvicorn.Server(config).run(sockets=[sock])
+
+
+def _has_display() -> bool:
+    """Whether a browser could show a window here (a desktop session, or macOS/Windows)."""
+    import sys
+
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
