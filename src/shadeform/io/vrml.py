@@ -33,10 +33,10 @@ def format_rows(array: np.ndarray, row_format: str) -> Iterator[bytes]:
 
     Parameters
     ----------
-    array : (N, K) array
+    array : (N, C) array
         Numbers to format.
     row_format : str
-        ``%``-format for one row with exactly ``K`` conversions, including its line ending,
+        ``%``-format for one row with exactly ``C`` conversions, including its line ending,
         e.g. ``"%.6g %.6g %.6g,\\n"``.
 
     Yields

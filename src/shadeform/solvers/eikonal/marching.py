@@ -284,7 +284,7 @@ def run_march(f, theta, mask, steep, index, values, labels, goal=None, need=0):
         Pixels to march over.
     steep : float
         Slope above which the arc update replaces finite differences.
-    index, values, labels : (K,) int, float, int
+    index, values, labels : (S,) int, float, int
         Flat index ``row * W + col``, starting ``T`` and label of each source pixel.
     goal : (H, W) int64, optional
         A target id per pixel (-1 for none).
@@ -371,7 +371,7 @@ def arrival_times(cos_theta, mask, sources, *, values=None, steep: float = STEEP
         Pixels to march over (8-connected).
     sources : sequence of (int, int)
         ``(row, col)`` of the starting pixels, inside ``mask``.
-    values : (K,) float, optional
+    values : (S,) float, optional
         ``T`` at the sources (default 0); the result is ``min_s (values_s + distance_s)``.
     steep : float, optional
         Slope ``f`` above which the semi-Lagrangian arc update replaces finite differences.

@@ -73,7 +73,7 @@ class SingularPoint:
         Local maximum, minimum or saddle of the height.
     height : float
         The height ``z`` it was given, in the result's frame (pixel units).
-    pixels : (K, 2) int64
+    pixels : (P, 2) int64
         ``(row, col)`` of the pixels where the marching starts (``T = 0``), read-only.
     origin : {"detected", "user", "brightest"}
         Found as a singular region, given by the user as a reference, or the brightest pixel of a
@@ -92,7 +92,7 @@ class SingularPoint:
 class Node:
     """A singular point while it is being found and placed (mutable; :class:`SingularPoint` after)."""
 
-    pixels: np.ndarray  # (K, 2) int64
+    pixels: np.ndarray  # (P, 2) int64
     kind: str
     part: int
     top: float  # brightest c in the node
