@@ -254,8 +254,7 @@ def ball_errors():
     return np.array(found)
 
 
-@pytest.mark.skipif(not DILIGENT_BALL.is_dir(),
-                    reason=f"DiLiGenT ball images not found at {DILIGENT_BALL}")
+@pytest.mark.skipif(not DILIGENT_BALL.is_dir(), reason=f"DiLiGenT ball images not found at {DILIGENT_BALL}")
 def test_diligent_ball_round_method(ball_errors):
     """Real photos of a glossy ball under calibrated lights, each channel divided by its light's
     intensity; the contour method's slant is biased low there (the paint darkens toward the

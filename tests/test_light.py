@@ -1,6 +1,6 @@
 """Tests for shadeform.light: unit vectors, slant/tilt and their round trips, and the round-feature
-fit of a relief behind estimate_light (its helpers against slow references, and reliefs that are
-not the benchmark's)."""
+fit of a relief behind estimate_light (its helpers against slow references, the compiled kernel
+against the scipy-based reference, and reliefs that are not the benchmark's)."""
 
 from __future__ import annotations
 
@@ -10,23 +10,19 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
+from _surfaces import normals_of, pixel_xy
 from shadeform import synth
 from shadeform.errors import InputError
-from shadeform.light import (
-    _PROFILE_KNOTS,
-    _block_mean,
-    _bspline,
-    _profile,
-    _render_features,
+from shadeform.light import as_light, estimate_light, light_from_slant_tilt, parse_light, slant_tilt
+from shadeform.light._relief_kernel import _spline_at
+from shadeform.light.features import (
+    PROFILE_KNOTS,
+    _levenberg_marquardt,
     _render_features_reference,
-    _ring_scores,
-    as_light,
-    estimate_light,
-    light_from_slant_tilt,
-    parse_light,
-    slant_tilt,
+    profile_spline,
+    render_features,
 )
-from _surfaces import normals_of, pixel_xy
+from shadeform.light.relief import block_mean, ring_scores
 
 S = math.sqrt(0.5)
 
@@ -97,9 +93,7 @@ class TestLightFromSlantTilt:
         np.testing.assert_allclose(light_from_slant_tilt(slant, tilt), expected, atol=1e-15)
 
     def test_tilt_is_periodic(self):
-        np.testing.assert_allclose(
-            light_from_slant_tilt(20, 370), light_from_slant_tilt(20, 10), atol=1e-15
-        )
+        np.testing.assert_allclose(light_from_slant_tilt(20, 370), light_from_slant_tilt(20, 10), atol=1e-15)
 
     @pytest.mark.parametrize(
         ("slant", "tilt"), [(90, 0), (120, 0), (-1, 0), (math.nan, 0), (10, math.inf), ("45", 0)]
@@ -121,8 +115,13 @@ class TestSlantTilt:
 
     @pytest.mark.parametrize(
         ("light", "expected"),
-        [([0, 1, 1], (45, 90)), ([1, 0, 1], (45, 0)), ([-1, 0, 1], (45, 180)),
-         ([0, -3, math.sqrt(3)], (60, -90)), ([0, 0, 7], (0, 0))],
+        [
+            ([0, 1, 1], (45, 90)),
+            ([1, 0, 1], (45, 0)),
+            ([-1, 0, 1], (45, 180)),
+            ([0, -3, math.sqrt(3)], (60, -90)),
+            ([0, 0, 7], (0, 0)),
+        ],
     )
     def test_values(self, light, expected):
         assert slant_tilt(light) == pytest.approx(expected, abs=1e-12)
@@ -181,7 +180,7 @@ class TestParseLight:
             parse_light([0, 0, 1])
 
 
-# --- the relief fit: round features on a flat base (private helpers of estimate_light) ---------
+# --- the relief fit: round features on a flat base (shadeform.light.features and .relief) ------
 
 
 def _profile_reference(coefficients, spacing, radius):
@@ -189,7 +188,7 @@ def _profile_reference(coefficients, spacing, radius):
     coefficients c_-1 .. c_{K+4} with c_-1 = -c_1, c_0 = 0 and zeros past c_K."""
     knots = coefficients.size
     c = np.zeros(knots + 6)
-    c[2:knots + 2] = coefficients
+    c[2 : knots + 2] = coefficients
     c[0] = -coefficients[0]
     spline = BSpline(spacing * np.arange(-3, knots + 7), c, 3)
     return spline(radius), spline.derivative()(radius)
@@ -198,7 +197,7 @@ def _profile_reference(coefficients, spacing, radius):
 def _render_reference(params, x, y, reaches):
     """Pixel by pixel: the gradients of the round features add, then the Lambertian shading."""
     level, tx, ty = params[:3]
-    knots = _PROFILE_KNOTS
+    knots = PROFILE_KNOTS
     out = []
     for px, py in zip(x, y):
         gx = gy = 0.0
@@ -207,8 +206,9 @@ def _render_reference(params, x, y, reaches):
             dx, dy = px - params[base], py - params[base + 1]
             r = math.hypot(dx, dy)
             if 0 < r < reach:
-                s = _profile_reference(params[base + 2:base + 2 + knots], reach / (knots + 2),
-                                       np.array([r]))[0][0]
+                s = _profile_reference(
+                    params[base + 2 : base + 2 + knots], reach / (knots + 2), np.array([r])
+                )[0][0]
                 gx -= s * dx / r
                 gy -= s * dy / r
         out.append(level * max(0.0, (1 - tx * gx - ty * gy) / math.sqrt(1 + gx * gx + gy * gy)))
@@ -218,28 +218,43 @@ def _render_reference(params, x, y, reaches):
 def _random_features(rng, count=2):
     params = [0.9, 0.3, -0.2]
     for _ in range(count):
-        params += [*rng.uniform(10, 30, 2) * (1, -1), *rng.uniform(-0.6, 0.6, _PROFILE_KNOTS)]
+        params += [*rng.uniform(10, 30, 2) * (1, -1), *rng.uniform(-0.6, 0.6, PROFILE_KNOTS)]
     return np.array(params)
 
 
 class TestBspline:
     def test_partition_of_unity(self):
-        _, weights, slopes = _bspline(np.linspace(0, 7.99, 200))
-        np.testing.assert_allclose(weights.sum(axis=0), 1.0, atol=1e-14)
-        np.testing.assert_allclose(slopes.sum(axis=0), 0.0, atol=1e-14)
+        # the compiled kernel's own basis: weights sum to 1 and their derivatives to 0; with all
+        # coefficients 1 (away from the mirrored c_-1 and the end) the profile is 1, its slope 0
+        ones = np.ones(PROFILE_KNOTS)
+        for t in np.linspace(0, 7.99, 200):
+            assert sum(_spline_at(ones, 0, PROFILE_KNOTS, t)[3]) == pytest.approx(1.0, abs=1e-14)
+        for t in np.linspace(2, PROFILE_KNOTS - 1.01, 200):
+            value, rate, _, _ = _spline_at(ones, 0, PROFILE_KNOTS, t)
+            assert value == pytest.approx(1.0, abs=1e-14)
+            assert rate == pytest.approx(0.0, abs=1e-14)
 
     def test_profile_matches_scipy(self):
         rng = np.random.default_rng(1)
-        coefficients = rng.normal(size=_PROFILE_KNOTS)
-        radius = np.linspace(0, 2.0 * (_PROFILE_KNOTS + 2) - 1e-9, 301)
-        value, rate, _, _ = _profile(coefficients, 2.0, radius)
+        coefficients = rng.normal(size=PROFILE_KNOTS)
+        radius = np.linspace(0, 2.0 * (PROFILE_KNOTS + 2) - 1e-9, 301)
+        spline = profile_spline(coefficients, 2.0)
         expected, expected_rate = _profile_reference(coefficients, 2.0, radius)
-        np.testing.assert_allclose(value, expected, atol=1e-12)
-        np.testing.assert_allclose(rate, expected_rate, atol=1e-12)
+        np.testing.assert_allclose(spline(radius), expected, atol=1e-12)
+        np.testing.assert_allclose(spline.derivative()(radius), expected_rate, atol=1e-12)
+
+    def test_compiled_profile_matches_scipy(self):
+        rng = np.random.default_rng(1)
+        coefficients = rng.normal(size=PROFILE_KNOTS)
+        radius = np.linspace(0, 2.0 * (PROFILE_KNOTS + 2) - 1e-9, 301)
+        compiled = np.array([_spline_at(coefficients, 0, PROFILE_KNOTS, r / 2.0)[:2] for r in radius])
+        expected, expected_rate = _profile_reference(coefficients, 2.0, radius)
+        np.testing.assert_allclose(compiled[:, 0], expected, atol=1e-12)
+        np.testing.assert_allclose(compiled[:, 1] / 2.0, expected_rate, atol=1e-12)
 
     def test_profile_is_level_at_the_top_and_ends(self):
-        coefficients = np.ones(_PROFILE_KNOTS)
-        value, _, _, _ = _profile(coefficients, 1.5, np.array([0.0, 1.5 * (_PROFILE_KNOTS + 2)]))
+        coefficients = np.ones(PROFILE_KNOTS)
+        value = profile_spline(coefficients, 1.5)(np.array([0.0, 1.5 * (PROFILE_KNOTS + 2)]))
         np.testing.assert_allclose(value, 0.0, atol=1e-14)
 
 
@@ -248,38 +263,85 @@ class TestRenderFeatures:
         rng = np.random.default_rng(2)
         params = _random_features(rng)
         x, y = rng.uniform(0, 40, 120), -rng.uniform(0, 40, 120)
-        np.testing.assert_allclose(_render_features(params, x, y, [18.0, 14.0]),
-                                   _render_reference(params, x, y, [18.0, 14.0]), atol=1e-12)
+        np.testing.assert_allclose(
+            render_features(params, x, y, [18.0, 14.0]),
+            _render_reference(params, x, y, [18.0, 14.0]),
+            atol=1e-12,
+        )
 
     def test_compiled_matches_the_vectorised_reference(self):
         rng = np.random.default_rng(5)
         params = _random_features(rng, count=4)
         x, y = rng.uniform(0, 40, 500), -rng.uniform(0, 40, 500)
         reaches = [18.0, 14.0, 9.0, 22.0]
-        image, jac = _render_features(params, x, y, reaches, jacobian=True)
+        image, jac = render_features(params, x, y, reaches, jacobian=True)
         expected_image, expected_jac = _render_features_reference(params, x, y, reaches, jacobian=True)
         np.testing.assert_allclose(image, expected_image, atol=1e-13)
         np.testing.assert_allclose(jac, expected_jac, atol=1e-13)
-        np.testing.assert_allclose(_render_features(params, x, y, reaches), expected_image, atol=1e-13)
+        np.testing.assert_allclose(render_features(params, x, y, reaches), expected_image, atol=1e-13)
 
     def test_jacobian_matches_finite_differences(self):
         rng = np.random.default_rng(3)
         params = _random_features(rng)
         x, y = rng.uniform(0, 40, 300), -rng.uniform(0, 40, 300)
-        image, jac = _render_features(params, x, y, [18.0, 14.0], jacobian=True)
+        image, jac = render_features(params, x, y, [18.0, 14.0], jacobian=True)
         assert jac.shape == (300, params.size)
         lit = image > 1e-3  # away from the clipping kink
         for i in range(params.size):
             step = np.zeros(params.size)
             step[i] = 1e-6
-            numeric = (_render_features(params + step, x, y, [18.0, 14.0])
-                       - _render_features(params - step, x, y, [18.0, 14.0])) / 2e-6
+            numeric = (
+                render_features(params + step, x, y, [18.0, 14.0])
+                - render_features(params - step, x, y, [18.0, 14.0])
+            ) / 2e-6
             np.testing.assert_allclose(jac[lit, i], numeric[lit], atol=1e-7)
 
     def test_flat_base(self):
         x, y = np.arange(5.0), -np.arange(5.0)
-        params = np.r_[0.8, 0.5, 0.1, 2.0, -2.0, np.zeros(_PROFILE_KNOTS)]
-        np.testing.assert_allclose(_render_features(params, x, y, [10.0]), 0.8)
+        params = np.r_[0.8, 0.5, 0.1, 2.0, -2.0, np.zeros(PROFILE_KNOTS)]
+        np.testing.assert_allclose(render_features(params, x, y, [10.0]), 0.8)
+
+
+class TestLevenbergMarquardt:
+    """The relief fit's solver against scipy's least_squares on the same problem."""
+
+    @pytest.mark.parametrize("scale", [None, 0.02])
+    def test_reaches_scipys_minimum(self, scale):
+        from scipy.optimize import least_squares
+
+        rng = np.random.default_rng(7)
+        truth = np.r_[0.9, 0.3, -0.2, 20.0, -20.0, rng.uniform(0.0, 0.6, PROFILE_KNOTS)]
+        x, y = pixel_xy((41, 41))
+        x, y = x.ravel(), y.ravel()
+        values = render_features(truth, x, y, [18.0]) + 0.01 * rng.normal(size=x.size)
+        values[::50] += 0.3  # a few outliers, for the robust loss
+        start = (
+            truth * np.r_[1.0, 0.7, 0.7, 1.0, 1.0, np.full(PROFILE_KNOTS, 0.8)]
+            + np.r_[0, 0, 0, 1.5, -1, np.zeros(PROFILE_KNOTS)]
+        )
+        bounded = np.arange(truth.size) >= 5
+        found = _levenberg_marquardt(
+            lambda p, j: render_features(p, x, y, [18.0], jacobian=j),
+            start,
+            values,
+            bounded=bounded,
+            scale=scale,
+            iterations=200,
+            tolerance=1e-14,
+        )
+        expected = least_squares(
+            lambda p: render_features(p, x, y, [18.0]) - values,
+            start,
+            jac=lambda p: render_features(p, x, y, [18.0], jacobian=True)[1],
+            loss="linear" if scale is None else "cauchy",
+            f_scale=scale or 1.0,
+            x_scale="jac",
+            ftol=1e-14,
+            xtol=1e-14,
+            gtol=1e-14,
+            max_nfev=2000,
+        ).x
+        np.testing.assert_allclose(found, expected, atol=1e-6)
 
 
 class TestRingScores:
@@ -287,7 +349,7 @@ class TestRingScores:
         rng = np.random.default_rng(4)
         deviation = -0.3 * rng.random((24, 26))  # darker than the base, as round features are
         window = 4
-        across, score, energy = _ring_scores(deviation, window)
+        across, score, energy = ring_scores(deviation, window)
         for r0, c0 in [(12, 13), (3, 20), (20, 2)]:
             moment, weight, explained, total = np.zeros(2), 0.0, 0.0, 0.0
             for dr in range(-window - 1, window + 2):
@@ -297,16 +359,22 @@ class TestRingScores:
                     if math.hypot(dr, dc) < window + 0.5:
                         total += value * value
             for k in range(1, window + 1):
-                ring = [(dr, dc) for dr in range(-k - 1, k + 2) for dc in range(-k - 1, k + 2)
-                        if abs(math.hypot(dr, dc) - k) < 0.5]
-                vals = np.array([deviation[r0 + dr, c0 + dc]
-                                 if 0 <= r0 + dr < 24 and 0 <= c0 + dc < 26 else 0.0
-                                 for dr, dc in ring])
+                ring = [
+                    (dr, dc)
+                    for dr in range(-k - 1, k + 2)
+                    for dc in range(-k - 1, k + 2)
+                    if abs(math.hypot(dr, dc) - k) < 0.5
+                ]
+                vals = np.array(
+                    [
+                        deviation[r0 + dr, c0 + dc] if 0 <= r0 + dr < 24 and 0 <= c0 + dc < 26 else 0.0
+                        for dr, dc in ring
+                    ]
+                )
                 angles = np.array([math.atan2(-dr, dc) for dr, dc in ring])
                 spread = float((np.cos(angles) ** 2).sum())
                 mean = vals.mean()
-                harmonic = np.array([(vals * np.cos(angles)).sum(),
-                                     (vals * np.sin(angles)).sum()]) / spread
+                harmonic = np.array([(vals * np.cos(angles)).sum(), (vals * np.sin(angles)).sum()]) / spread
                 explained += len(ring) * min(mean, 0.0) ** 2
                 lean = math.sqrt(1 - min(max(1 + mean, 0.0), 1.0) ** 2)
                 moment += spread * lean * harmonic
@@ -314,8 +382,7 @@ class TestRingScores:
             explained += float(moment @ moment) / weight
             assert energy[r0, c0] == pytest.approx(total, rel=1e-9)
             np.testing.assert_allclose(across[r0, c0], moment / weight, rtol=1e-8, atol=1e-12)
-            assert score[r0, c0] == pytest.approx(-math.log(max(1 - explained / total, 1e-9)),
-                                                  rel=1e-8)
+            assert score[r0, c0] == pytest.approx(-math.log(max(1 - explained / total, 1e-9)), rel=1e-8)
 
     def test_reads_the_light_at_a_round_features_centre(self):
         # one smooth cap z = h (1 - r^2 / rho^2)^2, lit from slant 30, tilt 120
@@ -326,7 +393,7 @@ class TestRingScores:
         normals = normals_of(grad * dx, grad * dy)
         light = light_from_slant_tilt(30, 120)
         image = synth.render(normals, np.ones((61, 61), bool), light=light)
-        across, score, _ = _ring_scores(image / light[2] - 1.0, 8)
+        across, score, _ = ring_scores(image / light[2] - 1.0, 8)
         np.testing.assert_allclose(across[30, 30], light[:2] / light[2], atol=0.02)
         assert score[30, 30] == score[22:39, 22:39].max()
 
@@ -336,7 +403,7 @@ class TestBlockMean:
         image = np.arange(20.0).reshape(4, 5)
         mask = np.ones((4, 5), bool)
         mask[0, 0] = False
-        small, small_mask = _block_mean(image, mask, 2)
+        small, small_mask = block_mean(image, mask, 2)
         np.testing.assert_allclose(small, [[3.0, 5.0], [13.0, 15.0]])
         np.testing.assert_array_equal(small_mask, [[False, True], [True, True]])
 
@@ -348,11 +415,10 @@ def _caps(size, sign=1.0):
     x, y = x - (size - 1) / 2, y + (size - 1) / 2
     zx = np.zeros_like(x)
     zy = np.zeros_like(x)
-    for x0, y0, height, rho in [(-0.2, 0.15, 0.12, 0.16), (0.18, -0.1, 0.08, 0.12),
-                                (0.15, 0.22, -0.06, 0.1)]:
+    for x0, y0, height, rho in [(-0.2, 0.15, 0.12, 0.16), (0.18, -0.1, 0.08, 0.12), (0.15, 0.22, -0.06, 0.1)]:
         dx, dy, rho = x - x0 * size, y - y0 * size, rho * size
-        q = np.clip(1 - (dx * dx + dy * dy) / rho ** 2, 0, None)
-        grad = -4 * sign * height * size * q / rho ** 2
+        q = np.clip(1 - (dx * dx + dy * dy) / rho**2, 0, None)
+        grad = -4 * sign * height * size * q / rho**2
         zx += grad * dx
         zy += grad * dy
     mask = (np.abs(x) < 0.45 * size) & (np.abs(y) < 0.45 * size)
@@ -389,8 +455,8 @@ class TestRoundFeatureRelief:
         x, y = x - 31.5, y + 31.5
         sigma = 4.0
         beyond = np.maximum(np.abs(x) - 16.0, 0.0)
-        z = 6.0 * np.exp(-(y * y + beyond * beyond) / (2 * sigma ** 2))
-        normals = normals_of(-z * beyond * np.sign(x) / sigma ** 2, -z * y / sigma ** 2)
+        z = 6.0 * np.exp(-(y * y + beyond * beyond) / (2 * sigma**2))
+        normals = normals_of(-z * beyond * np.sign(x) / sigma**2, -z * y / sigma**2)
         mask = (np.abs(x) < 29) & (np.abs(y) < 29)
         image = synth.render(normals, mask, light=light_from_slant_tilt(30, 200))
         est = estimate_light(image, mask)

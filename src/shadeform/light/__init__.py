@@ -1,0 +1,51 @@
+"""The light direction: unit vectors toward a distant light, slant and tilt, and estimation.
+
+Frame and angles as in ``docs/conventions.md``: x right, y up, z toward the viewer; ``(0, 0, 1)``
+is a light behind the camera, ``L = (sin s cos t, sin s sin t, cos s)`` for slant ``s`` and tilt
+``t``. The 2002 system fixed the light at +z; every solver here takes any light the camera can see
+lit surfaces under (z > 0), and :func:`estimate_light` reads it, with ``k * albedo``, from one
+image.
+
+Layout: :mod:`~shadeform.light.vectors` (checking and converting lights),
+:mod:`~shadeform.light.estimate` (:func:`estimate_light`, which asks each kind of evidence in
+turn), one module per kind of evidence (:mod:`~shadeform.light.contour`,
+:mod:`~shadeform.light.rings`, :mod:`~shadeform.light.relief`) and the round-feature model of a
+relief (:mod:`~shadeform.light.features`). The vectors are imported here at once (the pipeline
+needs :func:`as_light` at its import time, so this stays numpy-only); the estimation names are
+imported on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from shadeform.light.vectors import as_light, light_from_slant_tilt, parse_light, slant_tilt
+
+# public name -> submodule that defines it, imported on first use
+_LAZY = {
+    "LightEstimate": "shadeform.light.estimate",
+    "estimate_light": "shadeform.light.estimate",
+    "ESTIMATION_METHODS": "shadeform.light.estimate",
+    "MIN_OBJECT_PIXELS": "shadeform.light.estimate",
+}
+
+__all__ = [
+    "as_light",
+    "light_from_slant_tilt",
+    "slant_tilt",
+    "parse_light",
+    "LightEstimate",
+    "estimate_light",
+]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'shadeform.light' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
