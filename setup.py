@@ -29,8 +29,10 @@ class BuildPyWithClient(build_py):
         if not (STATIC / "index.html").is_file() and not getattr(self, "editable_mode", False):
             npm = shutil.which("npm")
             if npm is None or not (WEB / "package.json").is_file():
-                self.warn("the web client is not built and npm (or web/) is missing: the package will "
-                          "work, but `shadeform app` will ask for the client to be built (`make web`)")
+                self.warn(
+                    "the web client is not built and npm (or web/) is missing: the package will "
+                    "work, but `shadeform app` will ask for the client to be built (`make web`)"
+                )
             else:
                 subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=WEB, check=True)
                 subprocess.run([npm, "run", "build"], cwd=WEB, check=True)

@@ -43,16 +43,27 @@ BUDGET_MS = 200
 #: panel's controls); the rows run in this order, each from the state the one before left
 CHANGES = [
     ("step 2 → 3 → 2 … (re-mesh, solve reused)", "", "setSlider('step', i % 2 ? 3 : 2)"),
-    ("gaussian σ 0.5 … 10, light +z: auto = eikonal (new solve)",
-     "setSelect('filter-kind', 'gaussian')", "setSlider('filter-size', 0.5 + 0.5 * i)"),
-    ("light tilt at slant 30°, propagation, refine 0: the 2002 field (new solve)",
-     "setSelect('filter-kind', 'none'); setSelect('method', 'propagation'); setSlider('refine', 0); "
-     "document.querySelector('#light-mode [data-mode=slant_tilt]').click(); setSlider('slant', 30)",
-     "setSlider('tilt', -60 + 3 * i)"),
-    ("light tilt at slant 30°, propagation, refine 3 (new solve)", "setSlider('refine', 3)",
-     "setSlider('tilt', 3 * i)"),
-    ("light tilt at slant 30°, auto = oblique (new solve)", "setSelect('method', 'auto')",
-     "setSlider('tilt', 90 + 3 * i)"),
+    (
+        "gaussian σ 0.5 … 10, light +z: auto = eikonal (new solve)",
+        "setSelect('filter-kind', 'gaussian')",
+        "setSlider('filter-size', 0.5 + 0.5 * i)",
+    ),
+    (
+        "light tilt at slant 30°, propagation, refine 0: the 2002 field (new solve)",
+        "setSelect('filter-kind', 'none'); setSelect('method', 'propagation'); setSlider('refine', 0); "
+        "document.querySelector('#light-mode [data-mode=slant_tilt]').click(); setSlider('slant', 30)",
+        "setSlider('tilt', -60 + 3 * i)",
+    ),
+    (
+        "light tilt at slant 30°, propagation, refine 3 (new solve)",
+        "setSlider('refine', 3)",
+        "setSlider('tilt', 3 * i)",
+    ),
+    (
+        "light tilt at slant 30°, auto = oblique (new solve)",
+        "setSelect('method', 'auto')",
+        "setSlider('tilt', 90 + 3 * i)",
+    ),
 ]
 
 # a release of the slider: the value is set and a 'change' event sent, as a mouse-up does
@@ -71,7 +82,14 @@ PAGE_HELPERS = """() => {
 
 
 def start_server(image: Path) -> tuple[subprocess.Popen, str]:
-    command = [str(Path(sys.executable).with_name("shadeform")), "app", str(image), "--no-browser", "--port", "0"]
+    command = [
+        str(Path(sys.executable).with_name("shadeform")),
+        "app",
+        str(image),
+        "--no-browser",
+        "--port",
+        "0",
+    ]
     server = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + 120
     seen = []
@@ -94,8 +112,9 @@ def measure(page, script: str, runs: int) -> list[dict]:
         before = page.evaluate("window.shadeform.applied()")
         page.evaluate(f"(i) => {{ {script}; }}", i)
         # wait for the full-resolution model (a quick look may be drawn before it)
-        page.wait_for_function(f"window.shadeform.applied() > {before} && !window.shadeform.state().busy",
-                               timeout=120_000)
+        page.wait_for_function(
+            f"window.shadeform.applied() > {before} && !window.shadeform.state().busy", timeout=120_000
+        )
         timeline = page.evaluate("window.shadeform.timeline()")
         timeline["cached"] = bool(page.evaluate("window.shadeform.lastResult().info.cached"))
         timelines.append(timeline)
@@ -142,7 +161,9 @@ def main(argv=None) -> int:
     rows = []
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--no-sandbox"])
+            browser = playwright.chromium.launch(
+                executable_path=CHROMIUM, headless=True, args=["--no-sandbox"]
+            )
             page = browser.new_page(viewport={"width": 1440, "height": 860})
             page.goto(url)
             page.evaluate("window.shadeform.ready")
@@ -150,7 +171,9 @@ def main(argv=None) -> int:
             page.wait_for_function("window.shadeform.applied() >= 1", timeout=300_000)
             page.evaluate("setSlider('step', 2)")
             page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
-            measure(page, "setSlider('step', i % 2 ? 2 : 3)", 2)  # warm-up (ends at step 2): first geometry uploads
+            measure(
+                page, "setSlider('step', i % 2 ? 2 : 3)", 2
+            )  # warm-up (ends at step 2): first geometry uploads
             result = page.evaluate("window.shadeform.lastResult()")
             stages: dict[str, list[float]] = {}
             for name, setup, script in CHANGES:

@@ -48,8 +48,7 @@ MIN_SCALE_NOTE = (
 )
 
 #: Published BiNI (k = 2) MADE in mm (shared/data/README.md).
-BINI = {"bear": 0.334, "buddha": 1.098, "cat": 0.074, "cow": 0.058, "pot1": 0.635,
-        "reading": 0.257}
+BINI = {"bear": 0.334, "buddha": 1.098, "cat": 0.074, "cow": 0.058, "pot1": 0.635, "reading": 0.257}
 #: Published uniform least-squares MADE in mm (same source).
 PLAIN = {"bear": 1.20, "buddha": 3.72, "cat": 1.61, "cow": 0.89, "pot1": 1.51, "reading": 6.62}
 
@@ -99,9 +98,9 @@ def bini_rerun(normals, mask, K, *, sharpness=2.0, max_iter=100, tol=1e-4, cg_to
         ok[ok] = mask[r2[ok], c2[ok]]
         a = (fx if dc else fy) * dd[rows, cols] * (1.0 if dr + dc > 0 else -1.0)
         i = np.flatnonzero(ok)
-        return sp.csr_matrix((np.r_[-a[ok], a[ok]], (np.r_[i, i],
-                                                     np.r_[i, index[r2[ok], c2[ok]]])),
-                             shape=(n, n))
+        return sp.csr_matrix(
+            (np.r_[-a[ok], a[ok]], (np.r_[i, i], np.r_[i, index[r2[ok], c2[ok]]])), shape=(n, n)
+        )
 
     right, left, down, up = one_sided(0, 1), one_sided(0, -1), one_sided(1, 0), one_sided(-1, 0)
     A = sp.vstack([right, left, down, up]).tocsr()
@@ -130,12 +129,9 @@ def bini_rerun(normals, mask, K, *, sharpness=2.0, max_iter=100, tol=1e-4, cg_to
 def main(argv=None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--no-sweep", action="store_true",
-                        help="skip the min_scale sensitivity table")
-    parser.add_argument("--no-rerun", action="store_true",
-                        help="skip the BiNI re-run (about 15 s)")
-    parser.add_argument("--out", type=Path,
-                        default=ROOT / "benchmarks" / "results" / "diligent.md")
+    parser.add_argument("--no-sweep", action="store_true", help="skip the min_scale sensitivity table")
+    parser.add_argument("--no-rerun", action="store_true", help="skip the BiNI re-run (about 15 s)")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "diligent.md")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
         raise SystemExit(f"DiLiGenT data not found at {DATA}")
@@ -154,21 +150,31 @@ def main(argv=None) -> str:
         else:
             z_re, t_rerun = timed(partial(bini_rerun, normals, mask, K), 1)
             rerun = (made(z_re, gt, mask, fit="median_scale"), made(z_re, gt, mask))
-        row = dict(name=name, pixels=int(mask.sum()),
-                   bi=(made(z, gt, mask, fit="median_scale"), made(z, gt, mask)),
-                   rerun=rerun, ls=(made(z_ls, gt, mask, fit="median_scale"), made(z_ls, gt, mask)),
-                   t_bi=t_bi, t_ls=t_ls, t_rerun=t_rerun, steps=result.iterations,
-                   cg=result.cg_iterations)
+        row = dict(
+            name=name,
+            pixels=int(mask.sum()),
+            bi=(made(z, gt, mask, fit="median_scale"), made(z, gt, mask)),
+            rerun=rerun,
+            ls=(made(z_ls, gt, mask, fit="median_scale"), made(z_ls, gt, mask)),
+            t_bi=t_bi,
+            t_ls=t_ls,
+            t_rerun=t_rerun,
+            steps=result.iterations,
+            cg=result.cg_iterations,
+        )
         rows.append(row)
-        print(f"{name:8s} bilateral {row['bi'][0]:.3f} / {row['bi'][1]:.3f} mm "
-              f"(BiNI {BINI[name]:.3f}; re-run {rerun[0]:.3f} / {rerun[1]:.3f}) {t_bi:.2f} s "
-              f"[{result.iterations} steps, {result.cg_iterations} CG]  uniform LS "
-              f"{row['ls'][0]:.3f} / {row['ls'][1]:.3f} mm {t_ls:.2f} s", flush=True)
+        print(
+            f"{name:8s} bilateral {row['bi'][0]:.3f} / {row['bi'][1]:.3f} mm "
+            f"(BiNI {BINI[name]:.3f}; re-run {rerun[0]:.3f} / {rerun[1]:.3f}) {t_bi:.2f} s "
+            f"[{result.iterations} steps, {result.cg_iterations} CG]  uniform LS "
+            f"{row['ls'][0]:.3f} / {row['ls'][1]:.3f} mm {t_ls:.2f} s",
+            flush=True,
+        )
     lines = [
         "# DiLiGenT normal integration (perspective, ground-truth normals)",
         "",
         "MADE in mm under two fits of the unknown scale (`shadeform.metrics.made`): **median** "
-        "(`fit=\"median_scale\"`, the",
+        '(`fit="median_scale"`, the',
         "median of the depth ratios: the protocol of BiNI's DiLiGenT evaluation script, which its "
         "published figures use) and",
         "**LS** (least-squares scale). The bar is judged under BiNI's own protocol: bilateral "
@@ -195,23 +201,27 @@ def main(argv=None) -> str:
     for r in rows:
         ref = BINI[r["name"]]
         ok = "yes" if r["bi"][0] <= ref and r["t_bi"] < 1.0 else "no"
-        lines.append(f"| {r['name']} | {r['pixels']} | {r['bi'][0]:.3f} | {ref:.3f} | {ok} "
-                     f"| {r['bi'][1]:.3f} | {r['rerun'][0]:.3f} / {r['rerun'][1]:.3f} "
-                     f"| {r['ls'][0]:.3f} / {r['ls'][1]:.3f} | {PLAIN[r['name']]:.2f} "
-                     f"| {r['t_bi']:.2f} | {r['t_rerun']:.1f} | {r['steps']} | {r['cg']} |")
+        lines.append(
+            f"| {r['name']} | {r['pixels']} | {r['bi'][0]:.3f} | {ref:.3f} | {ok} "
+            f"| {r['bi'][1]:.3f} | {r['rerun'][0]:.3f} / {r['rerun'][1]:.3f} "
+            f"| {r['ls'][0]:.3f} / {r['ls'][1]:.3f} | {PLAIN[r['name']]:.2f} "
+            f"| {r['t_bi']:.2f} | {r['t_rerun']:.1f} | {r['steps']} | {r['cg']} |"
+        )
     if not args.no_sweep:
         scales = (0.01, 0.05, 0.1, 0.12, 0.15)
-        lines += ["", "## Sensitivity to `min_scale` (bilateral MADE in mm, median / LS; default "
-                  f"{MIN_SCALE})", "",
-                  "| object | BiNI | " + " | ".join(f"{v:g}" for v in scales) + " |",
-                  "|---|---:|" + "---:|" * len(scales)]
+        lines += [
+            "",
+            f"## Sensitivity to `min_scale` (bilateral MADE in mm, median / LS; default {MIN_SCALE})",
+            "",
+            "| object | BiNI | " + " | ".join(f"{v:g}" for v in scales) + " |",
+            "|---|---:|" + "---:|" * len(scales),
+        ]
         for name in OBJECTS:
             normals, mask, K, gt = load(name)
             cells = []
             for v in scales:
                 z = integrate_bilateral(normals, mask, K=K, min_scale=v).depth
-                cells.append(f"{made(z, gt, mask, fit='median_scale'):.3f} / "
-                             f"{made(z, gt, mask):.3f}")
+                cells.append(f"{made(z, gt, mask, fit='median_scale'):.3f} / {made(z, gt, mask):.3f}")
             lines.append(f"| {name} | {BINI[name]:.3f} | " + " | ".join(cells) + " |")
         lines += ["", MIN_SCALE_NOTE]
     text = "\n".join(lines) + "\n"

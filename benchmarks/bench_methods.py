@@ -131,8 +131,9 @@ def _regions(name: str, size: int) -> dict:
 
 def solve(scene: synth.Scene, kwargs: dict, size: int):
     """``reconstruct`` on a scene as a user would call it: true mask, true light, drawn regions."""
-    return shadeform.reconstruct(scene.image, mask=scene.mask, light=scene.light,
-                                 concave=_regions(scene.name, size), **kwargs)
+    return shadeform.reconstruct(
+        scene.image, mask=scene.mask, light=scene.light, concave=_regions(scene.name, size), **kwargs
+    )
 
 
 def warm_up(chosen: Sequence[tuple[str, dict]], lights: Sequence[tuple[str, tuple]]) -> None:
@@ -203,15 +204,34 @@ def run_grid(
                 pixels = int(scene.mask.sum())
                 for label, kwargs in chosen:
                     try:
-                        rec, seconds, runs = timed(functools.partial(solve, scene, kwargs, size), repeats, budget)
+                        rec, seconds, runs = timed(
+                            functools.partial(solve, scene, kwargs, size), repeats, budget
+                        )
                     except InputError as error:
-                        row = Row(label, name, light_label, noise, math.nan, math.nan, math.nan, 0,
-                                  pixels, note=str(error))
+                        row = Row(
+                            label,
+                            name,
+                            light_label,
+                            noise,
+                            math.nan,
+                            math.nan,
+                            math.nan,
+                            0,
+                            pixels,
+                            note=str(error),
+                        )
                     else:
-                        row = Row(label, name, light_label, noise,
-                                  depth_pct=metrics.depth_error(rec.depth, scene.depth, fit="offset"),
-                                  angle_deg=metrics.angular_error(rec.normals, scene.normals),
-                                  seconds=seconds, runs=runs, object_pixels=pixels)
+                        row = Row(
+                            label,
+                            name,
+                            light_label,
+                            noise,
+                            depth_pct=metrics.depth_error(rec.depth, scene.depth, fit="offset"),
+                            angle_deg=metrics.angular_error(rec.normals, scene.normals),
+                            seconds=seconds,
+                            runs=runs,
+                            object_pixels=pixels,
+                        )
                     rows.append(row)
                     if progress is not None:
                         progress(row)
@@ -236,7 +256,9 @@ def _status_bytes(field: str) -> int | None:
     return None
 
 
-def peak_memory(label: str, kwargs: dict, light_label: str, *, size: int, scene_name: str = "sphere") -> Memory | None:
+def peak_memory(
+    label: str, kwargs: dict, light_label: str, *, size: int, scene_name: str = "sphere"
+) -> Memory | None:
     """Peak memory of one method on one scene (noise 0) under one light of :data:`LIGHTS`; None
     if the method refuses the light.
 
@@ -266,8 +288,20 @@ def peak_memory(label: str, kwargs: dict, light_label: str, *, size: int, scene_
 
 def peak_memory_fresh(label: str, light_label: str, *, size: int) -> Memory | None:
     """:func:`peak_memory` in a new Python process, whose heap no earlier run has grown."""
-    probe = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--memory-of", label, light_label,
-                            "--size", str(size)], capture_output=True, text=True, check=True)
+    probe = subprocess.run(
+        [
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "--memory-of",
+            label,
+            light_label,
+            "--size",
+            str(size),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     found = json.loads(probe.stdout)
     return None if found is None else Memory(**found)
 
@@ -314,8 +348,11 @@ def best_method(rows: Sequence[Row], light: str, noise: float) -> str | None:
     scenes = _labels(rows, "scene")
     medians = {}
     for method in _labels(rows, "method"):
-        errors = [row.depth_pct for row in rows
-                  if row.method == method and row.light == light and row.noise == noise and row.available]
+        errors = [
+            row.depth_pct
+            for row in rows
+            if row.method == method and row.light == light and row.noise == noise and row.available
+        ]
         if len(errors) == len(scenes):
             medians[method] = statistics.median(errors)
     return min(medians, key=medians.get) if medians else None
@@ -324,20 +361,26 @@ def best_method(rows: Sequence[Row], light: str, noise: float) -> str | None:
 def summary_table(rows: Sequence[Row], noise: float) -> str:
     """Per method and light: median and mean errors over the scenes, and scenes won."""
     best = best_by_scene(rows, noise)
-    lines = ["| method | light | depth % median | depth % mean | angle ° median | angle ° mean | "
-             "best depth on |", "|---|---|---:|---:|---:|---:|---|"]
+    lines = [
+        "| method | light | depth % median | depth % mean | angle ° median | angle ° mean | best depth on |",
+        "|---|---|---:|---:|---:|---:|---|",
+    ]
     for light in _labels(rows, "light"):
         for method in _labels(rows, "method"):
-            chosen = [row for row in rows if row.method == method and row.light == light and row.noise == noise]
+            chosen = [
+                row for row in rows if row.method == method and row.light == light and row.noise == noise
+            ]
             if not all(row.available for row in chosen):
                 lines.append(f"| {method} | {light} | n/a | n/a | n/a | n/a | |")
                 continue
             depth = [row.depth_pct for row in chosen]
             angle = [row.angle_deg for row in chosen]
             won = [scene for (scene, where), row in best.items() if where == light and row.method == method]
-            lines.append(f"| {method} | {light} | {fmt(statistics.median(depth))} | {fmt(statistics.fmean(depth))} | "
-                         f"{fmt(statistics.median(angle))} | {fmt(statistics.fmean(angle))} | "
-                         f"{len(won)}/{len(chosen)}{': ' + ', '.join(won) if won else ''} |")
+            lines.append(
+                f"| {method} | {light} | {fmt(statistics.median(depth))} | {fmt(statistics.fmean(depth))} | "
+                f"{fmt(statistics.median(angle))} | {fmt(statistics.fmean(angle))} | "
+                f"{len(won)}/{len(chosen)}{': ' + ', '.join(won) if won else ''} |"
+            )
     return "\n".join(lines)
 
 
@@ -350,7 +393,9 @@ def best_table(rows: Sequence[Row], noise: float) -> str:
         cells = []
         for light in lights:
             row = best.get((scene, light))
-            cells.append("—" if row is None else f"{row.method} ({fmt(row.depth_pct)} %, {fmt(row.angle_deg)}°)")
+            cells.append(
+                "—" if row is None else f"{row.method} ({fmt(row.depth_pct)} %, {fmt(row.angle_deg)}°)"
+            )
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -358,8 +403,11 @@ def best_table(rows: Sequence[Row], noise: float) -> str:
 def speed_table(rows: Sequence[Row], memory: Sequence[Memory]) -> str:
     """Per method: median time and ms per megapixel of object over its configurations, memory."""
     peaks = {(item.method, item.light): item for item in memory}
-    lines = ["| method | light | configurations | median ms | max ms | median ms / Mpx | peak MiB traced | "
-             "peak RSS growth MiB | memory measured on |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    lines = [
+        "| method | light | configurations | median ms | max ms | median ms / Mpx | peak MiB traced | "
+        "peak RSS growth MiB | memory measured on |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
     for method in _labels(rows, "method"):
         for light in _labels(rows, "light"):
             ran = [row for row in rows if row.method == method and row.light == light and row.available]
@@ -372,8 +420,10 @@ def speed_table(rows: Sequence[Row], memory: Sequence[Memory]) -> str:
             traced = f"{item.traced / 2**20:,.0f}" if item else ""
             rss = (f"{item.rss / 2**20:,.0f}" if item.rss is not None else "n/a") if item else ""
             where = f"{item.scene}, noise 0" if item else ""
-            lines.append(f"| {method} | {light} | {len(ran)} | {statistics.median(ms):,.0f} | {max(ms):,.0f} | "
-                         f"{statistics.median(per_mpx):,.0f} | {traced} | {rss} | {where} |")
+            lines.append(
+                f"| {method} | {light} | {len(ran)} | {statistics.median(ms):,.0f} | {max(ms):,.0f} | "
+                f"{statistics.median(per_mpx):,.0f} | {traced} | {rss} | {where} |"
+            )
     return "\n".join(lines)
 
 
@@ -402,11 +452,21 @@ def _auto_choice(light: str, best: str | None) -> str:
     if light not in directions:
         return ""
     picked = solvers.choose(np.asarray(directions[light])).name
-    return f"; `method=\"auto\"` picks {picked}" + ("" if picked == best else " (**not** the best measured here)")
+    return f'; `method="auto"` picks {picked}' + (
+        "" if picked == best else " (**not** the best measured here)"
+    )
 
 
-def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats: int, budget: float,
-           wall: float, showcase: str | None) -> str:
+def report(
+    rows: Sequence[Row],
+    memory: Sequence[Memory],
+    *,
+    size: int,
+    repeats: int,
+    budget: float,
+    wall: float,
+    showcase: str | None,
+) -> str:
     """The whole ``methods.md``."""
     noises = _labels(rows, "noise")
     lights = _labels(rows, "light")
@@ -418,7 +478,8 @@ def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats:
         "# Methods on the synthetic scenes",
         "",
         f"`python benchmarks/bench_methods.py --size {size} --repeats {repeats}"
-        + (f" --budget {budget:g}" if math.isfinite(budget) else "") + "` "
+        + (f" --budget {budget:g}" if math.isfinite(budget) else "")
+        + "` "
         f"(`make bench`). Scenes {size}x{size} from `shadeform.synth` with the true mask and the true "
         f"light; **the concave regions a user would draw are given** "
         "(`synth.concave_regions`: the bowl and the saddle whole, the vase's neck, the bumps' dent). "
@@ -426,8 +487,8 @@ def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats:
         f"a fraction of the albedo, seed {SEED}. Depth error: RMSE as % of the true depth range after "
         "fitting the free offset; angle: mean angular error of the normals (both as `shadeform "
         "evaluate`). Methods: every registered solver (`shadeform methods`) with its defaults (the "
-        "default `method=\"auto\"` picks one of them by the light), and "
-        f"\"{LEGACY}\" = propagation with `refine=0`, `integrator=\"paths\"` (the report's algorithm). "
+        'default `method="auto"` picks one of them by the light), and '
+        f'"{LEGACY}" = propagation with `refine=0`, `integrator="paths"` (the report\'s algorithm). '
         "n/a: the method refuses that light (its message is below).",
         "",
         f"Time: median wall time of `reconstruct` over {repeats} run{'s' if repeats > 1 else ''} after a warm-up"
@@ -440,31 +501,54 @@ def report(rows: Sequence[Row], memory: Sequence[Memory], *, size: int, repeats:
         "",
     ]
     for light in lights:
-        parts.append(f"- Best measured for {light} (lowest median depth error over the "
-                     f"{len(_labels(rows, 'scene'))} scenes, noise {clean:.0%}): **{bests[light] or 'none'}**"
-                     + _auto_choice(light, bests[light]))
-    parts += ["", "Best measured (lowest median depth error over the scenes) at every noise level:", "",
-              "| light | " + " | ".join(f"noise {noise:.0%}" for noise in noises) + " |",
-              "|---|" + "---|" * len(noises)]
-    parts += [f"| {light} | " + " | ".join(best_method(rows, light, noise) or "none" for noise in noises) + " |"
-              for light in lights]
+        parts.append(
+            f"- Best measured for {light} (lowest median depth error over the "
+            f"{len(_labels(rows, 'scene'))} scenes, noise {clean:.0%}): **{bests[light] or 'none'}**"
+            + _auto_choice(light, bests[light])
+        )
+    parts += [
+        "",
+        "Best measured (lowest median depth error over the scenes) at every noise level:",
+        "",
+        "| light | " + " | ".join(f"noise {noise:.0%}" for noise in noises) + " |",
+        "|---|" + "---|" * len(noises),
+    ]
+    parts += [
+        f"| {light} | " + " | ".join(best_method(rows, light, noise) or "none" for noise in noises) + " |"
+        for light in lights
+    ]
     for noise in noises:
-        parts += ["", f"Noise {noise:.0%}: errors over the scenes per method and light, and the scenes "
-                  "on which the method has the lowest depth error.", "", summary_table(rows, noise)]
-    parts += ["", f"## Best method per scene (lowest depth error, noise {clean:.0%})", "",
-              best_table(rows, clean), "",
-              "## Speed and memory", "",
-              "Times over all scenes and noise levels of a light; milliseconds per megapixel of "
-              "object pixels. Memory: one call on the scene named, each in a fresh Python process "
-              "after a tiny warm-up; \"traced\" is the peak of Python and numpy allocations "
-              "(tracemalloc; it misses buffers numba kernels allocate inside), \"RSS growth\" the "
-              "rise of the process's peak resident memory over its size before the call (Linux).", "",
-              speed_table(rows, memory)]
+        parts += [
+            "",
+            f"Noise {noise:.0%}: errors over the scenes per method and light, and the scenes "
+            "on which the method has the lowest depth error.",
+            "",
+            summary_table(rows, noise),
+        ]
+    parts += [
+        "",
+        f"## Best method per scene (lowest depth error, noise {clean:.0%})",
+        "",
+        best_table(rows, clean),
+        "",
+        "## Speed and memory",
+        "",
+        "Times over all scenes and noise levels of a light; milliseconds per megapixel of "
+        "object pixels. Memory: one call on the scene named, each in a fresh Python process "
+        'after a tiny warm-up; "traced" is the peak of Python and numpy allocations '
+        '(tracemalloc; it misses buffers numba kernels allocate inside), "RSS growth" the '
+        "rise of the process's peak resident memory over its size before the call (Linux).",
+        "",
+        speed_table(rows, memory),
+    ]
     if notes:
         parts += ["", "Messages of the n/a cells:", ""] + [f"- {note}" for note in notes]
-    parts += ["", "Plots: `methods_depth.png`, `methods_angle.png` (heatmaps), `methods_noise.png` "
-              "(error against noise)" + (f"; `showcase.png`: {showcase}." if showcase else "."),
-              "The DiLiGenT normal-integration table is `diligent.md` (`benchmarks/bench_diligent.py`)."]
+    parts += [
+        "",
+        "Plots: `methods_depth.png`, `methods_angle.png` (heatmaps), `methods_noise.png` "
+        "(error against noise)" + (f"; `showcase.png`: {showcase}." if showcase else "."),
+        "The DiLiGenT normal-integration table is `diligent.md` (`benchmarks/bench_diligent.py`).",
+    ]
     for light in lights:
         parts += ["", f"## Full table, light {light}", "", full_table(rows, light)]
     return "\n".join(parts) + "\n"
@@ -499,8 +583,13 @@ def heatmap(rows: Sequence[Row], field: str, title: str, path: Path) -> None:
     top = max(values, default=1.0)
     norm = LogNorm(vmin=0.01, vmax=max(top, 0.1))
     cmap = plt.get_cmap("viridis").with_extremes(bad="#d9d9d9")
-    figure, axes = plt.subplots(len(noises), 1, figsize=(1.05 * len(columns) + 2.6, 3.3 * len(noises) + 1.0),
-                                squeeze=False, layout="constrained")
+    figure, axes = plt.subplots(
+        len(noises),
+        1,
+        figsize=(1.05 * len(columns) + 2.6, 3.3 * len(noises) + 1.0),
+        squeeze=False,
+        layout="constrained",
+    )
     for axis, noise in zip(axes[:, 0], noises):
         grid = np.full((len(scenes), len(columns)), np.nan)
         for i, scene in enumerate(scenes):
@@ -515,8 +604,9 @@ def heatmap(rows: Sequence[Row], field: str, title: str, path: Path) -> None:
                 value = grid[i, j]
                 text = "n/a" if np.isnan(value) else fmt(value)
                 dark = np.isnan(value) or norm(min(max(value, 0.01), top)) > 0.6
-                axis.text(j, i, text, ha="center", va="center", fontsize=8,
-                          color="black" if dark else "white")
+                axis.text(
+                    j, i, text, ha="center", va="center", fontsize=8, color="black" if dark else "white"
+                )
         axis.set_yticks(range(len(scenes)), scenes)
         axis.set_ylabel(f"noise {noise:.0%}", fontsize=11, fontweight="bold")
         axis.set_xticks(range(len(columns)), [light for _, light in columns], fontsize=8)
@@ -524,11 +614,17 @@ def heatmap(rows: Sequence[Row], field: str, title: str, path: Path) -> None:
         for j in range(len(lights), len(columns), len(lights)):
             axis.axvline(j - 0.5, color="white", linewidth=3)
         top_axis = axis.secondary_xaxis("top")
-        top_axis.set_xticks([k * len(lights) + (len(lights) - 1) / 2 for k in range(len(names))], names,
-                            fontsize=10, fontweight="bold")
+        top_axis.set_xticks(
+            [k * len(lights) + (len(lights) - 1) / 2 for k in range(len(names))],
+            names,
+            fontsize=10,
+            fontweight="bold",
+        )
         top_axis.tick_params(length=0)
     figure.colorbar(image, ax=axes[:, 0], shrink=0.6, label=title)
-    figure.suptitle(f"{title}: methods x lights on the synthetic scenes (grey: n/a, the method refuses the light)")
+    figure.suptitle(
+        f"{title}: methods x lights on the synthetic scenes (grey: n/a, the method refuses the light)"
+    )
     _save(figure, path)
     plt.close(figure)
 
@@ -539,23 +635,38 @@ def noise_plot(rows: Sequence[Row], path: Path) -> None:
     from matplotlib.ticker import FuncFormatter, LogFormatter
 
     lights, names, noises = (_labels(rows, f) for f in ("light", "method", "noise"))
-    measures = (("depth_pct", "depth error, % of range (median over scenes)"),
-                ("angle_deg", "angular error, ° (median over scenes)"))
-    figure, axes = plt.subplots(len(measures), len(lights), figsize=(4.3 * len(lights), 7.0),
-                                sharex=True, squeeze=False, layout="constrained")
+    measures = (
+        ("depth_pct", "depth error, % of range (median over scenes)"),
+        ("angle_deg", "angular error, ° (median over scenes)"),
+    )
+    figure, axes = plt.subplots(
+        len(measures),
+        len(lights),
+        figsize=(4.3 * len(lights), 7.0),
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
+    )
     markers = "osD^v<>"
     for i, (field, label) in enumerate(measures):
         for j, light in enumerate(lights):
             axis = axes[i, j]
             for k, method in enumerate(names):
-                chosen = [[row for row in rows if row.method == method and row.light == light and row.noise == n]
-                          for n in noises]
+                chosen = [
+                    [row for row in rows if row.method == method and row.light == light and row.noise == n]
+                    for n in noises
+                ]
                 if not all(row.available for group in chosen for row in group):
                     continue
                 medians = [statistics.median(getattr(row, field) for row in group) for group in chosen]
                 # one colour and marker per method in every panel, whichever methods a panel lacks
-                axis.plot([100 * n for n in noises], medians, marker=markers[k % len(markers)], color=f"C{k % 10}",
-                          label=method)
+                axis.plot(
+                    [100 * n for n in noises],
+                    medians,
+                    marker=markers[k % len(markers)],
+                    color=f"C{k % 10}",
+                    label=method,
+                )
             axis.set_yscale("log")
             # plain numbers (40, not 4 x 10^1); minor ticks labelled when the axis spans little
             axis.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
@@ -597,12 +708,23 @@ def showcase(rows: Sequence[Row], size: int, path: Path) -> str:
     picture = result_picture(scene.image, rec.normals, shadeform.to_mesh(rec, step=max(1, size // 128)))
     with atomic_write(path) as handle:
         Image.fromarray(picture).save(handle, format="PNG")
-    return (f"{name}, light {light_label} (tilt {TILT:g}°), noise {noise:.0%}, method {best.method} "
-            f"(depth error {fmt(best.depth_pct)} %, angle {fmt(best.angle_deg)}°)")
+    return (
+        f"{name}, light {light_label} (tilt {TILT:g}°), noise {noise:.0%}, method {best.method} "
+        f"(depth error {fmt(best.depth_pct)} %, angle {fmt(best.angle_deg)}°)"
+    )
 
 
-def write_results(rows: Sequence[Row], memory: Sequence[Memory], out: Path, *, size: int, repeats: int,
-                  budget: float, wall: float, pictures: bool = True) -> str:
+def write_results(
+    rows: Sequence[Row],
+    memory: Sequence[Memory],
+    out: Path,
+    *,
+    size: int,
+    repeats: int,
+    budget: float,
+    wall: float,
+    pictures: bool = True,
+) -> str:
     """Write ``methods.md`` (and the plots unless ``pictures`` is false) to ``out``; returns the text."""
     out.mkdir(parents=True, exist_ok=True)
     about = None
@@ -610,8 +732,11 @@ def write_results(rows: Sequence[Row], memory: Sequence[Memory], out: Path, *, s
         heatmap(rows, "depth_pct", "depth error, % of range", out / "methods_depth.png")
         heatmap(rows, "angle_deg", "mean angular error, °", out / "methods_angle.png")
         noise_plot(rows, out / "methods_noise.png")
-        if (SHOWCASE[0] in _labels(rows, "scene") and SHOWCASE[1] in _labels(rows, "light")
-                and SHOWCASE[2] in _labels(rows, "noise")):
+        if (
+            SHOWCASE[0] in _labels(rows, "scene")
+            and SHOWCASE[1] in _labels(rows, "light")
+            and SHOWCASE[2] in _labels(rows, "noise")
+        ):
             about = showcase(rows, size, out / "showcase.png")
     text = report(rows, memory, size=size, repeats=repeats, budget=budget, wall=wall, showcase=about)
     with atomic_write(out / "methods.md", mode="w") as handle:
@@ -637,16 +762,26 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per configuration (default 3)")
-    parser.add_argument("--budget", type=float, default=10.0,
-                        help="seconds after which a configuration gets no more timed runs (default 10)")
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=10.0,
+        help="seconds after which a configuration gets no more timed runs (default 10)",
+    )
     parser.add_argument("--quick", action="store_true", help="128 pixels, one run: a fast check")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for methods.md and the PNGs")
-    parser.add_argument("--save-rows", type=Path, metavar="JSON",
-                        help="also write the measured rows to this JSON file")
-    parser.add_argument("--replot", type=Path, metavar="JSON",
-                        help="rewrite methods.md and the PNGs from rows saved by --save-rows, without measuring")
-    parser.add_argument("--memory-of", nargs=2, metavar=("METHOD", "LIGHT"),
-                        help=argparse.SUPPRESS)  # the memory probe's own process
+    parser.add_argument(
+        "--save-rows", type=Path, metavar="JSON", help="also write the measured rows to this JSON file"
+    )
+    parser.add_argument(
+        "--replot",
+        type=Path,
+        metavar="JSON",
+        help="rewrite methods.md and the PNGs from rows saved by --save-rows, without measuring",
+    )
+    parser.add_argument(
+        "--memory-of", nargs=2, metavar=("METHOD", "LIGHT"), help=argparse.SUPPRESS
+    )  # the memory probe's own process
     args = parser.parse_args(argv)
     if args.quick:
         args.size, args.repeats = 128, 1
@@ -665,20 +800,35 @@ def main(argv=None) -> int:
 
     start = time.perf_counter()
     chosen = methods()
-    print(f"methods: {', '.join(label for label, _ in chosen)}; {args.size}x{args.size}, "
-          f"{args.repeats} runs", file=sys.stderr, flush=True)
+    print(
+        f"methods: {', '.join(label for label, _ in chosen)}; {args.size}x{args.size}, {args.repeats} runs",
+        file=sys.stderr,
+        flush=True,
+    )
 
     def progress(row: Row) -> None:
-        shown = (f"{fmt(row.depth_pct)} %  {fmt(row.angle_deg)}°  {row.seconds * 1e3:,.0f} ms x{row.runs}"
-                 if row.available else "n/a")
-        print(f"  {row.scene:9} {row.light:9} {row.noise:4.0%}  {row.method:20} {shown}", file=sys.stderr,
-              flush=True)
+        shown = (
+            f"{fmt(row.depth_pct)} %  {fmt(row.angle_deg)}°  {row.seconds * 1e3:,.0f} ms x{row.runs}"
+            if row.available
+            else "n/a"
+        )
+        print(
+            f"  {row.scene:9} {row.light:9} {row.noise:4.0%}  {row.method:20} {shown}",
+            file=sys.stderr,
+            flush=True,
+        )
 
-    rows = run_grid(size=args.size, repeats=args.repeats, budget=args.budget, chosen=chosen, progress=progress)
+    rows = run_grid(
+        size=args.size, repeats=args.repeats, budget=args.budget, chosen=chosen, progress=progress
+    )
     measured = (peak_memory_fresh(label, light, size=args.size) for label, _ in chosen for light, _ in LIGHTS)
     memory = [item for item in measured if item is not None]
-    run = {"size": args.size, "repeats": args.repeats, "budget": args.budget,
-           "wall": time.perf_counter() - start}
+    run = {
+        "size": args.size,
+        "repeats": args.repeats,
+        "budget": args.budget,
+        "wall": time.perf_counter() - start,
+    }
     if args.save_rows is not None:
         save_rows(args.save_rows, rows, memory, run)
     text = write_results(rows, memory, args.out, **run)

@@ -60,22 +60,35 @@ def main(argv=None) -> int:
     glb = tmp / "model.glb"
 
     stages = [
-        ("normals: propagation (2002)", lambda: propagate_normals(image, mask, light=light, reference=ref, albedo=albedo)),
-        ("normals: integrability refinement x3", lambda: refine_by_integrability(
-            normals, cos_theta, mask, light=light, iterations=3)),
+        (
+            "normals: propagation (2002)",
+            lambda: propagate_normals(image, mask, light=light, reference=ref, albedo=albedo),
+        ),
+        (
+            "normals: integrability refinement x3",
+            lambda: refine_by_integrability(normals, cos_theta, mask, light=light, iterations=3),
+        ),
         ("depth: averaged paths", lambda: integrate_paths(refined, mask, origin=ref)),
         ("mesh (step 1)", lambda: shadeform.to_mesh(rec, step=1)),
         ("export .glb", lambda: shadeform.export(mesh, glb)),
-        ("total, 2002 (refine=0): reconstruct + mesh + .glb", lambda: shadeform.export(
-            shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, refine=0)), glb)),
-        ("total, default (refine=3): reconstruct + mesh + .glb", lambda: shadeform.export(
-            shadeform.to_mesh(shadeform.reconstruct(image, mask=mask)), glb)),
+        (
+            "total, 2002 (refine=0): reconstruct + mesh + .glb",
+            lambda: shadeform.export(
+                shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, refine=0)), glb
+            ),
+        ),
+        (
+            "total, default (refine=3): reconstruct + mesh + .glb",
+            lambda: shadeform.export(shadeform.to_mesh(shadeform.reconstruct(image, mask=mask)), glb),
+        ),
     ]
     megapixels = image.size / 1e6
     rows = []
     for name, fn in stages:
         seconds, peak = measure(fn, args.runs)
-        rows.append(f"| {name} | {seconds * 1e3:,.0f} | {seconds * 1e3 / megapixels:,.0f} | {peak / 2**20:,.0f} |")
+        rows.append(
+            f"| {name} | {seconds * 1e3:,.0f} | {seconds * 1e3 / megapixels:,.0f} | {peak / 2**20:,.0f} |"
+        )
         print(rows[-1], file=sys.stderr)
 
     header = (

@@ -57,18 +57,32 @@ def timed(fn, repeats):
 
 def synthetic_rows(repeats):
     rng = np.random.default_rng(1)
-    lights = np.array([light_from_slant_tilt(s, t) for s, t in
-                       zip(rng.uniform(5, 50, 40), rng.uniform(0, 360, 40))])
+    lights = np.array(
+        [light_from_slant_tilt(s, t) for s, t in zip(rng.uniform(5, 50, 40), rng.uniform(0, 360, 40))]
+    )
     scene = synth.scene("sphere", size=128)
     rows = []
     for label, specular, shininess, noise in CASES:
-        images = np.stack([synth.render(scene.normals, scene.mask, light=light, albedo=0.7,
-                                        specular=specular, shininess=shininess, noise=noise,
-                                        seed=i) for i, light in enumerate(lights)])
+        images = np.stack(
+            [
+                synth.render(
+                    scene.normals,
+                    scene.mask,
+                    light=light,
+                    albedo=0.7,
+                    specular=specular,
+                    shininess=shininess,
+                    noise=noise,
+                    seed=i,
+                )
+                for i, light in enumerate(lights)
+            ]
+        )
         cells = []
         for method in METHODS:
-            result, seconds = timed(partial(photometric_stereo, images, lights, scene.mask, method=method),
-                                    repeats)
+            result, seconds = timed(
+                partial(photometric_stereo, images, lights, scene.mask, method=method), repeats
+            )
             errors = angles(result.normals, scene.normals, scene.mask)
             cells.append((float(np.nanmean(errors)), float(np.nanmedian(errors)), seconds))
         rows.append((label, int(scene.mask.sum()), cells))
@@ -85,11 +99,28 @@ def ball_rows(repeats):
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
     rows = []
     for method in METHODS[::-1]:
-        result, seconds = timed(partial(photometric_stereo, ball.images, ball.lights, ball.mask,
-                                        intensities=ball.intensities, method=method), repeats)
+        result, seconds = timed(
+            partial(
+                photometric_stereo,
+                ball.images,
+                ball.lights,
+                ball.mask,
+                intensities=ball.intensities,
+                method=method,
+            ),
+            repeats,
+        )
         errors = angles(result.normals, truth, ball.mask)
-        rows.append((method, float(np.nanmean(errors)), float(np.nanmedian(errors)),
-                     PUBLISHED[method], seconds, int(ball.mask.sum())))
+        rows.append(
+            (
+                method,
+                float(np.nanmean(errors)),
+                float(np.nanmedian(errors)),
+                PUBLISHED[method],
+                seconds,
+                int(ball.mask.sum()),
+            )
+        )
         print(rows[-1], flush=True)
     return rows, len(ball.paths)
 
@@ -122,8 +153,10 @@ def main(argv=None) -> str:
             "|---|---:|---:|---:|---:|---:|",
         ]
         for method, mean, median, published, seconds, pixels in ball:
-            lines.append(f"| {method} | {mean:.2f} | {median:.2f} | {published:.2f} "
-                         f"| {seconds:.2f} | {seconds * 1e3 / (pixels / 1e6):,.0f} |")
+            lines.append(
+                f"| {method} | {mean:.2f} | {median:.2f} | {published:.2f} "
+                f"| {seconds:.2f} | {seconds * 1e3 / (pixels / 1e6):,.0f} |"
+            )
         lines.append("")
     lines += [
         f"## Synthetic sphere, 128x128, {count} lights (slant 5-50°), albedo 0.7",
@@ -135,8 +168,9 @@ def main(argv=None) -> str:
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for label, _, ((rm, rmed, rt), (lm, lmed, lt)) in synthetic:
-        lines.append(f"| {label} | {rm:.2f} | {rmed:.2f} | {lm:.2f} | {lmed:.2f} "
-                     f"| {rt * 1e3:.0f} | {lt * 1e3:.0f} |")
+        lines.append(
+            f"| {label} | {rm:.2f} | {rmed:.2f} | {lm:.2f} | {lmed:.2f} | {rt * 1e3:.0f} | {lt * 1e3:.0f} |"
+        )
     text = "\n".join(lines) + "\n"
     with atomic_write(args.out, mode="w") as handle:
         handle.write(text)

@@ -11,7 +11,7 @@ def normals_of(zx, zy):
 
 def pixel_xy(shape):
     """Camera-frame pixel coordinates ``x = col``, ``y = -row``."""
-    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
     return cols, -rows
 
 

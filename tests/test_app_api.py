@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
-from test_io_images import png_with_ihdr
 
 import shadeform
 from shadeform import metrics, synth
@@ -27,12 +26,13 @@ from shadeform.app import schema, server
 from shadeform.app.server import AppLimits, create_app
 from shadeform.app.store import LRU
 from shadeform.examples import EXAMPLES, load_example
+from shadeform.integration import available_integrators
 from shadeform.io.exporters import available_formats
 from shadeform.io.images import CHANNELS
 from shadeform.light import light_from_slant_tilt
-from shadeform.integration import available_integrators
 from shadeform.preprocess import FILTER_KINDS, apply_filter
 from shadeform.solvers import available_methods
+from test_io_images import png_with_ihdr
 
 ROOT = Path(__file__).resolve().parents[1]
 LOCAL = "http://127.0.0.1:8000"
@@ -81,7 +81,9 @@ def upload(client, data: bytes, name="photo.png"):
 
 
 def reconstruct(client, image_id, request_id=1, **params):
-    return client.post("/api/reconstruct", json={"image_id": image_id, "params": params, "request_id": request_id})
+    return client.post(
+        "/api/reconstruct", json={"image_id": image_id, "params": params, "request_id": request_id}
+    )
 
 
 def decode_mesh(mesh: dict) -> dict[str, np.ndarray]:
@@ -135,8 +137,10 @@ class TestOptions:
         assert options["filters"] == list(FILTER_KINDS)
         assert {f["suffix"]: f["description"] for f in options["formats"]} == available_formats()
         assert [e["name"] for e in options["examples"]] == list(EXAMPLES)
-        assert options["limits"] == {"max_upload_bytes": AppLimits().max_upload_bytes,
-                                     "max_pixels": AppLimits().max_pixels}
+        assert options["limits"] == {
+            "max_upload_bytes": AppLimits().max_upload_bytes,
+            "max_pixels": AppLimits().max_pixels,
+        }
         assert options["initial_image"] is None
 
     def test_defaults_are_the_library_defaults(self, client):
@@ -160,7 +164,9 @@ class TestOptions:
     def test_initial_pinned(self):
         # the command line's image stays however many images are opened after it
         limits = AppLimits(max_images=2)
-        with TestClient(create_app(initial_image="synth:sphere", limits=limits), base_url=LOCAL) as test_client:
+        with TestClient(
+            create_app(initial_image="synth:sphere", limits=limits), base_url=LOCAL
+        ) as test_client:
             initial = test_client.get("/api/options").json()["initial_image"]["image_id"]
             for _ in range(3):
                 assert upload(test_client, png_bytes(disk_photo())).status_code == 201
@@ -193,7 +199,9 @@ class TestUpload:
         Image.fromarray(values).save(buffer, format="TIFF")
         info = upload(client, buffer.getvalue(), name="deep.tif").json()
         assert info["channels"] == 1
-        photo = np.asarray(Image.open(io.BytesIO(client.get(f"/api/images/{info['image_id']}/photo.png").content)))
+        photo = np.asarray(
+            Image.open(io.BytesIO(client.get(f"/api/images/{info['image_id']}/photo.png").content))
+        )
         np.testing.assert_array_equal(photo, np.rint(values / 65535 * 255).astype(np.uint8))
 
     def test_folders_dropped_from_the_name(self, client):
@@ -282,7 +290,9 @@ class TestPreviews:
         for index, channel in enumerate("rgb"):
             response = client.get(f"/api/images/{image_id}/channel.png?channel={channel}")
             assert response.status_code == 200 and response.headers["content-type"] == "image/png"
-            np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(response.content))), photo[:, :, index])
+            np.testing.assert_array_equal(
+                np.asarray(Image.open(io.BytesIO(response.content))), photo[:, :, index]
+            )
 
     def test_filter_matches_the_library(self, client, bowl):
         response = client.get(f"/api/images/{bowl['image_id']}/channel.png?filter=median:2")
@@ -315,7 +325,10 @@ class TestReconstruct:
         rec, mesh = library_result("synth:bowl", SIZE, step=2)
         got = decode_mesh(result["mesh"])
         assert result["request_id"] == 7
-        assert (result["mesh"]["vertex_count"], result["mesh"]["triangle_count"]) == (mesh.n_vertices, mesh.n_faces)
+        assert (result["mesh"]["vertex_count"], result["mesh"]["triangle_count"]) == (
+            mesh.n_vertices,
+            mesh.n_faces,
+        )
         np.testing.assert_array_equal(got["positions"], mesh.vertices.astype(np.float32))
         np.testing.assert_array_equal(got["normals"], mesh.normals.astype(np.float32))
         np.testing.assert_array_equal(got["uvs"], mesh.uv.astype(np.float32))
@@ -325,7 +338,9 @@ class TestReconstruct:
         assert result["references"] == [list(ref) for ref in rec.info["references"]]
         assert result["depth_range"] == [float(np.nanmin(rec.depth)), float(np.nanmax(rec.depth))]
         assert result["light"] == [0.0, 0.0, 1.0]
-        assert result["info"]["method"] == rec.info["method"] == "eikonal" and result["info"]["cached"] is False
+        assert (
+            result["info"]["method"] == rec.info["method"] == "eikonal" and result["info"]["cached"] is False
+        )
         assert {"normals", "mesh", "encode", "total"} <= set(result["timings"])
 
     def test_mesh_convention(self, client, bowl):
@@ -369,7 +384,11 @@ class TestReconstruct:
         quick = client.post("/api/reconstruct", json={**body, "preview": True}).json()
         assert quick["preview"] is True and quick["info"]["preview_step"] == 2 and quick["request_id"] == 7
         full = client.post("/api/reconstruct", json=body).json()
-        assert full["preview"] is False and "preview_step" not in full["info"] and full["info"]["cached"] is False
+        assert (
+            full["preview"] is False
+            and "preview_step" not in full["info"]
+            and full["info"]["cached"] is False
+        )
         # the quick look has the full mesh's vertices and triangles, at nearly the same depth
         quick_mesh, full_mesh = decode_mesh(quick["mesh"]), decode_mesh(full["mesh"])
         np.testing.assert_array_equal(quick_mesh["indices"], full_mesh["indices"])
@@ -381,8 +400,9 @@ class TestReconstruct:
         again = client.post("/api/reconstruct", json={**body, "preview": True}).json()
         assert again["preview"] is False and again["info"]["cached"] is True
         # at step 1 there is no quick look
-        single = client.post("/api/reconstruct", json={**body, "params": {**params, "step": 1, "refine": 1},
-                                                        "preview": True}).json()
+        single = client.post(
+            "/api/reconstruct", json={**body, "params": {**params, "step": 1, "refine": 1}, "preview": True}
+        ).json()
         assert single["preview"] is False
 
     def test_light_modes(self, client):
@@ -443,7 +463,9 @@ class TestReconstructErrors:
 
     def test_malformed_json(self, client):
         headers = {"content-type": "application/json"}
-        assert_error(client.post("/api/reconstruct", content=b'{"image_id": ', headers=headers), 422, "not valid JSON")
+        assert_error(
+            client.post("/api/reconstruct", content=b'{"image_id": ', headers=headers), 422, "not valid JSON"
+        )
         assert_error(client.post("/api/reconstruct", content=b"\xff\xfe", headers=headers), 422)
         assert_error(client.post("/api/reconstruct", json=[1, 2]), 422, "body")
         assert_error(client.post("/api/reconstruct", json={"params": {}}), 422, "image_id", "missing")
@@ -489,11 +511,24 @@ class TestSuperseded:
         async def send(message):
             sent.append(message)
 
-        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
-                 "scheme": "http", "path": "/api/reconstruct", "raw_path": b"/api/reconstruct",
-                 "query_string": b"", "root_path": "", "server": ("127.0.0.1", 8000), "client": ("127.0.0.1", 5),
-                 "headers": [(b"host", b"127.0.0.1:8000"), (b"content-type", b"application/json"),
-                             (b"content-length", str(len(body)).encode())]}
+        scope = {
+            "type": "http",
+            "asgi": {"version": "3.0"},
+            "http_version": "1.1",
+            "method": "POST",
+            "scheme": "http",
+            "path": "/api/reconstruct",
+            "raw_path": b"/api/reconstruct",
+            "query_string": b"",
+            "root_path": "",
+            "server": ("127.0.0.1", 8000),
+            "client": ("127.0.0.1", 5),
+            "headers": [
+                (b"host", b"127.0.0.1:8000"),
+                (b"content-type", b"application/json"),
+                (b"content-length", str(len(body)).encode()),
+            ],
+        }
         asyncio.run(app(scope, receive, send))
         assert calls == []
         assert sent[0]["status"] == 204
@@ -519,7 +554,9 @@ class TestExport:
         assert client.post("/api/export?format=WRL", json=request).content == wrl
 
     def test_upload_name_sanitised(self, client):
-        image_id = upload(client, png_bytes(disk_photo()), name='..\\..\\x/; rm -rf ~ ü.png').json()["image_id"]
+        image_id = upload(client, png_bytes(disk_photo()), name="..\\..\\x/; rm -rf ~ ü.png").json()[
+            "image_id"
+        ]
         response = client.post("/api/export?format=.iv", json={"image_id": image_id})
         assert response.status_code == 200
         assert response.headers["content-disposition"] == 'attachment; filename="rm_-rf.iv"'
@@ -531,9 +568,16 @@ class TestExport:
         assert_error(client.post("/api/export", json=request), 422, "format", "missing")
 
     def test_bad_requests(self, client, bowl):
-        assert_error(client.post("/api/export?format=.wrl", json={"image_id": "nope"}), 404, "unknown image id")
-        assert_error(client.post("/api/export?format=.wrl", json={"image_id": bowl["image_id"],
-                                                                  "params": {"method": "x"}}), 422, "unknown method")
+        assert_error(
+            client.post("/api/export?format=.wrl", json={"image_id": "nope"}), 404, "unknown image id"
+        )
+        assert_error(
+            client.post(
+                "/api/export?format=.wrl", json={"image_id": bowl["image_id"], "params": {"method": "x"}}
+            ),
+            422,
+            "unknown method",
+        )
 
 
 # ------------------------------------------------------------------- guard, routes, static
@@ -592,8 +636,13 @@ class TestStatic:
         with TestClient(create_app(static_dir=static), base_url=LOCAL) as test_client:
             assert test_client.get("/").text == "<!doctype html><title>app</title>"
             assert test_client.get("/assets/app.js").text == "console.log(1)"
-            for sneaky in ("/../secret.txt", "/%2e%2e/secret.txt", "/assets/..%2F..%2Fsecret.txt",
-                           "/..%5Csecret.txt", "/assets/%2e%2e/%2e%2e/secret.txt"):
+            for sneaky in (
+                "/../secret.txt",
+                "/%2e%2e/secret.txt",
+                "/assets/..%2F..%2Fsecret.txt",
+                "/..%5Csecret.txt",
+                "/assets/%2e%2e/%2e%2e/secret.txt",
+            ):
                 response = test_client.get(sneaky)
                 assert "do not serve" not in response.text, sneaky
                 assert response.status_code == 404, sneaky
@@ -611,8 +660,15 @@ class TestGeneratedTypes:
 
     def test_every_model_and_alias(self):
         text = schema.typescript()
-        for name in ("ReconstructParams", "ReconstructRequest", "ReconstructResult", "ImageInfo", "Options",
-                     "MeshData", "ErrorBody"):
+        for name in (
+            "ReconstructParams",
+            "ReconstructRequest",
+            "ReconstructResult",
+            "ImageInfo",
+            "Options",
+            "MeshData",
+            "ErrorBody",
+        ):
             assert f"export interface {name} {{" in text
         assert 'export type Channel = "luma" | "r" | "g" | "b" | "max";' in text
         assert "  light: [number, number, number];" in text
@@ -644,18 +700,18 @@ class TestLRU:
         assert lru.get("big") is None and lru.get("pin") == 0 and len(lru) == 2
 
 
-
-
 class TestAppCommand:
     @pytest.fixture
     def served(self, monkeypatch):
         """Record what would be served, and that no browser or warm-up really starts."""
-        import uvicorn
         import webbrowser
 
+        import uvicorn
+
         calls = {}
-        monkeypatch.setattr(uvicorn.Server, "run", lambda self, sockets: calls.update(app=self.config.app,
-                                                                                        sockets=sockets))
+        monkeypatch.setattr(
+            uvicorn.Server, "run", lambda self, sockets: calls.update(app=self.config.app, sockets=sockets)
+        )
         monkeypatch.setattr(webbrowser, "open", lambda url: calls.update(browser=url))
         monkeypatch.setattr(server, "warm_up", lambda: calls.update(warmed=True))
         monkeypatch.delenv("DISPLAY", raising=False)
@@ -700,8 +756,10 @@ class TestAppCommand:
             assert test_client.get("/api/options").status_code == 200  # any Host: remote users
 
     def test_bad_image(self, served, cli, tmp_path):
-        for bad, fragment in ((tmp_path / "missing.png", "no such image file or example"),
-                              (tmp_path, "no such image file or example")):
+        for bad, fragment in (
+            (tmp_path / "missing.png", "no such image file or example"),
+            (tmp_path, "no such image file or example"),
+        ):
             result = cli("app", bad, "--port", 0)
             assert result.exit_code == 2, result.output
             assert fragment in result.stderr and "Traceback" not in result.output

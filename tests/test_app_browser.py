@@ -70,11 +70,16 @@ def server():
 
 @pytest.fixture(scope="module")
 def browser():
-    require(CHROMIUM.is_file(), f"{CHROMIUM} not installed (Debian package chromium): cannot run the browser tests")
+    require(
+        CHROMIUM.is_file(),
+        f"{CHROMIUM} not installed (Debian package chromium): cannot run the browser tests",
+    )
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=["--no-sandbox"])
+        chromium = playwright.chromium.launch(
+            executable_path=str(CHROMIUM), headless=True, args=["--no-sandbox"]
+        )
         yield chromium
         chromium.close()
 
@@ -180,7 +185,10 @@ def test_bowl_flips_after_drawing_a_concave_region_and_exports_it(page, tmp_path
     before = applied(page)
     page.click('#tools [data-tool="polygon"]')
     page.click('#axis [data-axis="both"]')
-    corners = [(CENTRE[1] + 90 * math.cos(a), CENTRE[0] + 90 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)]
+    corners = [
+        (CENTRE[1] + 90 * math.cos(a), CENTRE[0] + 90 * math.sin(a))
+        for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)
+    ]
     for x, y in corners:
         click_image(page, x, y)
     click_image(page, *corners[0])
@@ -210,14 +218,18 @@ def test_regions_file_load_move_delete_and_save(page, tmp_path):
     from shadeform.regions import parse_regions
 
     open_example(page, BOWL)
-    octagon = [[round(CENTRE[1] + 90 * math.cos(a), 2), round(CENTRE[0] + 90 * math.sin(a), 2)]
-               for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)]
+    octagon = [
+        [round(CENTRE[1] + 90 * math.cos(a), 2), round(CENTRE[0] + 90 * math.sin(a), 2)]
+        for a in np.linspace(0, 2 * math.pi, 8, endpoint=False)
+    ]
     regions_file = tmp_path / "bowl.regions.json"
     regions_file.write_text(json.dumps({"regions": [{"polygon": octagon, "axis": "both"}]}))
     before = applied(page)
     page.set_input_files("#file-regions", str(regions_file))
     wait_for_result(page, before)
-    assert page.evaluate("window.shadeform.state().params.concave.regions") == [{"polygon": octagon, "axis": "both"}]
+    assert page.evaluate("window.shadeform.state().params.concave.regions") == [
+        {"polygon": octagon, "axis": "both"}
+    ]
     assert centre_minus_ring(lambda r, c: depth(page, r, c)) < -10
 
     # select it and drag it 10 pixels to the right
@@ -343,8 +355,12 @@ def test_a_new_solve_shows_a_quick_look_then_the_full_resolution_model(page):
     assert result["preview"] is False and "preview_step" not in result["info"]
     # what stays on screen is the library's full-resolution model
     image, info = load_example(BOWL)
-    expected = to_mesh(reconstruct(image, mask=info["mask"], light=info["light"],
-                                   filter=f"gaussian:{params['filter']['size']}"), step=2)
+    expected = to_mesh(
+        reconstruct(
+            image, mask=info["mask"], light=info["light"], filter=f"gaussian:{params['filter']['size']}"
+        ),
+        step=2,
+    )
     positions = np.array(page.evaluate("window.shadeform.mesh().positions")).reshape(-1, 3)
     np.testing.assert_allclose(positions, expected.vertices, atol=1e-3)
 
@@ -421,7 +437,9 @@ def test_project_file_round_trip(page, browser, server, tmp_path):
         assert state["image"]["name"] == BOWL
         assert state["params"] == page.evaluate("window.shadeform.state().params")
         light = other.evaluate("window.shadeform.lastResult().light")
-        np.testing.assert_allclose(light, [math.sin(math.radians(20)), 0, math.cos(math.radians(20))], atol=1e-6)
+        np.testing.assert_allclose(
+            light, [math.sin(math.radians(20)), 0, math.cos(math.radians(20))], atol=1e-6
+        )
     finally:
         context.close()
 
@@ -439,7 +457,9 @@ def test_view_keys_and_buttons_turn_zoom_and_recenter(page):
     zoomed = page.evaluate("window.shadeform.cameraOffset()")
     assert np.linalg.norm(zoomed) == pytest.approx(np.linalg.norm(turned) / 1.2, rel=1e-3)
     page.click('.nav [data-nav="zoom-out"]')
-    assert np.linalg.norm(page.evaluate("window.shadeform.cameraOffset()")) == pytest.approx(np.linalg.norm(turned), rel=1e-3)
+    assert np.linalg.norm(page.evaluate("window.shadeform.cameraOffset()")) == pytest.approx(
+        np.linalg.norm(turned), rel=1e-3
+    )
     page.keyboard.press("r")
     np.testing.assert_allclose(page.evaluate("window.shadeform.cameraOffset()"), front, atol=1e-6)
 
@@ -469,7 +489,13 @@ def test_a_dropped_image_opens_and_a_dropped_non_image_shows_the_servers_message
     drop_file(page, "egg.png", "image/png", png.read_bytes())
     wait_for_result(page, 0, timeout=FIRST_RESULT_MS)
     assert page.evaluate("window.shadeform.state().image") | {"image_id": None} == {
-        "image_id": None, "name": "egg.png", "width": 64, "height": 64, "channels": 1, "suggested": None}
+        "image_id": None,
+        "name": "egg.png",
+        "width": 64,
+        "height": 64,
+        "channels": 1,
+        "suggested": None,
+    }
 
     drop_file(page, "notes.png", "image/png", b"not a picture")
     toast = page.locator("#toast")

@@ -32,7 +32,7 @@ class TestAtomicWrite:
         target = tmp_path / "out.txt"
         with atomic_write(target, mode="w") as f:
             f.write("épure\nline 2\n")
-        assert target.read_bytes() == "épure\nline 2\n".encode("utf-8")
+        assert target.read_bytes() == "épure\nline 2\n".encode()
 
     def test_target_appears_only_when_complete(self, tmp_path):
         target = tmp_path / "out.bin"
@@ -55,48 +55,45 @@ class TestAtomicWrite:
     def test_exception_mid_write_keeps_existing_file(self, tmp_path):
         target = tmp_path / "model.wrl"
         target.write_bytes(b"good old file")
-        with pytest.raises(Boom):
-            with atomic_write(target) as f:
-                f.write(b"half of a new fi")
-                raise Boom("disk full, say")
+        with pytest.raises(Boom), atomic_write(target) as f:
+            f.write(b"half of a new fi")
+            raise Boom("disk full, say")
         assert target.read_bytes() == b"good old file"
         assert leftovers(tmp_path) == []
         assert sorted(p.name for p in tmp_path.iterdir()) == ["model.wrl"]
 
     def test_exception_mid_write_creates_nothing(self, tmp_path):
         target = tmp_path / "new.wrl"
-        with pytest.raises(Boom):
-            with atomic_write(target) as f:
-                f.write(b"partial")
-                raise Boom
+        with pytest.raises(Boom), atomic_write(target) as f:
+            f.write(b"partial")
+            raise Boom
         assert list(tmp_path.iterdir()) == []
 
     def test_keyboard_interrupt_also_cleans_up(self, tmp_path):
         target = tmp_path / "new.bin"
-        with pytest.raises(KeyboardInterrupt):
-            with atomic_write(target) as f:
-                f.write(b"partial")
-                raise KeyboardInterrupt
+        with pytest.raises(KeyboardInterrupt), atomic_write(target) as f:
+            f.write(b"partial")
+            raise KeyboardInterrupt
         assert list(tmp_path.iterdir()) == []
 
     def test_missing_folder_is_input_error(self, tmp_path):
         target = tmp_path / "no" / "such" / "out.bin"
-        with pytest.raises(InputError, match="does not exist; create it first") as info:
-            with atomic_write(target) as f:
-                f.write(b"x")
+        with (
+            pytest.raises(InputError, match="does not exist; create it first") as info,
+            atomic_write(target) as f,
+        ):
+            f.write(b"x")
         assert "\n" not in str(info.value)
         assert str(tmp_path / "no" / "such") in str(info.value)
 
     def test_folder_as_target_is_input_error(self, tmp_path):
-        with pytest.raises(InputError, match="is a folder"):
-            with atomic_write(tmp_path) as f:
-                f.write(b"x")
+        with pytest.raises(InputError, match="is a folder"), atomic_write(tmp_path) as f:
+            f.write(b"x")
         assert list(tmp_path.iterdir()) == []
 
     def test_bad_mode_is_rejected(self, tmp_path):
-        with pytest.raises(ValueError, match="mode"):
-            with atomic_write(tmp_path / "x", mode="a"):
-                pass
+        with pytest.raises(ValueError, match="mode"), atomic_write(tmp_path / "x", mode="a"):
+            pass
 
     @pytest.mark.skipif(os.name != "posix", reason="POSIX permission bits")
     def test_permissions_of_replaced_file_are_kept(self, tmp_path):

@@ -17,7 +17,6 @@ from shadeform.errors import InputError
 from shadeform.io.maps import load_depth, save_gray
 
 
-
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory) -> list[Path]:
     folder = tmp_path_factory.mktemp("photos")
@@ -33,9 +32,16 @@ class TestReconstructFiles:
     @pytest.mark.parametrize("workers", [1, 2])
     def test_same_models_as_one_at_a_time(self, photos, out, workers):
         seen = []
-        results = reconstruct_files(photos, out, suffix=".ply", step=2, depth=True,
-                                    workers=workers, progress=lambda done, total: seen.append((done, total)),
-                                    method="eikonal")
+        results = reconstruct_files(
+            photos,
+            out,
+            suffix=".ply",
+            step=2,
+            depth=True,
+            workers=workers,
+            progress=lambda done, total: seen.append((done, total)),
+            method="eikonal",
+        )
         assert [r.photo for r in results] == photos
         assert seen[-1] == (3, 3) and len(seen) == 3
         for photo, result in zip(photos, results):
@@ -46,19 +52,22 @@ class TestReconstructFiles:
             assert (result.vertices, result.faces) == (mesh.n_vertices, mesh.n_faces)
             written = trimesh.load(out / f"{photo.stem}.ply", force="mesh")
             assert len(written.vertices) == mesh.n_vertices
-            np.testing.assert_allclose(load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth,
-                                       atol=1e-4, equal_nan=True)  # float32 file
+            np.testing.assert_allclose(
+                load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth, atol=1e-4, equal_nan=True
+            )  # float32 file
 
     def test_srgb(self, out, tmp_path):
         scene = synth.scene("sphere", size=48)
         path = tmp_path / "srgb.png"
-        encoded = np.where(scene.image <= 0.0031308, 12.92 * scene.image,
-                           1.055 * scene.image ** (1 / 2.4) - 0.055)
+        encoded = np.where(
+            scene.image <= 0.0031308, 12.92 * scene.image, 1.055 * scene.image ** (1 / 2.4) - 0.055
+        )
         save_gray(encoded, path, bitdepth=16)
         reconstruct_files([path], out, suffix=".ply", depth=True, srgb=True, workers=1)
         linear = shadeform.reconstruct(shadeform.preprocess.srgb_to_linear(shadeform.load_image(path)))
-        np.testing.assert_allclose(load_depth(out / "srgb_depth.tiff"), linear.depth, atol=1e-4,
-                                   equal_nan=True)
+        np.testing.assert_allclose(
+            load_depth(out / "srgb_depth.tiff"), linear.depth, atol=1e-4, equal_nan=True
+        )
 
     def test_a_bad_photo_fails_alone(self, photos, out, tmp_path):
         bad = tmp_path / "black.png"
@@ -85,8 +94,11 @@ class TestReconstructFiles:
             reconstruct_files(photos, out, suffix=".xyz")
         with pytest.raises(InputError, match="workers"):
             reconstruct_files(photos, out, workers=0)
-        for options, match in (({"method": "magic"}, "method"), ({"integrator": "x"}, "integrator"),
-                               ({"filter": "blur:2"}, "filter")):
+        for options, match in (
+            ({"method": "magic"}, "method"),
+            ({"integrator": "x"}, "integrator"),
+            ({"filter": "blur:2"}, "filter"),
+        ):
             with pytest.raises(InputError, match=match):
                 reconstruct_files([tmp_path / "never-read.png"], out, **options)
         real_import = builtins.__import__
@@ -104,8 +116,9 @@ class TestReconstructFiles:
 class TestBatchCommand:
     def test_json_and_folder_created(self, photos, tmp_path, cli):
         folder = tmp_path / "models"
-        result = cli("batch", *photos, "--out", folder, "--format", "obj", "--normals",
-                        "--workers", "1", "--json")
+        result = cli(
+            "batch", *photos, "--out", folder, "--format", "obj", "--normals", "--workers", "1", "--json"
+        )
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)
         assert [Path(p["photo"]).name for p in report["photos"]] == [p.name for p in photos]
@@ -122,10 +135,15 @@ class TestBatchCommand:
         assert len(lines) == 1 and lines[0].startswith("error: ") and "notes.png" in lines[0]
         assert "Traceback" not in result.output
 
-    @pytest.mark.parametrize("option, value, fragment", [
-        ("--format", "xyz", "format"), ("--method", "magic", "method"),
-        ("--integrator", "magic", "integrator"), ("--filter", "blur:2", "filter"),
-    ])
+    @pytest.mark.parametrize(
+        "option, value, fragment",
+        [
+            ("--format", "xyz", "format"),
+            ("--method", "magic", "method"),
+            ("--integrator", "magic", "integrator"),
+            ("--filter", "blur:2", "filter"),
+        ],
+    )
     def test_bad_option_is_one_line(self, photos, tmp_path, option, value, fragment, cli):
         result = cli("batch", *photos, "--out", tmp_path / "m", option, value)
         assert result.exit_code == 2 and "Traceback" not in result.output

@@ -42,20 +42,34 @@ class TestMethods:
         labels = [label for label, _ in bench.methods()]
         solvers = solver_names()
         assert set(solvers) <= set(labels) and "auto" not in labels
-        assert dict(bench.methods())[bench.LEGACY] == {"method": "propagation", "refine": 0, "integrator": "paths"}
+        assert dict(bench.methods())[bench.LEGACY] == {
+            "method": "propagation",
+            "refine": 0,
+            "integrator": "paths",
+        }
         assert len(labels) == len(solvers) + 1
 
     def test_picks_up_a_new_solver(self, monkeypatch):
         monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))
-        solvers.register(solvers.Solver("newcomer", "shadeform.solvers.propagation:solve", integrator="paths",
-                                        description="a solver registered by the test"))
+        solvers.register(
+            solvers.Solver(
+                "newcomer",
+                "shadeform.solvers.propagation:solve",
+                integrator="paths",
+                description="a solver registered by the test",
+            )
+        )
         assert ("newcomer", {"method": "newcomer"}) in bench.methods()
 
 
 class TestGrid:
     def test_rows(self, rows):
-        expected = {(label, "sphere", light, noise) for label, _ in bench.methods()
-                    for light, _ in LIGHTS for noise in NOISES}
+        expected = {
+            (label, "sphere", light, noise)
+            for label, _ in bench.methods()
+            for light, _ in LIGHTS
+            for noise in NOISES
+        }
         got = [(row.method, row.scene, row.light, row.noise) for row in rows]
         assert len(got) == len(expected) and set(got) == expected
 
@@ -79,9 +93,16 @@ class TestGrid:
         # the numbers in the table are the metrics of a direct reconstruct call
         light_label, light = LIGHTS[1]
         scene = synth.scene("sphere", size=SIZE, light=light, noise=NOISES[-1], seed=bench.SEED)
-        rec = shadeform.reconstruct(scene.image, mask=scene.mask, light=scene.light, method="propagation",
-                                    concave=synth.concave_regions("sphere", size=SIZE))
-        row = next(r for r in rows if r.method == "propagation" and r.light == light_label and r.noise == NOISES[-1])
+        rec = shadeform.reconstruct(
+            scene.image,
+            mask=scene.mask,
+            light=scene.light,
+            method="propagation",
+            concave=synth.concave_regions("sphere", size=SIZE),
+        )
+        row = next(
+            r for r in rows if r.method == "propagation" and r.light == light_label and r.noise == NOISES[-1]
+        )
         assert row.depth_pct == pytest.approx(metrics.depth_error(rec.depth, scene.depth, fit="offset"))
         assert row.angle_deg == pytest.approx(metrics.angular_error(rec.normals, scene.normals))
 
@@ -91,8 +112,15 @@ class TestGrid:
 
         monkeypatch.setattr(bench, "solve", broken)
         with pytest.raises(RuntimeError, match="bug"):
-            bench.run_grid(size=SIZE, repeats=1, scenes=("sphere",), lights=LIGHTS[:1], noises=(0.0,),
-                           chosen=[("propagation", {"method": "propagation"})], warm=False)
+            bench.run_grid(
+                size=SIZE,
+                repeats=1,
+                scenes=("sphere",),
+                lights=LIGHTS[:1],
+                noises=(0.0,),
+                chosen=[("propagation", {"method": "propagation"})],
+                warm=False,
+            )
 
 
 class TestMemory:
@@ -116,8 +144,9 @@ class TestTiming:
 class TestReport:
     def test_tables(self, rows, tmp_path):
         memory = [bench.Memory("eikonal", "sphere", "+z", traced=2**20, rss=None)]
-        text = bench.write_results(rows, memory, tmp_path, size=SIZE, repeats=1, budget=math.inf, wall=1.0,
-                                   pictures=False)
+        text = bench.write_results(
+            rows, memory, tmp_path, size=SIZE, repeats=1, budget=math.inf, wall=1.0, pictures=False
+        )
         assert (tmp_path / "methods.md").read_text(encoding="utf-8") == text
         assert list(tmp_path.iterdir()) == [tmp_path / "methods.md"]
         full = text.split("## Full table, light slant 30°")[1]
@@ -126,7 +155,10 @@ class TestReport:
         eikonal_at = 1 + 1 + 3 * [label for label, _ in bench.methods()].index("eikonal") + 1
         assert [cell.strip() for cell in sphere_lines[0].split("|")][eikonal_at] == "n/a"
         best = bench.best_method(rows, "+z", 0.0)
-        assert f"Best measured for +z (lowest median depth error over the 1 scenes, noise 0%): **{best}**" in text
+        assert (
+            f"Best measured for +z (lowest median depth error over the 1 scenes, noise 0%): **{best}**"
+            in text
+        )
         assert "| eikonal | slant 30° | n/a |" in text
         # the default's choice is shown beside the measured best
         assert f'`method="auto"` picks {solvers.choose(np.array([0.0, 0.0, 1.0])).name}' in text
@@ -148,7 +180,9 @@ class TestReport:
         for name in ("methods_depth.png", "methods_angle.png", "methods_noise.png"):
             with Image.open(out / name) as picture:
                 assert picture.size[0] > 400 and picture.size[1] > 300
-        assert (out / "methods.md").read_text(encoding="utf-8").startswith("# Methods on the synthetic scenes")
+        assert (
+            (out / "methods.md").read_text(encoding="utf-8").startswith("# Methods on the synthetic scenes")
+        )
         # the showcase is the vase, not in this grid
         assert not (out / "showcase.png").exists()
 
@@ -159,8 +193,11 @@ def _same(a, b) -> bool:
 
 def test_best_by_scene_picks_the_lowest_depth_error():
     row = bench.Row
-    rows = [row("a", "s", "+z", 0.0, 2.0, 1.0, 0.1, 1, 10), row("b", "s", "+z", 0.0, 1.0, 5.0, 0.1, 1, 10),
-            row("c", "s", "+z", 0.0, math.nan, math.nan, math.nan, 0, 10, note="refuses")]
+    rows = [
+        row("a", "s", "+z", 0.0, 2.0, 1.0, 0.1, 1, 10),
+        row("b", "s", "+z", 0.0, 1.0, 5.0, 0.1, 1, 10),
+        row("c", "s", "+z", 0.0, math.nan, math.nan, math.nan, 0, 10, note="refuses"),
+    ]
     assert bench.best_by_scene(rows, 0.0)[("s", "+z")].method == "b"
     assert bench.best_method(rows, "+z", 0.0) == "b"
     assert np.isnan(rows[2].depth_pct)

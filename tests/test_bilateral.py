@@ -5,12 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _surfaces import l_shaped_mask, normals_of, pixel_xy
 from shadeform.errors import InputError
 from shadeform.integration._multigrid import PairHierarchy
 from shadeform.integration.bilateral import integrate_bilateral
 from shadeform.integration.poisson import integrate_poisson
-
-from _surfaces import l_shaped_mask, normals_of, pixel_xy
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "diligent-normals"
 
@@ -39,7 +38,7 @@ class TestOrthographic:
         mask[15:22, 20:30] = False  # a hole
         x, y = pixel_xy(mask.shape)
         x, y = x - 25, y + 20
-        truth = 0.01 * x ** 2 + 0.02 * y ** 2
+        truth = 0.01 * x**2 + 0.02 * y**2
         n = np.stack([-0.02 * x, -0.04 * y, np.ones(mask.shape)], axis=-1)
         uniform = integrate_bilateral(n, mask, iterations=0, cg_tol=1e-10).depth
         z = integrate_bilateral(n, mask).depth
@@ -67,9 +66,9 @@ class TestOrthographic:
         x, y = pixel_xy(shape)
         x, y = x - 40, y + 40
         R = 25.0
-        rho2 = x ** 2 + y ** 2
+        rho2 = x**2 + y**2
         inside = rho2 < (R - 0.5) ** 2
-        zs = np.sqrt(np.maximum(R ** 2 - rho2, 0))
+        zs = np.sqrt(np.maximum(R**2 - rho2, 0))
         n = np.zeros((*shape, 3))
         n[..., 2] = 1
         n[inside] = np.stack([x[inside], y[inside], zs[inside]], -1) / R
@@ -77,8 +76,10 @@ class TestOrthographic:
         mask = np.ones(shape, bool)
 
         def shape_error(d):  # each surface after fitting its own offset
-            return sum(np.abs((d - truth)[reg] - (d - truth)[reg].mean()).sum()
-                       for reg in (inside, ~inside)) / mask.sum()
+            return (
+                sum(np.abs((d - truth)[reg] - (d - truth)[reg].mean()).sum() for reg in (inside, ~inside))
+                / mask.sum()
+            )
 
         ls = shape_error(integrate_bilateral(n, mask, iterations=0).depth)
         bi = shape_error(integrate_bilateral(n, mask).depth)
@@ -94,12 +95,12 @@ class TestOrthographic:
 class TestPerspective:
     def render_sphere(self, K, shape=(120, 160), centre=(0.1, -0.05, 3.0), R=1.0):
         """Depth and normals (project frame) of a sphere seen by a pinhole camera."""
-        v, u = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+        v, u = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
         rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones(shape)], -1)
         rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
         c = np.asarray(centre)
         bq = rays @ c
-        disc = bq ** 2 - (c @ c - R ** 2)
+        disc = bq**2 - (c @ c - R**2)
         mask = disc > 0.05
         t = bq - np.sqrt(np.maximum(disc, 0))
         P = rays * t[..., None]
@@ -120,7 +121,7 @@ class TestPerspective:
     def test_tilted_plane_is_exact(self):
         K = np.array([[500.0, 0, 40], [0, 500.0, 30], [0, 0, 1]])
         shape = (60, 80)
-        v, u = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+        v, u = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
         a, b, Z0 = 0.3, -0.2, 4.0  # Z = Z0 + a X + b Y (OpenCV frame)
         xb, yb = (u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]
         Z = Z0 / (1 - a * xb - b * yb)
@@ -161,10 +162,8 @@ def test_pair_hierarchy_matches_a_direct_solve():
     rng = np.random.default_rng(1)
     mask = l_shaped_mask((33, 41))
     h, w = mask.shape
-    px = np.where(np.pad(mask[:, :-1] & mask[:, 1:], ((0, 0), (0, 1))),
-                  rng.uniform(0.01, 2.0, (h, w)), 0.0)
-    py = np.where(np.pad(mask[:-1] & mask[1:], ((0, 1), (0, 0))),
-                  rng.uniform(0.01, 2.0, (h, w)), 0.0)
+    px = np.where(np.pad(mask[:, :-1] & mask[:, 1:], ((0, 0), (0, 1))), rng.uniform(0.01, 2.0, (h, w)), 0.0)
+    py = np.where(np.pad(mask[:-1] & mask[1:], ((0, 1), (0, 0))), rng.uniform(0.01, 2.0, (h, w)), 0.0)
     b = np.where(mask, rng.normal(size=(h, w)), 0.0)
     b[mask] -= b[mask].mean()
     hier = PairHierarchy(mask, px, py)
@@ -178,9 +177,13 @@ def test_pair_hierarchy_matches_a_direct_solve():
     b_ = np.r_[index[r, c + 1], index[r2 + 1, c2]]
     wts = np.r_[px[r, c], py[r2, c2]]
     n = mask.sum()
-    D = sp.csr_matrix((np.r_[-np.ones(len(a_)), np.ones(len(a_))],
-                       (np.r_[np.arange(len(a_)), np.arange(len(a_))], np.r_[a_, b_])),
-                      shape=(len(a_), n))
+    D = sp.csr_matrix(
+        (
+            np.r_[-np.ones(len(a_)), np.ones(len(a_))],
+            (np.r_[np.arange(len(a_)), np.arange(len(a_))], np.r_[a_, b_]),
+        ),
+        shape=(len(a_), n),
+    )
     A = (D.T @ sp.diags(wts) @ D).tocsc()
     ref = np.zeros(n)
     ref[1:] = spla.spsolve(A[1:, 1:], b[mask][1:])
@@ -190,8 +193,7 @@ def test_pair_hierarchy_matches_a_direct_solve():
 
 #: Published BiNI (k = 2) MADE in mm on DiLiGenT (shared/data/README.md); BiNI's evaluation
 #: fits the scale by the median depth ratio, so the bar is measured the same way.
-BINI = {"bear": 0.334, "buddha": 1.098, "cat": 0.074, "cow": 0.058, "pot1": 0.635,
-        "reading": 0.257}
+BINI = {"bear": 0.334, "buddha": 1.098, "cat": 0.074, "cow": 0.058, "pot1": 0.635, "reading": 0.257}
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason=f"DiLiGenT normals not found at {DATA}")

@@ -60,8 +60,9 @@ def png_chunk(kind: bytes, data: bytes) -> bytes:
 def png_file(width: int, height: int, idat: bytes) -> bytes:
     """A PNG whose IHDR declares ``width`` x ``height`` 8-bit grey, with the given IDAT payload."""
     header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", header) + png_chunk(b"IDAT", idat)
-            + png_chunk(b"IEND", b""))
+    return (
+        b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", header) + png_chunk(b"IDAT", idat) + png_chunk(b"IEND", b"")
+    )
 
 
 @pytest.fixture(scope="module")
@@ -87,8 +88,19 @@ def inputs(tmp_path) -> Path:
 
 def reconstruct_args(image, out: Path, *extra) -> list:
     """A reconstruction that writes three files, so a failure has three chances to leave one."""
-    return ["reconstruct", image, "-o", out / "model.wrl", "--depth", out / "depth.tiff",
-            "--normals", out / "normals.png", "--refine", "0", *extra]
+    return [
+        "reconstruct",
+        image,
+        "-o",
+        out / "model.wrl",
+        "--depth",
+        out / "depth.tiff",
+        "--normals",
+        out / "normals.png",
+        "--refine",
+        "0",
+        *extra,
+    ]
 
 
 # --- bad inputs: one test each ------------------------------------------------------------------
@@ -194,8 +206,16 @@ class TestBadOutputs:
         assert_fails(result, out, "does not exist")
 
     def test_same_file_twice(self, sphere, out):
-        result = invoke("reconstruct", sphere["image"], "-o", out / "m.wrl", "--normals", out / "x.png",
-                        "--depth", out / "x.png")
+        result = invoke(
+            "reconstruct",
+            sphere["image"],
+            "-o",
+            out / "m.wrl",
+            "--normals",
+            out / "x.png",
+            "--depth",
+            out / "x.png",
+        )
         assert_fails(result, out)
 
     def test_existing_file_is_kept_on_failure(self, sphere, out):
@@ -245,8 +265,17 @@ class TestBadRegions:
             ('{"regions": [{"polygon": [[0, 0], ["five", 0], [5, 5]], "axis": "x"}]}', "non-numeric"),
             ('{"regions": [{"axis": "both"}]}', "missing 'polygon'"),
         ],
-        ids=["cut-off", "empty", "list", "no-regions", "regions-not-list", "two-points", "bad-axis",
-             "text-coordinate", "no-polygon"],
+        ids=[
+            "cut-off",
+            "empty",
+            "list",
+            "no-regions",
+            "regions-not-list",
+            "two-points",
+            "bad-axis",
+            "text-coordinate",
+            "no-polygon",
+        ],
     )
     def test_malformed_concave_json(self, sphere, inputs, out, text, fragment):
         path = inputs / "regions.json"
@@ -266,12 +295,16 @@ class TestBadRegions:
 class TestBadReferencesAndLights:
     @pytest.mark.parametrize("reference", ["0,0", "39,0", "500,500", "-3,20"])
     def test_reference_outside_the_mask(self, sphere, out, reference):
-        result = invoke(*reconstruct_args(sphere["image"], out, "--reference", "20,20", "--reference", reference))
+        result = invoke(
+            *reconstruct_args(sphere["image"], out, "--reference", "20,20", "--reference", reference)
+        )
         assert_fails(result, out, "not on the object")
 
     @pytest.mark.parametrize("reference", ["20", "20,x", "1,2,3", "20,20,0,0,one", ""])
     def test_malformed_reference(self, sphere, out, reference):
-        assert_fails(invoke(*reconstruct_args(sphere["image"], out, "--reference", reference)), out, "--reference")
+        assert_fails(
+            invoke(*reconstruct_args(sphere["image"], out, "--reference", reference)), out, "--reference"
+        )
 
     def test_light_from_behind(self, sphere, out):
         assert_fails(invoke(*reconstruct_args(sphere["image"], out, "--light", "0,0,-1")), out, "z <= 0")
@@ -290,16 +323,21 @@ class TestBadReferencesAndLights:
     def test_slant_past_the_horizon(self, sphere, out):
         assert_fails(invoke(*reconstruct_args(sphere["image"], out, "--slant", "95")), out, "slant")
 
-    @pytest.mark.parametrize(("option", "value"), [("--channel", "alpha"), ("--method", "magic"),
-                                                   ("--integrator", "guess"), ("--filter", "blur:2")])
+    @pytest.mark.parametrize(
+        ("option", "value"),
+        [("--channel", "alpha"), ("--method", "magic"), ("--integrator", "guess"), ("--filter", "blur:2")],
+    )
     def test_unknown_names(self, sphere, out, option, value):
         assert_fails(invoke(*reconstruct_args(sphere["image"], out, option, value)), out, value)
 
 
 class TestUsage:
     def test_usage_errors_exit_2(self, sphere, out):
-        for args in (["reconstruct", sphere["image"]], ["reconstruct", sphere["image"], "-o", out / "m.wrl",
-                                                          "--step", "0"], ["nonsense"]):
+        for args in (
+            ["reconstruct", sphere["image"]],
+            ["reconstruct", sphere["image"], "-o", out / "m.wrl", "--step", "0"],
+            ["nonsense"],
+        ):
             result = invoke(*args)
             assert result.exit_code == 2
             assert "Traceback" not in result.output
@@ -310,8 +348,12 @@ class TestUsage:
         if not script.exists():
             pytest.skip("console script not installed (pip install -e .)")
         (inputs / "notes.txt").write_text("not an image")
-        done = subprocess.run([script, "reconstruct", inputs / "notes.txt", "-o", out / "m.glb"],
-                              capture_output=True, text=True, timeout=120)
+        done = subprocess.run(
+            [script, "reconstruct", inputs / "notes.txt", "-o", out / "m.glb"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert done.returncode == 2
         assert done.stdout == ""
         assert done.stderr.startswith("error: not an image") and done.stderr.count("\n") == 1
@@ -331,7 +373,9 @@ class TestReconstruct:
     @pytest.mark.parametrize("suffix", FORMATS)
     def test_every_format(self, sphere, out, suffix):
         target = out / f"model{suffix}"
-        result = invoke("reconstruct", sphere["image"], "-o", target, "--refine", "0", "--step", "2", "--json")
+        result = invoke(
+            "reconstruct", sphere["image"], "-o", target, "--refine", "0", "--step", "2", "--json"
+        )
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)
         assert [p.name for p in out.iterdir()] == [target.name]  # no temporaries left
@@ -346,8 +390,17 @@ class TestReconstruct:
             assert len(loaded.faces) == faces
 
     def test_json_lists_the_files(self, sphere, out):
-        result = invoke("reconstruct", sphere["image"], "-o", out / "m.glb", "--depth", out / "d.npy",
-                        "--normals", out / "n.png", "--json")
+        result = invoke(
+            "reconstruct",
+            sphere["image"],
+            "-o",
+            out / "m.glb",
+            "--depth",
+            out / "d.npy",
+            "--normals",
+            out / "n.png",
+            "--json",
+        )
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)  # stdout holds the JSON object and nothing else
         files = report["files"]
@@ -359,8 +412,16 @@ class TestReconstruct:
 
     def test_estimated_light_and_eikonal(self, sphere, out):
         for extra in (["--light", "estimate"], ["--method", "eikonal"]):
-            result = invoke("reconstruct", sphere["image"], "-o", out / "m.glb", "--mask", sphere["mask"],
-                            "--json", *extra)
+            result = invoke(
+                "reconstruct",
+                sphere["image"],
+                "-o",
+                out / "m.glb",
+                "--mask",
+                sphere["mask"],
+                "--json",
+                *extra,
+            )
             assert result.exit_code == 0, result.output
             info = json.loads(result.stdout)["info"]
             if extra[0] == "--light":
@@ -370,8 +431,18 @@ class TestReconstruct:
 
     @pytest.mark.parametrize("depth_name", ["depth.tiff", "depth.npy"])
     def test_depth_and_normals_are_readable_and_right(self, sphere, out, depth_name):
-        result = invoke("reconstruct", sphere["image"], "-o", out / "m.obj", "--depth", out / depth_name,
-                        "--normals", out / "normals.png", "--mask", sphere["mask"])
+        result = invoke(
+            "reconstruct",
+            sphere["image"],
+            "-o",
+            out / "m.obj",
+            "--depth",
+            out / depth_name,
+            "--normals",
+            out / "normals.png",
+            "--mask",
+            sphere["mask"],
+        )
         assert result.exit_code == 0, result.output
         depth = load_depth(out / depth_name)
         normals = load_normal_map(out / "normals.png")
@@ -386,10 +457,31 @@ class TestReconstruct:
     def test_options_reach_the_library(self, sphere, inputs, out):
         regions = inputs / "regions.json"
         regions.write_text('{"regions": [{"polygon": [[0, 0], [8, 0], [8, 8]], "axis": "x"}]}')
-        result = invoke("reconstruct", sphere["image"], "-o", out / "m.stl", "--filter", "gaussian:1",
-                        "--slant", "10", "--tilt", "90", "--reference", "20,20", "--reference", "12,18,0,0.4,0.9",
-                        "--concave", regions, "--integrator", "poisson", "--refine", "1", "--method", "propagation",
-                        "--json")
+        result = invoke(
+            "reconstruct",
+            sphere["image"],
+            "-o",
+            out / "m.stl",
+            "--filter",
+            "gaussian:1",
+            "--slant",
+            "10",
+            "--tilt",
+            "90",
+            "--reference",
+            "20,20",
+            "--reference",
+            "12,18,0,0.4,0.9",
+            "--concave",
+            regions,
+            "--integrator",
+            "poisson",
+            "--refine",
+            "1",
+            "--method",
+            "propagation",
+            "--json",
+        )
         assert result.exit_code == 0, result.output
         info = json.loads(result.stdout)["info"]
         assert info["references"] == [[20, 20], [12, 18]]
@@ -407,7 +499,9 @@ class TestReconstruct:
 class TestSynth:
     def test_writes_image_and_truth(self, sphere):
         scene = synth.scene("sphere", size=SIZE)
-        assert sorted(p.name for p in sphere["image"].parent.iterdir()) == sorted(p.name for p in sphere.values())
+        assert sorted(p.name for p in sphere["image"].parent.iterdir()) == sorted(
+            p.name for p in sphere.values()
+        )
         image = shadeform.load_image(sphere["image"])
         assert np.abs(image - scene.image).max() <= 0.5 / 65535 + 1e-7  # all 16 bits kept
         assert np.array_equal(shadeform.load_mask(sphere["mask"]), scene.mask)
@@ -416,11 +510,32 @@ class TestSynth:
         assert metrics.angular_error(normals, scene.normals) < 0.01
 
     def test_light_noise_and_tiff_depth(self, tmp_path):
-        result = invoke("synth", "bowl", "-o", tmp_path / "b.png", "--size", "24", "--slant", "30",
-                        "--tilt", "45", "--noise", "0.02", "--seed", "3", "--depth-format", "tiff")
+        result = invoke(
+            "synth",
+            "bowl",
+            "-o",
+            tmp_path / "b.png",
+            "--size",
+            "24",
+            "--slant",
+            "30",
+            "--tilt",
+            "45",
+            "--noise",
+            "0.02",
+            "--seed",
+            "3",
+            "--depth-format",
+            "tiff",
+        )
         assert result.exit_code == 0, result.output
-        scene = synth.scene("bowl", size=24, light=[np.sin(np.radians(30)) * np.cos(np.radians(45))] * 2
-                            + [np.cos(np.radians(30))], noise=0.02, seed=3)
+        scene = synth.scene(
+            "bowl",
+            size=24,
+            light=[np.sin(np.radians(30)) * np.cos(np.radians(45))] * 2 + [np.cos(np.radians(30))],
+            noise=0.02,
+            seed=3,
+        )
         assert np.abs(shadeform.load_image(tmp_path / "b.png") - scene.image).max() < 1e-4
         assert np.allclose(load_depth(tmp_path / "b_depth.tiff"), scene.depth, equal_nan=True, atol=1e-4)
 
@@ -455,11 +570,16 @@ class TestEvaluate:
         rows = json.loads(result.stdout)["rows"]
         # sphere: 3 methods; bowl: 3 methods x without/with its region
         assert [(r["scene"], r["concave_region"], r["label"]) for r in rows] == [
-            ("sphere", False, "propagation"), ("sphere", False, "propagation (2002, no refinement)"),
+            ("sphere", False, "propagation"),
+            ("sphere", False, "propagation (2002, no refinement)"),
             ("sphere", False, "eikonal"),
-            ("bowl", False, "propagation"), ("bowl", True, "propagation"),
-            ("bowl", False, "propagation (2002, no refinement)"), ("bowl", True, "propagation (2002, no refinement)"),
-            ("bowl", False, "eikonal"), ("bowl", True, "eikonal")]
+            ("bowl", False, "propagation"),
+            ("bowl", True, "propagation"),
+            ("bowl", False, "propagation (2002, no refinement)"),
+            ("bowl", True, "propagation (2002, no refinement)"),
+            ("bowl", False, "eikonal"),
+            ("bowl", True, "eikonal"),
+        ]
         error = {(r["scene"], r["concave_region"], r["label"]): r["angular_error_deg"] for r in rows}
         assert error["sphere", False, "propagation"] < 3 and error["sphere", False, "eikonal"] < 3
         assert error["bowl", True, "propagation"] < 3 < 10 < error["bowl", False, "propagation"]
@@ -481,7 +601,7 @@ class TestDemo:
         assert len(mesh.faces) > 1000
         picture = np.asarray(Image.open(folder / "result.png").convert("RGB"))
         assert picture.shape[1] > 2.5 * picture.shape[0]  # three panels side by side
-        view = picture[:, 2 * picture.shape[1] // 3:]
+        view = picture[:, 2 * picture.shape[1] // 3 :]
         assert (view.std(axis=2) > 10).mean() > 0.2  # the clay-coloured mesh covers the third panel
 
     def test_synthetic_example_and_step(self, tmp_path):
@@ -499,7 +619,7 @@ class TestExamples:
     def test_coin(self):
         image, info = load_example("coin")
         assert image.dtype == np.float32 and image.ndim == 2 and min(image.shape) >= 64
-        assert 0 <= image.min() and image.max() <= 1
+        assert image.min() >= 0 and image.max() <= 1
         assert info["mask"] is None and info["light"] == (0.0, 0.0, 1.0) and info["step"] >= 1
         # a bright coin on a dark background: the border is dark, the centre bright
         border = np.concatenate([image[0], image[-1], image[:, 0], image[:, -1]])
@@ -530,23 +650,30 @@ def photo_set(tmp_path_factory) -> dict:
     """A sphere under six lights: 16-bit photos, a light file and the truth."""
     folder = tmp_path_factory.mktemp("stereo")
     scene = synth.scene("sphere", size=SIZE)
-    lights = np.array([[0, 0, 1.0]] + [list(shadeform.light.light_from_slant_tilt(30, t))
-                                       for t in (0, 72, 144, 216, 288)])
+    lights = np.array(
+        [[0, 0, 1.0]] + [list(shadeform.light.light_from_slant_tilt(30, t)) for t in (0, 72, 144, 216, 288)]
+    )
     photos = []
     for i, light in enumerate(lights):
         path = folder / f"{i:03d}.png"
-        save_gray(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path,
-                            bitdepth=16)
+        save_gray(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path, bitdepth=16)
         photos.append(path)
     np.savetxt(folder / "light_directions.txt", lights)
-    return {"folder": folder, "photos": photos, "lights": folder / "light_directions.txt",
-            "scene": scene}
+    return {"folder": folder, "photos": photos, "lights": folder / "light_directions.txt", "scene": scene}
 
 
 class TestStereo:
     def test_folder(self, photo_set, out):
-        result = invoke("stereo", photo_set["folder"], "-o", out / "m.ply", "--normals", out / "n.png",
-                        "--depth", out / "d.npy")
+        result = invoke(
+            "stereo",
+            photo_set["folder"],
+            "-o",
+            out / "m.ply",
+            "--normals",
+            out / "n.png",
+            "--depth",
+            out / "d.npy",
+        )
         assert result.exit_code == 0, result.output
         assert "6 photos" in result.stdout
         scene = photo_set["scene"]
@@ -559,8 +686,17 @@ class TestStereo:
         assert len(mesh.vertices) == np.isfinite(depth).sum()
 
     def test_files_and_json(self, photo_set, out):
-        result = invoke("stereo", *photo_set["photos"], "--lights", photo_set["lights"],
-                        "-o", out / "m.glb", "--method", "least_squares", "--json")
+        result = invoke(
+            "stereo",
+            *photo_set["photos"],
+            "--lights",
+            photo_set["lights"],
+            "-o",
+            out / "m.glb",
+            "--method",
+            "least_squares",
+            "--json",
+        )
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)
         assert report["command"] == "stereo" and report["info"]["photos"] == 6
@@ -570,10 +706,14 @@ class TestStereo:
     def test_light_file_with_comments_and_commas(self, photo_set, inputs, out):
         rows = np.loadtxt(photo_set["lights"])
         path = inputs / "lights.csv"
-        path.write_text("# x, y, z toward each light\n\n"
-                        + "\n".join(", ".join(f"{v:.17g}" for v in row) for row in rows) + "\n")
-        result = invoke("stereo", *photo_set["photos"], "--lights", path, "-o", out / "a.ply",
-                        "--normals", out / "a.png")
+        path.write_text(
+            "# x, y, z toward each light\n\n"
+            + "\n".join(", ".join(f"{v:.17g}" for v in row) for row in rows)
+            + "\n"
+        )
+        result = invoke(
+            "stereo", *photo_set["photos"], "--lights", path, "-o", out / "a.ply", "--normals", out / "a.png"
+        )
         assert result.exit_code == 0, result.output
         plain = invoke("stereo", photo_set["folder"], "-o", out / "b.ply", "--normals", out / "b.png")
         assert plain.exit_code == 0, plain.output
@@ -591,15 +731,19 @@ class TestStereo:
         assert_fails(result, out, "unknown", value)
 
     def test_too_few_photos(self, photo_set, out):
-        result = invoke("stereo", *photo_set["photos"][:2], "--lights", photo_set["lights"],
-                        "-o", out / "m.glb")
+        result = invoke(
+            "stereo", *photo_set["photos"][:2], "--lights", photo_set["lights"], "-o", out / "m.glb"
+        )
         assert_fails(result, out, "at least 3 photos")
 
-    @pytest.mark.parametrize("text, fragment", [
-        ("0 0 1\n0.5 0 0.8\n", "6 rows"),
-        ("up\n" * 6, "numbers only"),
-        ("1 0 1\n0 1 1\n1 1 2\n2 1 3\n1 2 3\n3 1 4\n", "one plane"),
-    ])
+    @pytest.mark.parametrize(
+        "text, fragment",
+        [
+            ("0 0 1\n0.5 0 0.8\n", "6 rows"),
+            ("up\n" * 6, "numbers only"),
+            ("1 0 1\n0 1 1\n1 1 2\n2 1 3\n1 2 3\n3 1 4\n", "one plane"),
+        ],
+    )
     def test_bad_light_file(self, photo_set, inputs, out, text, fragment):
         path = inputs / "lights.txt"
         path.write_text(text)
@@ -609,8 +753,9 @@ class TestStereo:
     def test_photos_of_different_sizes(self, photo_set, inputs, out):
         odd = inputs / "odd.png"
         save_gray(np.ones((SIZE, SIZE + 3)) * 0.5, odd, bitdepth=8)
-        result = invoke("stereo", *photo_set["photos"][:5], odd, "--lights", photo_set["lights"],
-                        "-o", out / "m.glb")
+        result = invoke(
+            "stereo", *photo_set["photos"][:5], odd, "--lights", photo_set["lights"], "-o", out / "m.glb"
+        )
         assert_fails(result, out, "one still camera")
 
 
@@ -629,8 +774,17 @@ class TestSrgb:
         errors = {}
         for flag in ((), ("--srgb",)):
             normals = out / f"n{len(flag)}.png"
-            result = invoke("reconstruct", path, "-o", out / f"m{len(flag)}.ply", "--normals", normals,
-                            "--mask", mask, *flag)
+            result = invoke(
+                "reconstruct",
+                path,
+                "-o",
+                out / f"m{len(flag)}.ply",
+                "--normals",
+                normals,
+                "--mask",
+                mask,
+                *flag,
+            )
             assert result.exit_code == 0, result.output
             errors[flag] = metrics.angular_error(load_normal_map(normals), scene.normals, scene.mask)
         # measured: 13.1 degrees read as linear, 1.4 undone (what is left is 8-bit quantisation)
@@ -647,8 +801,17 @@ class TestSrgb:
         inner = scene.mask & (scene.normals[..., 2] > 0.3)
         for flag in ((), ("--srgb",)):
             normals = out / f"n{len(flag)}.png"
-            result = invoke("stereo", *sorted(folder.iterdir()), "--lights", photo_set["lights"],
-                            "-o", out / f"m{len(flag)}.ply", "--normals", normals, *flag)
+            result = invoke(
+                "stereo",
+                *sorted(folder.iterdir()),
+                "--lights",
+                photo_set["lights"],
+                "-o",
+                out / f"m{len(flag)}.ply",
+                "--normals",
+                normals,
+                *flag,
+            )
             assert result.exit_code == 0, result.output
             errors[flag] = metrics.angular_error(load_normal_map(normals), scene.normals, inner)
         assert errors[("--srgb",)] < 1.0 < errors[()]

@@ -11,7 +11,8 @@ import pytest
 import shadeform
 
 MODULES = sorted(
-    info.name for info in pkgutil.walk_packages(shadeform.__path__, "shadeform.")
+    info.name
+    for info in pkgutil.walk_packages(shadeform.__path__, "shadeform.")
     # the app needs the optional server packages; its examples are the API tests
     if not info.name.startswith("shadeform.app")
 )
@@ -20,6 +21,7 @@ MODULES = sorted(
 @pytest.mark.parametrize("name", MODULES)
 def test_examples(name):
     module = importlib.import_module(name)
-    failed, _ = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
-                                verbose=False)
+    failed, _ = doctest.testmod(
+        module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE, verbose=False
+    )
     assert failed == 0

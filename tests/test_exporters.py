@@ -291,8 +291,14 @@ class TestVrmlWriter:
         text = export(mesh, tmp_path / "m.wrl").read_text(encoding="utf-8")
         assert text.startswith("#VRML V2.0 utf8\n")
         for token in (
-            "Material", "IndexedFaceSet", "coord Coordinate", "normal Normal",
-            "normalPerVertex TRUE", "solid FALSE", "creaseAngle", "texCoord TextureCoordinate",
+            "Material",
+            "IndexedFaceSet",
+            "coord Coordinate",
+            "normal Normal",
+            "normalPerVertex TRUE",
+            "solid FALSE",
+            "creaseAngle",
+            "texCoord TextureCoordinate",
         ):
             assert token in text
         assert text.count("-1") >= mesh.n_faces

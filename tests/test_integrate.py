@@ -3,13 +3,12 @@
 import numpy as np
 import pytest
 
+from _surfaces import l_shaped_mask, normals_of, pixel_xy
 from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.integration import integrate
 from shadeform.integration.paths import integrate_paths, integrate_paths_reference
 from shadeform.integration.poisson import integrate_poisson
-
-from _surfaces import l_shaped_mask, normals_of, pixel_xy
 
 
 class TestIntegratePaths:
@@ -136,8 +135,9 @@ class TestIntegrateFourier:
         normals[3, 4] = np.nan  # NaN slopes count as flat, as in slopes()
         normals[5, 6, 2] = np.nan
         mask = rng.random((23, 31)) > 0.3
-        np.testing.assert_allclose(_divergence(normals, mask, MIN_NZ),
-                                   _divergence_reference(normals, mask), atol=1e-12)
+        np.testing.assert_allclose(
+            _divergence(normals, mask, MIN_NZ), _divergence_reference(normals, mask), atol=1e-12
+        )
 
     def test_paraboloid_on_a_box_inside_the_image(self):
         mask = np.zeros((40, 50), bool)

@@ -53,10 +53,7 @@ def png_with_ihdr(width, height, *, bitdepth=8, colortype=2):
     ihdr = struct.pack(">IIBBBBB", width, height, bitdepth, colortype, 0, 0, 0)
     idat = zlib.compress(b"\x00" * 16)
     return (
-        b"\x89PNG\r\n\x1a\n"
-        + png_chunk(b"IHDR", ihdr)
-        + png_chunk(b"IDAT", idat)
-        + png_chunk(b"IEND", b"")
+        b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) + png_chunk(b"IDAT", idat) + png_chunk(b"IEND", b"")
     )
 
 
@@ -86,7 +83,7 @@ class TestLoadImage:
         image = load_image(str(path), channel=channel)
         assert image.shape == (12, 17) and image.dtype == np.float32
         assert image.flags.c_contiguous
-        assert 0.0 <= image.min() and image.max() <= 1.0
+        assert image.min() >= 0.0 and image.max() <= 1.0
 
     def test_channels_hand_computed(self, tmp_path):
         path = tmp_path / "rgb.png"
@@ -198,9 +195,7 @@ class TestLoadImage:
 
     def test_tiff_planar_and_deflate(self, tmp_path):
         planar = np.moveaxis(RGB16, 2, 0)
-        tifffile.imwrite(
-            tmp_path / "planar.tif", planar, photometric="rgb", planarconfig="separate"
-        )
+        tifffile.imwrite(tmp_path / "planar.tif", planar, photometric="rgb", planarconfig="separate")
         tifffile.imwrite(tmp_path / "zip.tif", RGB16, photometric="rgb", compression="zlib")
         np.testing.assert_array_equal(load_image_rgb(tmp_path / "planar.tif"), unit16(RGB16))
         np.testing.assert_array_equal(load_image_rgb(tmp_path / "zip.tif"), unit16(RGB16))
@@ -289,13 +284,14 @@ class TestLoadImageErrors:
         path = tmp_path / "bad16.png"
         with open(path, "wb") as fh:
             png.Writer(width=8, height=4, greyscale=True, bitdepth=16).write(
-                fh, (np.arange(32).reshape(4, 8) * 1000).tolist())
+                fh, (np.arange(32).reshape(4, 8) * 1000).tolist()
+            )
         data = bytearray(path.read_bytes())
         at = data.index(b"IDAT")
-        (size,) = struct.unpack(">I", data[at - 4:at])
-        payload = bytes(data[at + 4:at + 6]) + b"\xff\xff\xff\xff" + bytes(data[at + 10:at + 4 + size])
-        data[at + 4:at + 4 + size] = payload
-        data[at + 4 + size:at + 8 + size] = struct.pack(">I", zlib.crc32(b"IDAT" + payload))
+        (size,) = struct.unpack(">I", data[at - 4 : at])
+        payload = bytes(data[at + 4 : at + 6]) + b"\xff\xff\xff\xff" + bytes(data[at + 10 : at + 4 + size])
+        data[at + 4 : at + 4 + size] = payload
+        data[at + 4 + size : at + 8 + size] = struct.pack(">I", zlib.crc32(b"IDAT" + payload))
         path.write_bytes(bytes(data))
         with pytest.raises(InputError, match="damaged PNG") as err:
             load_image(path)
@@ -429,7 +425,6 @@ class TestLoadImageErrors:
         with pytest.raises(InputError, match="'luma', 'r', 'g', 'b', 'max'") as err:
             load_image(path, channel="green")
         self.assert_one_line(err)
-
 
     def test_truncated_images_stay_refused(self):
         # Setting this True anywhere would let Pillow return half-decoded pictures.

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import tifffile
 from PIL import Image
-from test_io_images import GRAY8, GRAY16, RGB8, RGB16, png_with_ihdr, unit8, write_png16
 
 from shadeform.errors import InputError
 from shadeform.io.images import (
@@ -22,6 +21,7 @@ from shadeform.io.images import (
     load_pixels,
     select_channel,
 )
+from test_io_images import GRAY8, GRAY16, RGB8, RGB16, png_with_ihdr, unit8, write_png16
 
 
 def files(tmp_path):
@@ -109,7 +109,9 @@ class TestSelectChannel:
 
     def test_hand_values(self):
         pixels = np.array([[[1.0, 0.0, 0.0], [0.2, 0.6, 0.4]]], dtype=np.float32)
-        np.testing.assert_allclose(select_channel(pixels, "luma"), [[0.299, 0.0598 + 0.3522 + 0.0456]], rtol=1e-6)
+        np.testing.assert_allclose(
+            select_channel(pixels, "luma"), [[0.299, 0.0598 + 0.3522 + 0.0456]], rtol=1e-6
+        )
         np.testing.assert_array_equal(select_channel(pixels, "max"), np.float32([[1.0, 0.6]]))
         np.testing.assert_array_equal(select_channel(pixels, "b"), np.float32([[0.0, 0.4]]))
 

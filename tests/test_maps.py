@@ -50,9 +50,7 @@ class TestSaveNormalMap:
         assert info["bitdepth"] == 16 and not info["greyscale"] and not info["alpha"]
 
     def test_hand_computed_values(self, tmp_path):
-        normals = np.array(
-            [[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [np.nan, np.nan, np.nan]]]
-        )
+        normals = np.array([[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [np.nan, np.nan, np.nan]]])
         save_normal_map(normals, tmp_path / "n.png")
         pixels, _ = read_png_raw(tmp_path / "n.png")
         # (n + 1) / 2 * 65535, rounded: 0 -> 32768 (32767.5 rounds to even), 1 -> 65535
@@ -245,11 +243,14 @@ class TestSaveGray:
         stored = np.asarray(Image.open(save_gray(mask, tmp_path / "m.png", bitdepth=8)))
         np.testing.assert_array_equal(stored, [[255, 0], [0, 255]])
 
-    @pytest.mark.parametrize(("image", "name", "bitdepth", "message"), [
-        (np.zeros((4, 4)), "x.jpg", 8, ".png"),
-        (np.zeros((4, 4)), "x.png", 12, "bitdepth must be 8 or 16"),
-        (np.zeros((4, 4, 3)), "x.png", 8, "must be (H, W)"),
-    ])
+    @pytest.mark.parametrize(
+        ("image", "name", "bitdepth", "message"),
+        [
+            (np.zeros((4, 4)), "x.jpg", 8, ".png"),
+            (np.zeros((4, 4)), "x.png", 12, "bitdepth must be 8 or 16"),
+            (np.zeros((4, 4, 3)), "x.png", 8, "must be (H, W)"),
+        ],
+    )
     def test_bad_input_writes_nothing(self, tmp_path, image, name, bitdepth, message):
         with pytest.raises(InputError, match=message.replace("(", r"\(").replace(")", r"\)")):
             save_gray(image, tmp_path / name, bitdepth=bitdepth)

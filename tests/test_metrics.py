@@ -41,9 +41,7 @@ class TestAngularError:
         assert angular_error(_field(u), _field(u)) == pytest.approx(0.0, abs=1e-12)
         tiny = 1e-7
         v = (np.sin(tiny), 0.0, np.cos(tiny))
-        assert angular_error(_field(v), _field((0, 0, 1))) == pytest.approx(
-            np.degrees(tiny), rel=1e-9
-        )
+        assert angular_error(_field(v), _field((0, 0, 1))) == pytest.approx(np.degrees(tiny), rel=1e-9)
 
     def test_mask(self):
         a = _field((1, 0, 0), (0, 0, 1))
@@ -93,9 +91,7 @@ class TestDepthError:
         assert depth_error(est, self.truth) == pytest.approx(100 * 0.1 * np.sqrt(1.25) / 3)
         # No fit: RMSE 0.1 * sqrt(mean t^2) = 0.1 * sqrt(3.5).
         assert depth_error(est, self.truth, fit="none") == pytest.approx(10 * np.sqrt(3.5) / 3)
-        assert depth_error(est - 7.0, self.truth, fit="scale_offset") == pytest.approx(
-            0.0, abs=1e-10
-        )
+        assert depth_error(est - 7.0, self.truth, fit="scale_offset") == pytest.approx(0.0, abs=1e-10)
         assert depth_error(est, self.truth, fit="scale") == pytest.approx(0.0, abs=1e-12)
 
     def test_on_scene(self):

@@ -31,8 +31,7 @@ def sphere():
 
 
 def photos(scene, lights, **kwargs):
-    return np.stack([synth.render(scene.normals, scene.mask, light=light, **kwargs)
-                     for light in lights])
+    return np.stack([synth.render(scene.normals, scene.mask, light=light, **kwargs) for light in lights])
 
 
 class TestPhotometricStereo:
@@ -78,8 +77,9 @@ class TestPhotometricStereo:
 
     def test_robust_leaves_highlights_out(self, sphere):
         rng = np.random.default_rng(3)
-        lights = np.array([light_from_slant_tilt(s, t) for s, t in
-                           zip(rng.uniform(5, 45, 30), rng.uniform(0, 360, 30))])
+        lights = np.array(
+            [light_from_slant_tilt(s, t) for s, t in zip(rng.uniform(5, 45, 30), rng.uniform(0, 360, 30))]
+        )
         images = photos(sphere, lights, albedo=0.7, specular=0.5, shininess=50)
         robust = photometric_stereo(images, lights, sphere.mask)
         plain = photometric_stereo(images, lights, sphere.mask, method="least_squares")
@@ -104,8 +104,7 @@ class TestPhotometricStereo:
         result = photometric_stereo(images, lights, sphere.mask, intensities=strengths)
         assert result.albedo.shape == sphere.mask.shape + (3,)
         assert angles(result.normals, sphere.normals, lit).max() < 1e-4
-        np.testing.assert_allclose(result.albedo[lit], np.broadcast_to(colour, (lit.sum(), 3)),
-                                   atol=1e-5)
+        np.testing.assert_allclose(result.albedo[lit], np.broadcast_to(colour, (lit.sum(), 3)), atol=1e-5)
         # one strength per photo divides every channel alike
         single = photometric_stereo(gray * 2.0, lights, sphere.mask, intensities=np.full(6, 2.0))
         np.testing.assert_allclose(single.albedo[lit], 1.0, atol=1e-5)
@@ -149,32 +148,40 @@ class TestPhotometricStereoErrors:
     def good(self):
         return np.ones((4, 5, 6)), ring(4, 20), np.ones((5, 6), bool)
 
-    @pytest.mark.parametrize("change, match", [
-        (lambda i, l, m: (i[:2], l[:2], m), "at least 3 photos"),
-        (lambda i, l, m: (i, l[:3], m), "one per photo"),
-        (lambda i, l, m: (i, np.array([[1, 0, 0.1], [0, 1, 0.1], [1, 1, 0.2], [2, 1, 0.3]]), m),
-         "one plane"),
-        (lambda i, l, m: (i, np.vstack([l[:3], [0, 0, 0]]), m), "zero vector"),
-        (lambda i, l, m: (i, np.where(l > 0.5, np.nan, l), m), "NaN or inf"),
-        (lambda i, l, m: (np.where(i > 0, np.inf, i), l, m), "finite intensities"),
-        (lambda i, l, m: (i, l, m[:4]), "mask has shape"),
-        (lambda i, l, m: (i, l, np.zeros_like(m)), "empty"),
-        (lambda i, l, m: (i[0], l, m), "images must be"),
-        (lambda i, l, m: (np.full(i.shape, "x"), l, m), "numeric"),
-    ])
+    @pytest.mark.parametrize(
+        "change, match",
+        [
+            (lambda i, l, m: (i[:2], l[:2], m), "at least 3 photos"),
+            (lambda i, l, m: (i, l[:3], m), "one per photo"),
+            (
+                lambda i, l, m: (i, np.array([[1, 0, 0.1], [0, 1, 0.1], [1, 1, 0.2], [2, 1, 0.3]]), m),
+                "one plane",
+            ),
+            (lambda i, l, m: (i, np.vstack([l[:3], [0, 0, 0]]), m), "zero vector"),
+            (lambda i, l, m: (i, np.where(l > 0.5, np.nan, l), m), "NaN or inf"),
+            (lambda i, l, m: (np.where(i > 0, np.inf, i), l, m), "finite intensities"),
+            (lambda i, l, m: (i, l, m[:4]), "mask has shape"),
+            (lambda i, l, m: (i, l, np.zeros_like(m)), "empty"),
+            (lambda i, l, m: (i[0], l, m), "images must be"),
+            (lambda i, l, m: (np.full(i.shape, "x"), l, m), "numeric"),
+        ],
+    )
     def test_bad_input(self, good, change, match):
         with pytest.raises(InputError, match=match) as info:
             photometric_stereo(*change(*good))
         assert "\n" not in str(info.value)
 
-    @pytest.mark.parametrize("options, match", [
-        ({"method": "magic"}, "method"),
-        ({"min_shading": 1.0}, "min_shading"),
-        ({"highlight_angle": -1}, "highlight_angle"),
-        ({"iterations": 1.5}, "iterations"),
-        ({"intensities": np.ones(3)}, "intensities"),
-        ({"intensities": -np.ones(4)}, "positive"),
-    ])
+    @pytest.mark.parametrize(
+        "options, match",
+        [
+            ({"method": "magic"}, "method"),
+            ({"min_shading": 1.0}, "min_shading"),
+            ({"highlight_angle": -1}, "highlight_angle"),
+            ({"iterations": 1.5}, "iterations"),
+            ({"intensities": np.ones(3)}, "intensities"),
+            ({"intensities": -np.ones(4)}, "positive"),
+        ],
+    )
     def test_bad_options(self, good, options, match):
         with pytest.raises(InputError, match=match):
             photometric_stereo(*good, **options)

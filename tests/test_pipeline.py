@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from shadeform import metrics, pipeline, reconstruct, synth, to_mesh
-from shadeform.pipeline import preview_step, reconstruct_preview
-from shadeform.solvers import choose, get_solver
 from shadeform.errors import InputError
+from shadeform.pipeline import preview_step, reconstruct_preview
 from shadeform.reconstruction import Reconstruction
+from shadeform.solvers import choose, get_solver
 
 SIZE = 256
 
@@ -51,12 +51,16 @@ class TestBars:
         refs = [(128, 128), (90, 110), (170, 150), (128, 60)]
 
         def errors(rec):
-            return (metrics.angular_error(rec.normals, scene.normals, scene.mask),
-                    metrics.depth_error(rec.depth, scene.depth, scene.mask))
+            return (
+                metrics.angular_error(rec.normals, scene.normals, scene.mask),
+                metrics.depth_error(rec.depth, scene.depth, scene.mask),
+            )
 
         # eq. 7 of the 2002 report combines the propagated fields of several references
-        singles = [errors(reconstruct(scene.image, mask=scene.mask, references=[r], method="propagation"))
-                   for r in refs]
+        singles = [
+            errors(reconstruct(scene.image, mask=scene.mask, references=[r], method="propagation"))
+            for r in refs
+        ]
         combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs, method="propagation"))
         assert combined[0] <= max(s[0] for s in singles) + 1e-9
         assert combined[1] <= max(s[1] for s in singles) + 1e-9
@@ -122,8 +126,9 @@ class TestReconstruct:
         raw = reconstruct(scene.image, mask=scene.mask, method="eikonal")
         smooth = reconstruct(scene.image, mask=scene.mask, method="eikonal", filter="gaussian:1")
         assert smooth.info["filter"] == "gaussian"
-        assert (metrics.angular_error(smooth.normals, scene.normals, scene.mask)
-                < metrics.angular_error(raw.normals, scene.normals, scene.mask))
+        assert metrics.angular_error(smooth.normals, scene.normals, scene.mask) < metrics.angular_error(
+            raw.normals, scene.normals, scene.mask
+        )
 
     def test_oblique_light_sphere(self):
         from shadeform.light import light_from_slant_tilt
@@ -159,14 +164,17 @@ class TestBadInput:
     def scene(self):
         return synth.scene("sphere", size=32)
 
-    @pytest.mark.parametrize("image,match", [
-        (np.zeros((32, 32)), "black"),
-        (np.ones((32, 32)), "saturated|constant"),
-        (np.zeros((1, 1)), "at least"),
-        (np.zeros((0, 5)), "at least"),
-        (np.zeros((8, 8, 3)), "one channel"),
-        ([[0.5, 0.5]], "numpy array"),
-    ])
+    @pytest.mark.parametrize(
+        "image,match",
+        [
+            (np.zeros((32, 32)), "black"),
+            (np.ones((32, 32)), "saturated|constant"),
+            (np.zeros((1, 1)), "at least"),
+            (np.zeros((0, 5)), "at least"),
+            (np.zeros((8, 8, 3)), "one channel"),
+            ([[0.5, 0.5]], "numpy array"),
+        ],
+    )
     def test_bad_images(self, image, match):
         with pytest.raises(InputError, match=match):
             reconstruct(image)
@@ -188,16 +196,19 @@ class TestBadInput:
         with pytest.raises(InputError, match="not on the object"):
             reconstruct(scene.image, mask=scene.mask, references=[(500, 3)])
 
-    @pytest.mark.parametrize("kwargs,match", [
-        ({"method": "magic"}, "unknown method"),
-        ({"integrator": "magic"}, "unknown integrator"),
-        ({"refine": -1}, "refine"),
-        ({"light": (0, 0, -1)}, "z <= 0"),
-        ({"concave": '{"regions": [{"polygon": [[0, 0]], "axis": "x"}]}'}, "3"),
-        ({"concave": "{not json"}, "JSON"),
-        ({"references": [(1,)]}, "reference"),
-        ({"filter": "blur:2"}, "filter|gaussian"),
-    ])
+    @pytest.mark.parametrize(
+        "kwargs,match",
+        [
+            ({"method": "magic"}, "unknown method"),
+            ({"integrator": "magic"}, "unknown integrator"),
+            ({"refine": -1}, "refine"),
+            ({"light": (0, 0, -1)}, "z <= 0"),
+            ({"concave": '{"regions": [{"polygon": [[0, 0]], "axis": "x"}]}'}, "3"),
+            ({"concave": "{not json"}, "JSON"),
+            ({"references": [(1,)]}, "reference"),
+            ({"filter": "blur:2"}, "filter|gaussian"),
+        ],
+    )
     def test_bad_options(self, scene, kwargs, match):
         with pytest.raises(InputError, match=match):
             reconstruct(scene.image, mask=scene.mask, **kwargs)
@@ -212,8 +223,9 @@ class TestBadInput:
 class TestEikonalMethod:
     def test_vase_with_its_neck_marked(self):
         scene = synth.scene("vase", size=SIZE)
-        rec = reconstruct(scene.image, mask=scene.mask, method="eikonal",
-                          concave=synth.concave_regions("vase", size=SIZE))
+        rec = reconstruct(
+            scene.image, mask=scene.mask, method="eikonal", concave=synth.concave_regions("vase", size=SIZE)
+        )
         assert rec.info["method"] == "eikonal" and rec.info["singular_points"]
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) <= 1.0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) <= 3.0
@@ -275,20 +287,27 @@ class TestEstimatedLight:
 class TestPreview:
     """reconstruct_preview: the quick look at the mesh's grid that the app shows first."""
 
-    @pytest.mark.parametrize(("name", "step", "bound"), [("vase", 2, 0.5), ("vase", 3, 0.5),
-                                                         ("bumps", 2, 5.0)])
+    @pytest.mark.parametrize(
+        ("name", "step", "bound"), [("vase", 2, 0.5), ("vase", 3, 0.5), ("bumps", 2, 5.0)]
+    )
     def test_bright_caps_between_grid_points_are_kept(self, name, step, bound):
         """The vase's lip (its singular point on the top row) and the bumps' small caps fall
         between grid points: sampled plainly, the eikonal quick look lost them (6.3 % and 19 %)."""
         scene = synth.scene(name, size=256)
-        quick = pipeline.reconstruct_preview(scene.image, mask=scene.mask, step=step,
-                                             concave=synth.concave_regions(name, size=256),
-                                             method="eikonal")
+        quick = pipeline.reconstruct_preview(
+            scene.image,
+            mask=scene.mask,
+            step=step,
+            concave=synth.concave_regions(name, size=256),
+            method="eikonal",
+        )
         grid = np.zeros_like(scene.mask)
         grid[::step, ::step] = True
         on = grid & scene.mask
-        assert metrics.depth_error(np.where(on, quick.depth, np.nan),
-                                   np.where(on, scene.depth, np.nan), on) < bound
+        assert (
+            metrics.depth_error(np.where(on, quick.depth, np.nan), np.where(on, scene.depth, np.nan), on)
+            < bound
+        )
 
     def test_keep_caps_moves_a_cap_to_the_nearest_grid_point(self):
         image = np.full((9, 9), 0.5)
@@ -303,8 +322,8 @@ class TestPreview:
         on_grid = image.copy()
         on_grid[3, 5], on_grid[4, 4] = 0.5, 1.0
         np.testing.assert_array_equal(
-            pipeline._keep_caps(on_grid, mask, on_grid[::2, ::2], mask[::2, ::2], 2),
-            on_grid[::2, ::2])
+            pipeline._keep_caps(on_grid, mask, on_grid[::2, ::2], mask[::2, ::2], 2), on_grid[::2, ::2]
+        )
 
     @pytest.mark.parametrize(("name", "step"), [("vase", 2), ("sphere", 2), ("sphere", 3)])
     def test_same_mesh_as_the_full_solve_and_close_to_the_truth(self, name, step):
@@ -337,8 +356,14 @@ class TestPreview:
 
     def test_filter_and_references_in_input_pixels(self):
         scene = synth.scene("sphere", size=96, noise=0.02)
-        quick = reconstruct_preview(scene.image, mask=scene.mask, step=2, method="propagation",
-                                    filter="gaussian:3", references=[(31, 47)])
+        quick = reconstruct_preview(
+            scene.image,
+            mask=scene.mask,
+            step=2,
+            method="propagation",
+            filter="gaussian:3",
+            references=[(31, 47)],
+        )
         assert quick.info["references"][0] == (32, 48)  # (31, 47) / 2, rounded, back in input pixels
         assert quick.info["filter"] == "gaussian"
         grid = scene.mask[::2, ::2]
@@ -347,8 +372,14 @@ class TestPreview:
     def test_reference_moves_onto_the_coarse_object(self):
         scene = synth.scene("sphere", size=64)
         rows, cols = np.nonzero(scene.mask)
-        edge = next((r, c) for r, c in zip(rows, cols) if r % 4 and not scene.mask[::4, ::4][round(r / 4), round(c / 4)])
-        quick = reconstruct_preview(scene.image, mask=scene.mask, step=4, references=[edge], method="propagation")
+        edge = next(
+            (r, c)
+            for r, c in zip(rows, cols)
+            if r % 4 and not scene.mask[::4, ::4][round(r / 4), round(c / 4)]
+        )
+        quick = reconstruct_preview(
+            scene.image, mask=scene.mask, step=4, references=[edge], method="propagation"
+        )
         r, c = quick.info["references"][0]
         assert scene.mask[r, c] and abs(r - edge[0]) <= 6 and abs(c - edge[1]) <= 6
 
@@ -358,8 +389,10 @@ class TestPreview:
         quick = reconstruct_preview(scene.image, mask=scene.mask, step=1)
         np.testing.assert_array_equal(quick.depth, full.depth)
 
-    @pytest.mark.parametrize(("step", "message"), [(0, "step must be"), (2.5, "step must be"), (True, "step must be"),
-                                                   (40, "no pixel on the grid")])
+    @pytest.mark.parametrize(
+        ("step", "message"),
+        [(0, "step must be"), (2.5, "step must be"), (True, "step must be"), (40, "no pixel on the grid")],
+    )
     def test_bad_step(self, step, message):
         mask = np.zeros((64, 64), bool)
         mask[30:36, 30:36] = True
@@ -371,7 +404,7 @@ class TestPreview:
         mask = np.ones((512, 512), bool)
         # step 2 leaves 65,536 grid pixels, over the eikonal budget: doubled once (16,384)
         assert preview_step(mask, 2, method="eikonal") == 4
-        assert 512 ** 2 / 4 ** 2 <= get_solver("eikonal").preview_pixels < 512 ** 2 / 2 ** 2
+        assert 512**2 / 4**2 <= get_solver("eikonal").preview_pixels < 512**2 / 2**2
         assert preview_step(mask, 2, method="oblique") == 16  # 1,024 pixels
         assert preview_step(mask, 3, light=(0.5, 0.0, 0.866)) == 12  # auto under oblique light
         assert preview_step(mask, 2, light="estimate") == 16

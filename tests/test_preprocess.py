@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from shadeform.errors import InputError
 from shadeform import synth
+from shadeform.errors import InputError
 from shadeform.preprocess import FILTER_KINDS, Filter, apply_filter, noise_level, object_mask, parse_filter
 
 N, R = 256, 100

@@ -62,7 +62,8 @@ class TestProjectToCone:
         tilt_in = normals - (normals @ light)[:, None] * light
         tilt_out = out - (out @ light)[:, None] * light
         cosines = np.sum(tilt_in * tilt_out, axis=1) / (
-            np.linalg.norm(tilt_in, axis=1) * np.linalg.norm(tilt_out, axis=1))
+            np.linalg.norm(tilt_in, axis=1) * np.linalg.norm(tilt_out, axis=1)
+        )
         np.testing.assert_allclose(cosines[cos_theta < 0.999], 1, atol=1e-9)
 
 
@@ -76,29 +77,39 @@ class TestPropagateNormals:
 
     def test_brightness_is_explained(self):
         scene = synth.scene("ellipsoid", size=64, light=light_from_slant_tilt(20, 45))
-        n = propagate_normals(scene.image, scene.mask, light=scene.light, reference=brightest(scene),
-                              albedo=scene.image.max())
-        np.testing.assert_allclose((n @ scene.light)[scene.mask], scene.image[scene.mask] / scene.image.max(),
-                                   atol=1e-12)
+        n = propagate_normals(
+            scene.image, scene.mask, light=scene.light, reference=brightest(scene), albedo=scene.image.max()
+        )
+        np.testing.assert_allclose(
+            (n @ scene.light)[scene.mask], scene.image[scene.mask] / scene.image.max(), atol=1e-12
+        )
 
     def test_sphere_is_recovered(self):
         scene = synth.scene("sphere", size=128)
         n = propagate_normals(scene.image, scene.mask, light=Z, reference=brightest(scene), albedo=1.0)
         assert metrics.angular_error(n, scene.normals) < 0.5
 
-    @pytest.mark.parametrize("name,light,concave", [
-        ("ellipsoid", (0, 0, 1), None),
-        ("bumps", (0, 0, 1), None),
-        ("sphere", tuple(light_from_slant_tilt(30, 120)), None),
-        ("bowl", (0, 0, 1), "both"),
-        ("saddle", (0, 0, 1), "x"),
-    ])
+    @pytest.mark.parametrize(
+        "name,light,concave",
+        [
+            ("ellipsoid", (0, 0, 1), None),
+            ("bumps", (0, 0, 1), None),
+            ("sphere", tuple(light_from_slant_tilt(30, 120)), None),
+            ("bowl", (0, 0, 1), "both"),
+            ("saddle", (0, 0, 1), "x"),
+        ],
+    )
     def test_compiled_kernel_matches_reference(self, name, light, concave):
         scene = synth.scene(name, size=40, light=light)
         cx = scene.mask if concave in ("x", "both") else None
         cy = scene.mask if concave in ("y", "both") else None
-        kwargs = dict(light=np.asarray(scene.light), reference=brightest(scene), albedo=float(scene.image.max()),
-                      concave_x=cx, concave_y=cy)
+        kwargs = dict(
+            light=np.asarray(scene.light),
+            reference=brightest(scene),
+            albedo=float(scene.image.max()),
+            concave_x=cx,
+            concave_y=cy,
+        )
         fast = propagate_normals(scene.image, scene.mask, **kwargs)
         slow = propagate_normals_reference(scene.image, scene.mask, **kwargs)
         np.testing.assert_array_equal(np.isnan(fast), np.isnan(slow))
@@ -108,8 +119,15 @@ class TestPropagateNormals:
         scene = synth.scene("bowl", size=96)
         ref = brightest(scene)
         convex = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, albedo=1.0)
-        concave = propagate_normals(scene.image, scene.mask, light=Z, reference=ref, albedo=1.0,
-                                    concave_x=scene.mask, concave_y=scene.mask)
+        concave = propagate_normals(
+            scene.image,
+            scene.mask,
+            light=Z,
+            reference=ref,
+            albedo=1.0,
+            concave_x=scene.mask,
+            concave_y=scene.mask,
+        )
         assert metrics.angular_error(convex, scene.normals) > 10
         assert metrics.angular_error(concave, scene.normals) < 1
 
@@ -117,7 +135,9 @@ class TestPropagateNormals:
         scene = synth.scene("sphere", size=32)
         given = np.array([0.1, 0.2, 0.97])
         given /= np.linalg.norm(given)
-        n = propagate_normals(scene.image, scene.mask, light=Z, reference=(16, 16), reference_normal=given, albedo=1.0)
+        n = propagate_normals(
+            scene.image, scene.mask, light=Z, reference=(16, 16), reference_normal=given, albedo=1.0
+        )
         np.testing.assert_allclose(n[16, 16], given)
 
     def test_disconnected_part_stays_nan(self):

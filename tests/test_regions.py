@@ -100,7 +100,7 @@ class TestParseRegions:
             (_one(((0, 0), (1, 1))), "at least 3 points, got 2 in region 1"),
             ({"regions": [{"polygon": "square", "axis": "x"}]}, "list of \\[x, y\\] points"),
             (_one(((0, 0), (1, 0), (1,))), "point 3 must be \\[x, y\\], got \\[1\\]"),
-            (_one(((0, 0), (1, "a"), (1, 1))), "point 2 has a non-numeric coordinate \"a\""),
+            (_one(((0, 0), (1, "a"), (1, 1))), 'point 2 has a non-numeric coordinate "a"'),
             (_one(((0, 0), (1, None), (1, 1))), "non-numeric coordinate null"),
             (_one(((0, 0), (True, 0), (1, 1))), "non-numeric coordinate true"),
             (_one(((0, 0), (1, 0), (1, float("nan")))), "point 3 has a non-finite coordinate"),

@@ -36,8 +36,13 @@ def gradient_solve(problem: Problem) -> Solution:
     return Solution(normals, problem.integrate(normals), {"gradient_pixels": int(np.count_nonzero(length))})
 
 
-TINY = Solver("gradient", gradient_solve, lights="frontal", integrator="poisson",
-              description="normals tilted against the brightness gradient (a test solver)")
+TINY = Solver(
+    "gradient",
+    gradient_solve,
+    lights="frontal",
+    integrator="poisson",
+    description="normals tilted against the brightness gradient (a test solver)",
+)
 
 
 @pytest.fixture
@@ -65,8 +70,9 @@ class TestRegistry:
         assert choose(None).name == "oblique"
 
     def test_a_ranked_solver_is_chosen_by_auto(self, registries):
-        registries[0].register(Solver("first", gradient_solve, integrator="poisson", auto=-1,
-                                      description="ranked first"))
+        registries[0].register(
+            Solver("first", gradient_solve, integrator="poisson", auto=-1, description="ranked first")
+        )
         assert choose(np.array([0.5, 0.0, 0.866])).name == "first"
         assert "first" in available_methods()[AUTO]
 
@@ -94,7 +100,9 @@ class TestNewSolverEverywhere:
             shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", light=(0.5, 0, 0.866))
         other = shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", integrator="fourier")
         assert other.info["integrator"] == "fourier"
-        quick = shadeform.pipeline.reconstruct_preview(scene.image, mask=scene.mask, step=2, method="gradient")
+        quick = shadeform.pipeline.reconstruct_preview(
+            scene.image, mask=scene.mask, step=2, method="gradient"
+        )
         assert quick.info["method"] == "gradient" and quick.info["preview_step"] == 2
 
     def test_cli(self, tiny, sphere64, cli, tmp_path):
@@ -116,8 +124,14 @@ class TestNewSolverEverywhere:
             options = client.get("/api/options").json()
             assert {"name": "gradient", "description": TINY.description} in options["methods"]
             image = client.post("/api/examples/synth:sphere?size=48").json()
-            response = client.post("/api/reconstruct", json={"image_id": image["image_id"], "request_id": 1,
-                                                             "params": {"method": "gradient", "step": 2}})
+            response = client.post(
+                "/api/reconstruct",
+                json={
+                    "image_id": image["image_id"],
+                    "request_id": 1,
+                    "params": {"method": "gradient", "step": 2},
+                },
+            )
             assert response.status_code == 200, response.text
             assert response.json()["info"]["method"] == "gradient"
 
@@ -133,8 +147,9 @@ class TestSolverContract:
         registries[0].register(Solver("spy", spy, depth="zero", description="records its problem"))
         scene = sphere64
         regions = synth.concave_regions("bowl", size=64)
-        rec = shadeform.reconstruct(scene.image, mask=scene.mask, method="spy", references=[(32, 30)],
-                                    concave=regions, refine=2)
+        rec = shadeform.reconstruct(
+            scene.image, mask=scene.mask, method="spy", references=[(32, 30)], concave=regions, refine=2
+        )
         problem = seen["problem"]
         assert problem.given == 1 and problem.main == (32, 30) and problem.references[0].normal is None
         assert problem.albedo == pytest.approx(scene.image.max())

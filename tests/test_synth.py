@@ -210,9 +210,7 @@ class TestRender:
     def test_oblique_light_attached_shadows(self):
         _, normals, mask = surface("sphere", size=SIZE)
         slant, tilt = np.radians(60), np.radians(30)
-        light = np.array(
-            [np.sin(slant) * np.cos(tilt), np.sin(slant) * np.sin(tilt), np.cos(slant)]
-        )
+        light = np.array([np.sin(slant) * np.cos(tilt), np.sin(slant) * np.sin(tilt), np.cos(slant)])
         image = render(normals, mask, light=light)
         dot = normals @ light
         shadow = mask & (dot < 0)
@@ -283,9 +281,7 @@ class TestScene:
         assert s.normals.shape == (SIZE, SIZE, 3)
         np.testing.assert_allclose(s.light, np.array([1, 1, 2]) / np.sqrt(6))
         assert s.albedo == 0.8 and isinstance(s.albedo, float)
-        np.testing.assert_array_equal(
-            s.image, render(s.normals, s.mask, light=(1, 1, 2), albedo=0.8)
-        )
+        np.testing.assert_array_equal(s.image, render(s.normals, s.mask, light=(1, 1, 2), albedo=0.8))
 
     def test_matches_surface(self):
         s = scene("saddle", size=SIZE)
@@ -312,9 +308,10 @@ class TestScene:
         np.testing.assert_allclose(bowl.depth[m], -depth_convex[m], atol=1e-9)
         assert np.nanmax(bowl.depth) <= 0 < np.max(depth_convex[m])
         oblique = (0.5, 0.0, 1.0)
-        assert np.abs(
-            render(bowl.normals, m, light=oblique) - render(normals_convex, m, light=oblique)
-        ).max() > 0.3
+        assert (
+            np.abs(render(bowl.normals, m, light=oblique) - render(normals_convex, m, light=oblique)).max()
+            > 0.3
+        )
 
     def test_noise_seed(self):
         a = scene("bumps", size=48, noise=0.02, seed=7)

@@ -41,7 +41,20 @@ _EXPORTS = {
     "photometric_stereo": "shadeform.photometric",
     "PhotometricStereo": "shadeform.photometric",
 }
-_SUBMODULES = {"synth", "metrics", "preprocess", "light", "regions", "solvers", "integration", "io", "mesh", "render", "examples", "photometric"}
+_SUBMODULES = {
+    "synth",
+    "metrics",
+    "preprocess",
+    "light",
+    "regions",
+    "solvers",
+    "integration",
+    "io",
+    "mesh",
+    "render",
+    "examples",
+    "photometric",
+}
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 

@@ -21,8 +21,9 @@ def shading_image(image) -> np.ndarray:
     refused with a one-line :class:`InputError`.
     """
     if not isinstance(image, np.ndarray):
-        raise InputError(f"image must be a numpy array, got {type(image).__name__}; "
-                         "load it with shadeform.load_image")
+        raise InputError(
+            f"image must be a numpy array, got {type(image).__name__}; load it with shadeform.load_image"
+        )
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[..., 0]
     if image.ndim != 2:
@@ -69,8 +70,9 @@ def check_mask(mask, shape, *, of: str = "the image") -> np.ndarray:
     """
     mask = np.asarray(mask)
     if mask.shape != tuple(shape):
-        raise InputError(f"mask has shape {mask.shape} but {of} has {tuple(shape)}; "
-                         "give a mask of the same size")
+        raise InputError(
+            f"mask has shape {mask.shape} but {of} has {tuple(shape)}; give a mask of the same size"
+        )
     mask = mask.astype(bool)
     if not mask.any():
         raise InputError("mask is empty; it must mark the object's pixels")

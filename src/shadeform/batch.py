@@ -52,11 +52,20 @@ class BatchResult:
     error: str | None = None
 
 
-def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.PathLike, *,
-                      suffix: str = ".glb", step: int = 1, channel: str = "luma",
-                      srgb: bool = False, depth: bool = False, normals: bool = False, workers: int | None = None,
-                      progress: Callable[[int, int], None] | None = None,
-                      **options) -> list[BatchResult]:
+def reconstruct_files(
+    photos: Sequence[str | os.PathLike],
+    out_dir: str | os.PathLike,
+    *,
+    suffix: str = ".glb",
+    step: int = 1,
+    channel: str = "luma",
+    srgb: bool = False,
+    depth: bool = False,
+    normals: bool = False,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    **options,
+) -> list[BatchResult]:
     """Reconstruct every photo with the same options and write one model per photo.
 
     Parameters
@@ -110,12 +119,15 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
         raise InputError("no photos given; list the photos to reconstruct")
     twice = sorted(stem for stem, n in Counter(p.stem for p in photos).items() if n > 1)
     if twice:
-        raise InputError(f"two photos are named '{twice[0]}', so their models would overwrite "
-                         "each other; rename one")
+        raise InputError(
+            f"two photos are named '{twice[0]}', so their models would overwrite each other; rename one"
+        )
     if not out_dir.is_dir():
         raise InputError(f"output folder '{out_dir}' does not exist; create it first")
     if suffix.lower() not in available_formats():
-        raise InputError(f"unknown mesh format suffix '{suffix}'; use one of {', '.join(available_formats())}")
+        raise InputError(
+            f"unknown mesh format suffix '{suffix}'; use one of {', '.join(available_formats())}"
+        )
     # the options every photo shares are checked once, not found wrong in every task
     check_choice(options.get("method", "auto"), tuple(available_methods()), "method")
     if options.get("integrator") is not None:
@@ -128,14 +140,25 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
         import dask
         from dask.callbacks import Callback
     except ImportError:
-        raise InputError("batch processing needs Dask; install it with "
-                         "pip install 'shadeform[dask]'") from None
+        raise InputError(
+            "batch processing needs Dask; install it with pip install 'shadeform[dask]'"
+        ) from None
 
-    jobs = [(photo, tuple(out_dir / f"{photo.stem}{end}" for end, wanted in
-                          ((suffix, True), (DEPTH_SUFFIX, depth), (NORMALS_SUFFIX, normals))
-                          if wanted)) for photo in photos]
-    tasks = [dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, srgb, options)
-             for photo, files in jobs]
+    jobs = [
+        (
+            photo,
+            tuple(
+                out_dir / f"{photo.stem}{end}"
+                for end, wanted in ((suffix, True), (DEPTH_SUFFIX, depth), (NORMALS_SUFFIX, normals))
+                if wanted
+            ),
+        )
+        for photo in photos
+    ]
+    tasks = [
+        dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, srgb, options)
+        for photo, files in jobs
+    ]
     done = [0]
 
     def finished(key, result, dsk, state, worker_id):
@@ -149,8 +172,9 @@ def reconstruct_files(photos: Sequence[str | os.PathLike], out_dir: str | os.Pat
     return list(results)
 
 
-def _reconstruct_one(photo: Path, files: tuple[Path, ...], step: int, channel: str, srgb: bool,
-                     options: dict) -> BatchResult:
+def _reconstruct_one(
+    photo: Path, files: tuple[Path, ...], step: int, channel: str, srgb: bool, options: dict
+) -> BatchResult:
     """One photo: load, reconstruct, mesh, write; a user mistake becomes the result's error."""
     import shadeform
     from shadeform.io.atomic import OutputSet
@@ -177,6 +201,12 @@ def _reconstruct_one(photo: Path, files: tuple[Path, ...], step: int, channel: s
         return BatchResult(photo, (), 0, 0, time.perf_counter() - start, str(err))
     except OSError as err:
         reason = err.strerror or type(err).__name__
-        return BatchResult(photo, (), 0, 0, time.perf_counter() - start,
-                           f"cannot read or write the files of '{photo}': {reason}")
+        return BatchResult(
+            photo,
+            (),
+            0,
+            0,
+            time.perf_counter() - start,
+            f"cannot read or write the files of '{photo}': {reason}",
+        )
     return BatchResult(photo, files, mesh.n_vertices, mesh.n_faces, time.perf_counter() - start)

@@ -79,7 +79,9 @@ def load_example(name: str, *, size: int | None = None) -> tuple[np.ndarray, dic
     if name.startswith("synth:"):
         return _synthetic(name.removeprefix("synth:"), size, info)
     if size is not None:
-        raise InputError(f"example {name!r} is a photograph of fixed size; size only applies to synth: examples")
+        raise InputError(
+            f"example {name!r} is a photograph of fixed size; size only applies to synth: examples"
+        )
     return _coin(info)
 
 

@@ -64,8 +64,7 @@ class Mesh:
             )
         if normals.shape != (n_vertices, 3):
             raise InputError(
-                f"mesh normals must have shape ({n_vertices}, 3) like the vertices, "
-                f"got {normals.shape}"
+                f"mesh normals must have shape ({n_vertices}, 3) like the vertices, got {normals.shape}"
             )
         if not np.isfinite(vertices).all():
             raise InputError("mesh vertices contain NaN or inf; drop those vertices first")
@@ -103,9 +102,7 @@ def _check_step(step: object, shape: tuple[int, int]) -> int:
     step = int(step)
     limit = min(shape)
     if not 1 <= step < limit:
-        raise InputError(
-            f"step must be at least 1 and below {limit} (the smaller image side), got {step}"
-        )
+        raise InputError(f"step must be at least 1 and below {limit} (the smaller image side), got {step}")
     return step
 
 
@@ -117,19 +114,14 @@ def _check_reconstruction(reconstruction: Reconstruction) -> tuple[np.ndarray, .
         raise InputError(f"reconstruction mask must have shape (H, W), got {mask.shape}")
     if depth.shape != mask.shape:
         raise InputError(
-            f"reconstruction depth has shape {depth.shape} but the mask {mask.shape}; "
-            "they must match"
+            f"reconstruction depth has shape {depth.shape} but the mask {mask.shape}; they must match"
         )
     if normals.shape != mask.shape + (3,):
-        raise InputError(
-            f"reconstruction normals have shape {normals.shape}, expected {mask.shape + (3,)}"
-        )
+        raise InputError(f"reconstruction normals have shape {normals.shape}, expected {mask.shape + (3,)}")
     return mask, depth, normals
 
 
-def _outside_count(
-    background: np.ndarray, top: np.ndarray, left: np.ndarray, size: int
-) -> np.ndarray:
+def _outside_count(background: np.ndarray, top: np.ndarray, left: np.ndarray, size: int) -> np.ndarray:
     """Background pixels in each ``size`` x ``size`` block at ``(top, left)`` (integral image).
 
     Parameters
@@ -146,9 +138,7 @@ def _outside_count(
     integral = np.zeros((background.shape[0] + 1, background.shape[1] + 1), dtype=np.int64)
     np.cumsum(np.cumsum(background, axis=0), axis=1, out=integral[1:, 1:])
     bottom, right = top + size, left + size
-    return (integral[bottom, right] - integral[top, right]) - (
-        integral[bottom, left] - integral[top, left]
-    )
+    return (integral[bottom, right] - integral[top, right]) - (integral[bottom, left] - integral[top, left])
 
 
 # The four single triangles of a cell with one corner missing, as (corner, corner, corner) with

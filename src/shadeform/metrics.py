@@ -64,9 +64,7 @@ def angular_error(normals, normals_true, mask=None, *, reduce: str = "mean"):
     a = np.asarray(normals, dtype=np.float64)
     b = np.asarray(normals_true, dtype=np.float64)
     if a.ndim != 3 or a.shape[-1] != 3 or a.shape != b.shape:
-        raise InputError(
-            f"normals must both have shape (H, W, 3), got {a.shape} and {b.shape}"
-        )
+        raise InputError(f"normals must both have shape (H, W, 3), got {a.shape} and {b.shape}")
     mask = _region(mask, b, a.shape[:2], "normals")
     est, ref = a[mask], b[mask]
     valid = np.isfinite(est).all(axis=-1) & np.any(est != 0, axis=-1)
@@ -191,9 +189,7 @@ def _region(mask, truth, shape, what: str) -> np.ndarray:
             raise InputError(f"mask shape {region.shape} does not match {what} shape {shape}")
         region = region.astype(bool)
         if not finite[region].all():
-            raise InputError(
-                f"true {what} are {bad} inside the mask; pass a mask within the ground truth"
-            )
+            raise InputError(f"true {what} are {bad} inside the mask; pass a mask within the ground truth")
     if not region.any():
         raise InputError(f"no pixels to evaluate: the mask or the true {what} selects none")
     return region
@@ -225,8 +221,7 @@ def _fitted(estimate, truth, fit):
     if fit == "median_scale":
         nonzero = estimate != 0
         # Only the pixels with a defined ratio vote; an all-zero estimate stays zero.
-        return estimate * (np.median(truth[nonzero] / estimate[nonzero]) if nonzero.any()
-                           else 0.0)
+        return estimate * (np.median(truth[nonzero] / estimate[nonzero]) if nonzero.any() else 0.0)
     if fit == "scale_offset":
         design = np.column_stack([estimate, np.ones_like(estimate)])
         coef, *_ = np.linalg.lstsq(design, truth, rcond=None)

@@ -92,9 +92,17 @@ class PhotometricStereo:
     method: str
 
 
-def photometric_stereo(images, lights, mask=None, *, intensities=None, method: str = "robust",
-                       min_shading: float = MIN_SHADING, highlight_angle: float = HIGHLIGHT_ANGLE,
-                       iterations: int = ITERATIONS) -> PhotometricStereo:
+def photometric_stereo(
+    images,
+    lights,
+    mask=None,
+    *,
+    intensities=None,
+    method: str = "robust",
+    min_shading: float = MIN_SHADING,
+    highlight_angle: float = HIGHLIGHT_ANGLE,
+    iterations: int = ITERATIONS,
+) -> PhotometricStereo:
     """Normals and albedo of a still object photographed under several known distant lights.
 
     Parameters
@@ -179,9 +187,13 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
         if method == "least_squares":
             g, usable = _fit(lights, gray, np.ones_like(gray))
         else:
-            g, usable = _robust(lights, gray, min_shading=min_shading,
-                                highlight_cos=np.cos(np.radians(highlight_angle)),
-                                iterations=int(iterations))
+            g, usable = _robust(
+                lights,
+                gray,
+                min_shading=min_shading,
+                highlight_cos=np.cos(np.radians(highlight_angle)),
+                iterations=int(iterations),
+            )
         length = np.linalg.norm(g, axis=1)
         ok = np.isfinite(length) & (length > 0)
         n = np.full_like(g, np.nan)
@@ -203,9 +215,12 @@ def photometric_stereo(images, lights, mask=None, *, intensities=None, method: s
     out_used = np.zeros(h * w, dtype=np.int64)
     out_used[where] = used
     shape = (h, w, channels) if channels else (h, w)
-    return PhotometricStereo(normals=out_normals.reshape(h, w, 3),
-                             albedo=out_albedo.reshape(shape),
-                             lights_used=out_used.reshape(h, w), method=method)
+    return PhotometricStereo(
+        normals=out_normals.reshape(h, w, 3),
+        albedo=out_albedo.reshape(shape),
+        lights_used=out_used.reshape(h, w),
+        method=method,
+    )
 
 
 def _fit(lights, readings, weights):
@@ -231,13 +246,12 @@ def _robust(lights, readings, *, min_shading, highlight_cos, iterations):
     low = int(DROP_DARK * count) if count > 4 else min(1, count - 3)
     high = int(DROP_BRIGHT * count) if count > 4 else 0
     start = np.zeros_like(readings)
-    np.put_along_axis(start, order[low:count - high], 1.0, axis=0)
+    np.put_along_axis(start, order[low : count - high], 1.0, axis=0)
     g, usable = _fit(lights, readings, start)
     # pixels whose middle readings do not span 3-D start from all of their lit readings
     lost = ~np.isfinite(g[:, 0])
     if lost.any():
-        g[lost], usable[:, lost] = _fit(lights, readings[:, lost],
-                                        (readings[:, lost] > 0).astype(np.float64))
+        g[lost], usable[:, lost] = _fit(lights, readings[:, lost], (readings[:, lost] > 0).astype(np.float64))
     half = lights + np.array([0.0, 0.0, 1.0])
     half /= np.linalg.norm(half, axis=1, keepdims=True)
     for _ in range(iterations):
@@ -248,11 +262,9 @@ def _robust(lights, readings, *, min_shading, highlight_cos, iterations):
         excess = readings - lights @ current.T
         # the spread of the residuals the last fit used, so that noise is not taken for a
         # highlight: their mean absolute value, times sqrt(pi / 2) for a Gaussian's sigma
-        spread = (1.2533 * np.sum(np.abs(excess) * usable, axis=0)
-                  / np.maximum(usable.sum(axis=0), 1))
+        spread = 1.2533 * np.sum(np.abs(excess) * usable, axis=0) / np.maximum(usable.sum(axis=0), 1)
         limit = np.maximum(EXCESS * np.linalg.norm(current, axis=1), SPREAD * spread)
-        keep = ((lights @ n.T >= min_shading) & (half @ n.T <= highlight_cos)
-                & (excess <= limit))
+        keep = (lights @ n.T >= min_shading) & (half @ n.T <= highlight_cos) & (excess <= limit)
         g_new, usable_new = _fit(lights, readings, keep.astype(np.float64))
         better = solved & np.isfinite(g_new[:, 0])
         g[better] = g_new[better]
@@ -266,11 +278,14 @@ def _check(images, lights, mask, intensities):
         lights = np.asarray(lights, dtype=np.float64)
     except (TypeError, ValueError):
         stack = None
-    if stack is None or not (np.issubdtype(stack.dtype, np.floating)
-                             or np.issubdtype(stack.dtype, np.integer)):
+    if stack is None or not (
+        np.issubdtype(stack.dtype, np.floating) or np.issubdtype(stack.dtype, np.integer)
+    ):
         raise InputError("images and lights must be numeric arrays: (N, H, W[, C]) and (N, 3)")
     if stack.ndim not in (3, 4) or (stack.ndim == 4 and stack.shape[3] not in (1, 3, 4)):
-        raise InputError(f"images must be (N, H, W) or (N, H, W, C) with C 1, 3 or 4, got shape {stack.shape}")
+        raise InputError(
+            f"images must be (N, H, W) or (N, H, W, C) with C 1, 3 or 4, got shape {stack.shape}"
+        )
     if stack.ndim == 4 and stack.shape[3] == 4:
         stack = stack[..., :3]  # alpha carries no shading
     if stack.ndim == 4 and stack.shape[3] == 1:
@@ -287,15 +302,19 @@ def _check(images, lights, mask, intensities):
         raise InputError(f"light {int(np.argmin(lengths)) + 1} is the zero vector; give a direction")
     lights = lights / lengths[:, None]
     if np.linalg.matrix_rank(lights, tol=1e-3) < 3:
-        raise InputError("the lights all lie in one plane, so they cannot fix a normal; photograph "
-                         "the object under lights from at least three non-coplanar directions")
+        raise InputError(
+            "the lights all lie in one plane, so they cannot fix a normal; photograph "
+            "the object under lights from at least three non-coplanar directions"
+        )
     scale = np.ones((count, 1))
     if intensities is not None:
         strength = np.asarray(intensities, dtype=np.float64)
         channels = stack.shape[3] if stack.ndim == 4 else None
         allowed = {(count,)} | ({(count, channels)} if channels else set())
         if strength.shape not in allowed:
-            raise InputError(f"intensities must be (N,) or (N, C) = {sorted(allowed)}, got shape {strength.shape}")
+            raise InputError(
+                f"intensities must be (N,) or (N, C) = {sorted(allowed)}, got shape {strength.shape}"
+            )
         if not (np.isfinite(strength).all() and (strength > 0).all()):
             raise InputError("intensities must be finite and positive (each photo's light strength)")
         scale = strength.reshape(count, -1)
@@ -308,8 +327,9 @@ def _check(images, lights, mask, intensities):
     return stack, lights, mask, scale
 
 
-def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: str = "robust",
-                       integrator: str = "poisson"):
+def reconstruct_stereo(
+    images, lights, mask=None, *, intensities=None, method: str = "robust", integrator: str = "poisson"
+):
     """Photometric stereo, then depth: the several-photo counterpart of
     :func:`shadeform.reconstruct`.
 
@@ -356,8 +376,10 @@ def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: s
     result = photometric_stereo(images, lights, mask, intensities=intensities, method=method)
     solved = np.isfinite(result.normals[..., 0])
     if not solved.any():
-        raise InputError("no pixel is lit by three photos whose lights span 3-D; check the lights "
-                         "and that the photos show the object")
+        raise InputError(
+            "no pixel is lit by three photos whose lights span 3-D; check the lights "
+            "and that the photos show the object"
+        )
     normals_time = time.perf_counter()
     depth = integrate(result.normals, solved, method=integrator)
     done = time.perf_counter()
@@ -365,9 +387,16 @@ def reconstruct_stereo(images, lights, mask=None, *, intensities=None, method: s
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
     albedo = result.albedo if result.albedo.ndim == 2 else result.albedo.mean(axis=2)
     return Reconstruction(
-        normals=np.where(solved[..., None], result.normals, np.nan), depth=depth, mask=solved,
-        light=mean / np.linalg.norm(mean), albedo=albedo,
-        info={"method": f"photometric stereo ({method})", "integrator": integrator,
-              "photos": len(directions),
-              "lights_used": float(np.median(result.lights_used[solved])),
-              "timings": {"normals": normals_time - start, "depth": done - normals_time}})
+        normals=np.where(solved[..., None], result.normals, np.nan),
+        depth=depth,
+        mask=solved,
+        light=mean / np.linalg.norm(mean),
+        albedo=albedo,
+        info={
+            "method": f"photometric stereo ({method})",
+            "integrator": integrator,
+            "photos": len(directions),
+            "lights_used": float(np.median(result.lights_used[solved])),
+            "timings": {"normals": normals_time - start, "depth": done - normals_time},
+        },
+    )

@@ -131,8 +131,12 @@ def reconstruct(
     if estimate_wanted:
         estimate = estimate_light(shading, mask)
         light = np.asarray(estimate.light, dtype=np.float64)
-        info["light_estimate"] = {"slant": float(estimate.slant), "tilt": float(estimate.tilt),
-                                  "albedo": float(estimate.albedo), "evidence": estimate.evidence}
+        info["light_estimate"] = {
+            "slant": float(estimate.slant),
+            "tilt": float(estimate.tilt),
+            "albedo": float(estimate.albedo),
+            "evidence": estimate.evidence,
+        }
         lap("light")
     noise = inside = None
     if solver is None or solver.denoise is not None:
@@ -151,19 +155,34 @@ def reconstruct(
         if solver.denoise is None:
             noise = None
     if not solver.takes(light):
-        raise InputError(f"method {solver.name!r} needs the light at (0, 0, 1); use "
-                         f"{' or '.join(repr(s) for s in _any_light())} for other light directions")
+        raise InputError(
+            f"method {solver.name!r} needs the light at (0, 0, 1); use "
+            f"{' or '.join(repr(s) for s in _any_light())} for other light directions"
+        )
     concave_x, concave_y = concave_masks(as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
     refs = _references(references, shading, mask, labels, n_parts, inside=inside)
-    albedo = _brightness_scale(shading, mask, refs[0], light,
-                               estimated=float(estimate.albedo) if estimate_wanted else None)
+    albedo = _brightness_scale(
+        shading, mask, refs[0], light, estimated=float(estimate.albedo) if estimate_wanted else None
+    )
     lap("references")
 
-    problem = Problem(image=shading, mask=mask, light=light, albedo=albedo, references=tuple(refs),
-                      given=len(references or ()), concave_x=concave_x, concave_y=concave_y,
-                      labels=labels, parts=int(n_parts), integrator=integrator or solver.integrator,
-                      refine=refine, noise=noise, lap=lap)
+    problem = Problem(
+        image=shading,
+        mask=mask,
+        light=light,
+        albedo=albedo,
+        references=tuple(refs),
+        given=len(references or ()),
+        concave_x=concave_x,
+        concave_y=concave_y,
+        labels=labels,
+        parts=int(n_parts),
+        integrator=integrator or solver.integrator,
+        refine=refine,
+        noise=noise,
+        lap=lap,
+    )
     solution = solver.run(problem)
     normals = np.array(solution.normals, dtype=np.float64)
     depth = np.array(solution.depth, dtype=np.float64)
@@ -183,7 +202,9 @@ def reconstruct(
         **solution.info,
         **info,
     }
-    return Reconstruction(normals=normals, depth=depth, mask=mask, light=light, albedo=float(albedo), info=info)
+    return Reconstruction(
+        normals=normals, depth=depth, mask=mask, light=light, albedo=float(albedo), info=info
+    )
 
 
 def _any_light() -> list[str]:
@@ -194,8 +215,9 @@ def _any_light() -> list[str]:
 def _check_image(image) -> np.ndarray:
     image = shading_image(image)
     if min(image.shape) < MIN_SIDE:
-        raise InputError(f"image is {image.shape[1]}x{image.shape[0]} pixels; it needs at least "
-                         f"{MIN_SIDE}x{MIN_SIDE}")
+        raise InputError(
+            f"image is {image.shape[1]}x{image.shape[0]} pixels; it needs at least {MIN_SIDE}x{MIN_SIDE}"
+        )
     return image
 
 
@@ -203,7 +225,9 @@ def _check_shading(image, mask) -> None:
     values = image[mask]
     top = values.max()
     if top <= 0:
-        raise InputError("the object is black: there is no shading to work with; check the exposure or the mask")
+        raise InputError(
+            "the object is black: there is no shading to work with; check the exposure or the mask"
+        )
     at_top = np.count_nonzero(values >= top * (1 - 1e-6)) / values.size
     if top >= 0.999 and at_top >= SATURATED_FRACTION:
         raise InputError(
@@ -238,17 +262,26 @@ def _brightness_scale(image, mask, main: Reference, light, *, estimated=None) ->
     if main.normal is not None:
         facing = float(main.normal @ light)
         if facing <= 0 or image[main.pixel] <= 0:
-            raise InputError(f"reference (row {main.row}, col {main.col}) is in shadow or its normal faces "
-                             "away from the light; pick a lit reference")
+            raise InputError(
+                f"reference (row {main.row}, col {main.col}) is in shadow or its normal faces "
+                "away from the light; pick a lit reference"
+            )
         return float(image[main.pixel] / facing)
     if estimated is not None:
         return estimated
     return float(image[mask].max())
 
 
-def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None = None,
-                        filter: str | None = None, references: Sequence | None = None,
-                        concave: Any = None, **options: Any) -> Reconstruction:
+def reconstruct_preview(
+    image: np.ndarray,
+    *,
+    step: int,
+    mask: np.ndarray | None = None,
+    filter: str | None = None,
+    references: Sequence | None = None,
+    concave: Any = None,
+    **options: Any,
+) -> Reconstruction:
     """A quick look at what ``to_mesh(reconstruct(...), step=step)`` will show.
 
     The image is sampled at the mesh's grid (every ``step``-th row and column) and reconstructed
@@ -293,15 +326,13 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
     _check_shading(image, mask)
     if step == 1:
-        return reconstruct(image, mask=mask, filter=filter, references=references, concave=concave,
-                           **options)
+        return reconstruct(image, mask=mask, filter=filter, references=references, concave=concave, **options)
     # sampled, not averaged: an average flattens the narrow bright ridges where the eikonal
     # solver finds its singular points (the vase's rim); the filter, scaled, does the smoothing
     coarse_mask = mask[::step, ::step]
     if not coarse_mask.any():
         raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
-    coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0),
-                        coarse_mask, step)
+    coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0), coarse_mask, step)
 
     spec = parse_filter(filter) if filter else None
     if spec is not None and spec.kind != "none":
@@ -311,8 +342,9 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     if references:
         coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
     regions = tuple(Region(region.polygon / step, region.axis) for region in as_regions(concave))
-    rec = reconstruct(coarse, mask=coarse_mask, filter=spec, references=coarse_refs,
-                      concave=regions or None, **options)
+    rec = reconstruct(
+        coarse, mask=coarse_mask, filter=spec, references=coarse_refs, concave=regions or None, **options
+    )
 
     normals = np.full(image.shape + (3,), np.nan)
     depth = np.full(image.shape, np.nan)
@@ -320,10 +352,14 @@ def reconstruct_preview(image: np.ndarray, *, step: int, mask: np.ndarray | None
     grid_depth = depth[::step, ::step]
     grid_normals[coarse_mask] = rec.normals[coarse_mask]
     grid_depth[coarse_mask] = rec.depth[coarse_mask] * step  # heights in input pixels
-    info = {**rec.info, "preview_step": step,
-            "references": [(r * step, c * step) for r, c in rec.info["references"]]}
-    return Reconstruction(normals=normals, depth=depth, mask=mask, light=rec.light, albedo=rec.albedo,
-                          info=info)
+    info = {
+        **rec.info,
+        "preview_step": step,
+        "references": [(r * step, c * step) for r, c in rec.info["references"]],
+    }
+    return Reconstruction(
+        normals=normals, depth=depth, mask=mask, light=rec.light, albedo=rec.albedo, info=info
+    )
 
 
 def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:
@@ -390,7 +426,7 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
     budget = solver.preview_pixels
     count = int(np.count_nonzero(mask))
     spacing = max(int(step), 1)
-    while count / spacing ** 2 > budget and min(mask.shape) // (2 * spacing) >= MIN_SIDE:
+    while count / spacing**2 > budget and min(mask.shape) // (2 * spacing) >= MIN_SIDE:
         spacing *= 2
     return spacing
 
@@ -403,7 +439,9 @@ def _parse_reference(item, mask) -> Reference:
     except (TypeError, ValueError, IndexError):
         raise InputError(f"reference {item!r} must be (row, col) or (row, col, (nx, ny, nz))") from None
     if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
-        raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+        raise InputError(
+            f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask"
+        )
     if normal is not None:
         length = np.linalg.norm(normal)
         if normal.shape != (3,) or not np.isfinite(normal).all() or length == 0:

@@ -18,8 +18,15 @@ from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 from shadeform._checks import check_mask, is_number
 from shadeform.errors import InputError
 
-__all__ = ["object_mask", "Filter", "FILTER_KINDS", "parse_filter", "apply_filter", "noise_level",
-           "srgb_to_linear"]
+__all__ = [
+    "object_mask",
+    "Filter",
+    "FILTER_KINDS",
+    "parse_filter",
+    "apply_filter",
+    "noise_level",
+    "srgb_to_linear",
+]
 
 #: Filter kinds, in the order the 2002 system offered them ("none" was called "blank").
 FILTER_KINDS = ("none", "gaussian", "mean", "median", "minimum")
@@ -102,8 +109,7 @@ def _hysteresis_mask(image: np.ndarray) -> np.ndarray:
     brightest, darkest = image.max(), image.min()
     if brightest <= 0:
         raise InputError(
-            "no object found: the image is black; check the exposure and the channel, "
-            "or give a mask"
+            "no object found: the image is black; check the exposure and the channel, or give a mask"
         )
     if brightest == darkest:
         raise InputError(
@@ -149,9 +155,7 @@ class Filter:
 
     def __post_init__(self):
         if self.kind not in FILTER_KINDS:
-            raise InputError(
-                f"unknown filter kind {self.kind!r}; choose one of {', '.join(FILTER_KINDS)}"
-            )
+            raise InputError(f"unknown filter kind {self.kind!r}; choose one of {', '.join(FILTER_KINDS)}")
         size = self.size
         if not is_number(size):
             raise InputError(f"filter size must be a number, got {size!r}")
@@ -213,15 +217,11 @@ def parse_filter(spec: str | Filter | None) -> Filter:
     try:
         value = float(size)
     except ValueError:
-        raise InputError(
-            f"bad filter {spec!r}: size {size!r} is not a number; {help_text}"
-        ) from None
+        raise InputError(f"bad filter {spec!r}: size {size!r} is not a number; {help_text}") from None
     return Filter(kind, value)
 
 
-def apply_filter(
-    image: np.ndarray, mask: np.ndarray | None, filter: Filter | str | None
-) -> np.ndarray:
+def apply_filter(image: np.ndarray, mask: np.ndarray | None, filter: Filter | str | None) -> np.ndarray:
     """Smooth an image inside the object without the background bleeding in.
 
     Gaussian and mean use normalised convolution, ``filter(image * mask) / filter(mask)``: each
@@ -252,9 +252,7 @@ def apply_filter(
     spec = parse_filter(filter)
     image = np.array(image, dtype=np.float64)  # a copy: the result, where no filtering happens
     if image.ndim != 2:
-        raise InputError(
-            f"image must be 2-D (H, W), got shape {image.shape}; pick one channel first"
-        )
+        raise InputError(f"image must be 2-D (H, W), got shape {image.shape}; pick one channel first")
     if mask is None:
         mask = np.ones(image.shape, dtype=bool)
     mask = check_mask(mask, image.shape)

@@ -158,8 +158,7 @@ def regions_to_json(regions) -> dict:
     """
     return {
         "regions": [
-            {"polygon": [[float(x), float(y)] for x, y in r.polygon], "axis": r.axis}
-            for r in regions
+            {"polygon": [[float(x), float(y)] for x, y in r.polygon], "axis": r.axis} for r in regions
         ]
     }
 

@@ -48,7 +48,9 @@ def compose(panels: list[tuple[np.ndarray, str]]) -> np.ndarray:
         top = gap + (height - pixels.shape[0]) // 2
         canvas.paste(Image.fromarray(pixels), (x, top))
         text_width = draw.textlength(text, font=font)
-        draw.text((x + (pixels.shape[1] - text_width) / 2, gap + height + 6), text, fill=(225, 225, 225), font=font)
+        draw.text(
+            (x + (pixels.shape[1] - text_width) / 2, gap + height + 6), text, fill=(225, 225, 225), font=font
+        )
         x += pixels.shape[1] + gap
     return np.asarray(canvas)
 
@@ -61,7 +63,9 @@ def rotation(tilt_deg: float, turn_deg: float) -> np.ndarray:
     return tip @ turn
 
 
-def render_mesh(mesh, height: int, width: int, *, tilt_deg: float = 35.0, turn_deg: float = -20.0) -> np.ndarray:
+def render_mesh(
+    mesh, height: int, width: int, *, tilt_deg: float = 35.0, turn_deg: float = -20.0
+) -> np.ndarray:
     """A shaded view of a mesh, drawn with numpy alone: (height, width, 3) uint8.
 
     The mesh is turned (see :func:`rotation`) and projected orthographically; every triangle is

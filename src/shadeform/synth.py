@@ -346,7 +346,9 @@ def concave_regions(name: str, *, size: int = 256) -> dict:
         for x0, y0, height, sigma in _BUMPS:
             if height < 0:
                 half = 1.7 * sigma * size
-                regions.append(box(x0 * size - half, y0 * size - half, x0 * size + half, y0 * size + half, "both"))
+                regions.append(
+                    box(x0 * size - half, y0 * size - half, x0 * size + half, y0 * size + half, "both")
+                )
     else:
         regions = []
     return {"regions": regions}
@@ -458,9 +460,7 @@ def _unit_light(light) -> np.ndarray:
     if direction is None or direction.shape != (3,) or not np.isfinite(direction).all():
         raise InputError(f"light must be 3 finite numbers (x, y, z), got {light!r}")
     if direction[2] <= 0:
-        raise InputError(
-            f"light must point toward the viewer (z > 0), got {tuple(direction.tolist())}"
-        )
+        raise InputError(f"light must point toward the viewer (z > 0), got {tuple(direction.tolist())}")
     return direction / np.linalg.norm(direction)
 
 

@@ -60,7 +60,8 @@ class FilterParams(_Model):
 
     kind: FilterKind = "none"
     size: float = Field(
-        default=0.0, ge=0,
+        default=0.0,
+        ge=0,
         description="Gaussian sigma, or the window radius (whole number) of mean, median and minimum.",
     )
 
@@ -92,17 +93,22 @@ class ReconstructParams(_Model):
     channel: Channel = "luma"
     filter: FilterParams = Field(default_factory=FilterParams)
     light: LightParams = Field(default_factory=LightParams)
-    method: str = Field(default="auto", description="One of ``Options.methods``; \"auto\" is the best measured for the light.")
+    method: str = Field(
+        default="auto", description='One of ``Options.methods``; "auto" is the best measured for the light.'
+    )
     integrator: str | None = Field(
         default=None,
         description="One of ``Options.integrators``, or null for the method's own.",
     )
     refine: int = Field(
-        default=3, ge=0, le=100,
+        default=3,
+        ge=0,
+        le=100,
         description="Integrability refinement iterations (propagation only).",
     )
     step: int = Field(
-        default=2, ge=1,
+        default=2,
+        ge=1,
         description="Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve.",
     )
     references: list[tuple[int, int]] = Field(
@@ -124,8 +130,8 @@ class ReconstructRequest(_Model):
     preview: bool = Field(
         default=False,
         description="Answer at once with a quick look solved at the mesh's grid (or a coarser one within the "
-                    "solver's pixel budget), unless the full result is already known or the grid is the "
-                    "image's own; the result's ``preview`` says which came.",
+        "solver's pixel budget), unless the full result is already known or the grid is the "
+        "image's own; the result's ``preview`` says which came.",
     )
 
 
@@ -212,7 +218,7 @@ class ReconstructResult(_Model):
     request_id: int
     preview: bool = Field(
         description="True for a quick look solved at the mesh's grid or a coarser one: the full result is "
-                    "still to come.",
+        "still to come.",
     )
     mesh: MeshData
     mask_png: str = Field(
@@ -321,8 +327,13 @@ def _ts_type(spec: dict) -> str:
     if kind == "object":
         values = spec.get("additionalProperties", True)
         return f"Record<string, {'unknown' if values is True else _ts_type(values)}>"
-    return {"string": "string", "number": "number", "integer": "number", "boolean": "boolean",
-            "null": "null"}.get(kind, "unknown")
+    return {
+        "string": "string",
+        "number": "number",
+        "integer": "number",
+        "boolean": "boolean",
+        "null": "null",
+    }.get(kind, "unknown")
 
 
 if __name__ == "__main__":

@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 from fastapi import FastAPI, File, Query, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
-from fastapi.routing import APIRoute
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
@@ -155,8 +155,13 @@ def create_app(
     state = _State(limits)
     initial = _store_initial(state, initial_image) if initial_image is not None else None
 
-    app = FastAPI(title="shadeform", docs_url=None, redoc_url=None, openapi_url="/api/openapi.json",
-                  lifespan=_lifespan(warm))
+    app = FastAPI(
+        title="shadeform",
+        docs_url=None,
+        redoc_url=None,
+        openapi_url="/api/openapi.json",
+        lifespan=_lifespan(warm),
+    )
     _add_error_handlers(app)
     app.add_middleware(_Guard, allowed_hosts=allowed_hosts, limits=limits)
 
@@ -185,7 +190,9 @@ def create_app(
         return _json(_image_info(entry), status_code=201)
 
     @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
-    def post_example(name: str, size: int | None = Query(None, description="Side of a synth: example.")) -> Response:
+    def post_example(
+        name: str, size: int | None = Query(None, description="Side of a synth: example.")
+    ) -> Response:
         entry = state.example(name, size)
         return _json(_image_info(entry), status_code=201)
 
@@ -235,8 +242,11 @@ def create_app(
         async with state.solve_lock:
             data = await run_in_threadpool(_export_bytes, state, entry, body.params, suffix)
         filename = _safe_stem(entry.name) + suffix
-        return Response(data, media_type=_MEDIA_TYPES.get(suffix, "application/octet-stream"),
-                        headers={"Content-Disposition": f'attachment; filename="{filename}"'})
+        return Response(
+            data,
+            media_type=_MEDIA_TYPES.get(suffix, "application/octet-stream"),
+            headers={"Content-Disposition": f'attachment; filename="{filename}"'},
+        )
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index() -> Response:
@@ -249,13 +259,17 @@ def create_app(
     # while the server runs); StaticFiles refuses any path that resolves outside the folder
     client_files = StaticFiles(directory=static_dir, check_dir=False)
 
-    @app.api_route("/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"],
-                   include_in_schema=False)
+    @app.api_route(
+        "/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"], include_in_schema=False
+    )
     async def static_file(path: str, request: Request) -> Response:
         # reached by every request no other route took, whatever its method
         if path == "api" or path.startswith("api/"):
-            if any(route.path_regex.match("/" + path) for route in app.router.routes
-                   if isinstance(route, APIRoute) and route is not static_route):
+            if any(
+                route.path_regex.match("/" + path)
+                for route in app.router.routes
+                if isinstance(route, APIRoute) and route is not static_route
+            ):
                 raise HTTPException(405)
             raise HTTPException(404, "no such API endpoint; the endpoints are listed in /api/openapi.json")
         if request.method not in ("GET", "HEAD"):
@@ -291,8 +305,11 @@ class _State:
         entry = self.images.get(image_id)
         if entry is None:
             shown = image_id if len(image_id) <= 40 else image_id[:37] + "..."
-            raise HTTPException(404, f"unknown image id {shown!r}: the server does not have it (it was "
-                                     "restarted or forgot older images); reload the page or open the image again")
+            raise HTTPException(
+                404,
+                f"unknown image id {shown!r}: the server does not have it (it was "
+                "restarted or forgot older images); reload the page or open the image again",
+            )
         return entry
 
     def example(self, name: str, size: int | None, *, pinned: bool = False) -> StoredImage:
@@ -302,13 +319,18 @@ class _State:
             shown = name if len(name) <= 40 else name[:37] + "..."
             raise HTTPException(404, f"unknown example {shown!r}; choose one of: {', '.join(EXAMPLES)}")
         if size is not None and size * size > self.limits.max_pixels:
-            raise HTTPException(413, f"size {size} gives {size * size:,} pixels, more than the limit of "
-                                     f"{self.limits.max_pixels:,}; choose a smaller size")
+            raise HTTPException(
+                413,
+                f"size {size} gives {size * size:,} pixels, more than the limit of "
+                f"{self.limits.max_pixels:,}; choose a smaller size",
+            )
         known = self._examples.get((name, size))
         if known is not None and self.images.get(known) is not None:
             return self.images.get(known)
         image, info = load_example(name, size=size)
-        entry = self.add(name, image[:, :, None], mask=info["mask"], suggested=_suggested(info), pinned=pinned)
+        entry = self.add(
+            name, image[:, :, None], mask=info["mask"], suggested=_suggested(info), pinned=pinned
+        )
         self._examples[(name, size)] = entry.image_id
         return entry
 
@@ -362,8 +384,9 @@ class _Solved:
     depth_range: tuple[float, float]
 
 
-def _solve(state: _State, entry: StoredImage, params: ReconstructParams, *,
-           preview: bool = False) -> tuple[_Solved, bool]:
+def _solve(
+    state: _State, entry: StoredImage, params: ReconstructParams, *, preview: bool = False
+) -> tuple[_Solved, bool]:
     """The reconstruction for these parameters, from the cache when only ``step`` changed.
 
     With ``preview`` the full result if it is cached, else the quick look at the mesh's grid,
@@ -401,7 +424,11 @@ def _solve(state: _State, entry: StoredImage, params: ReconstructParams, *,
     key = (*full_key, "preview", spacing) if spacing > 1 else full_key
     if spacing > 1 and (solved := state.results.get(key)) is not None:
         return solved, True
-    rec = reconstruct_preview(image, step=spacing, **settings) if spacing > 1 else reconstruct(image, **settings)
+    rec = (
+        reconstruct_preview(image, step=spacing, **settings)
+        if spacing > 1
+        else reconstruct(image, **settings)
+    )
     depth = rec.depth[rec.mask]
     solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
     nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
@@ -520,7 +547,9 @@ def _suggested(info: dict[str, Any]) -> dict[str, Any]:
         light_params = LightParams(mode="slant_tilt", slant=slant, tilt=tilt)
     spec = parse_filter(info["filter"])
     return ReconstructParams(
-        filter=FilterParams(kind=spec.kind, size=spec.size), light=light_params, step=int(info["step"]),
+        filter=FilterParams(kind=spec.kind, size=spec.size),
+        light=light_params,
+        step=int(info["step"]),
         method=info["method"],
     ).model_dump()
 
@@ -528,21 +557,29 @@ def _suggested(info: dict[str, Any]) -> dict[str, Any]:
 def _image_info(entry: StoredImage) -> ImageInfo:
     height, width, channels = entry.pixels.shape
     suggested = None if entry.suggested is None else ReconstructParams(**entry.suggested)
-    return ImageInfo(image_id=entry.image_id, name=entry.name, width=width, height=height,
-                     channels=channels, suggested=suggested)
+    return ImageInfo(
+        image_id=entry.image_id,
+        name=entry.name,
+        width=width,
+        height=height,
+        channels=channels,
+        suggested=suggested,
+    )
 
 
 def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
     from shadeform.examples import EXAMPLES
+    from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
-    from shadeform.integration import available_integrators
     from shadeform.preprocess import FILTER_KINDS
     from shadeform.solvers import available_methods
 
     return Options(
         methods=[MethodInfo(name=name, description=text) for name, text in available_methods().items()],
-        integrators=[MethodInfo(name=name, description=text) for name, text in available_integrators().items()],
+        integrators=[
+            MethodInfo(name=name, description=text) for name, text in available_integrators().items()
+        ],
         channels=list(CHANNELS),
         filters=list(FILTER_KINDS),
         formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],
@@ -605,8 +642,11 @@ def _add_error_handlers(app: FastAPI) -> None:
         return _error(413 if isinstance(err, ImageTooLargeError) else 422, str(err))
 
     async def server_error(request: Request, err: Exception) -> Response:
-        return _error(500, f"internal error ({type(err).__name__}) in shadeform; please report it with "
-                           "the steps that led here")
+        return _error(
+            500,
+            f"internal error ({type(err).__name__}) in shadeform; please report it with "
+            "the steps that led here",
+        )
 
     app.add_exception_handler(HTTPException, http_error)
     app.add_exception_handler(RequestValidationError, validation_error)
@@ -711,8 +751,10 @@ class _Guard:
             return None
         host = _host_name(headers.get("host", ""))
         if host not in self.allowed:
-            return (f"this server only answers requests addressed to {', '.join(sorted(self.allowed))}; "
-                    "open it at the address it printed (or start it with --host and --allow-remote)")
+            return (
+                f"this server only answers requests addressed to {', '.join(sorted(self.allowed))}; "
+                "open it at the address it printed (or start it with --host and --allow-remote)"
+            )
         origin = headers.get("origin")
         if origin and origin != "null" and _host_name(origin.split("://", 1)[-1]) not in self.allowed:
             return "requests from other sites' pages are refused; open the app at the address it printed"
@@ -729,6 +771,11 @@ def _host_name(authority: str) -> str:
 
 async def _send_error(send: Callable, status: int, detail: str) -> None:
     body = json.dumps({"detail": detail}).encode()
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())],
+        }
+    )
     await send({"type": "http.response.body", "body": body})

@@ -208,6 +208,7 @@ def output_temps(outputs: OutputSet, *targets: Path | None) -> dict[Path, Path]:
 
 
 def write_model(
+    outputs: OutputSet,
     err: Console,
     timings: dict[str, float],
     rec,
@@ -218,8 +219,9 @@ def write_model(
     depth: Path | None,
     normals: Path | None,
 ):
-    """Mesh a reconstruction and write it, and the depth and normal maps asked for, to their
-    temporaries; returns the mesh and the (file, description) rows to print."""
+    """Mesh a reconstruction, write it and the depth and normal maps asked for to their
+    temporaries, and put them all in place together; returns the mesh, the (file, description) rows
+    to print and the entries every command's JSON report shares."""
     import shadeform
     from shadeform.io.maps import save_depth, save_normal_map
 
@@ -234,7 +236,13 @@ def write_model(
         if normals is not None:
             save_normal_map(rec.normals, temps[normals])
             written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
-    return mesh, written
+    outputs.commit()
+    report = {
+        "files": {"mesh": output, "depth": depth, "normals": normals},
+        "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
+        "object_pixels": int(rec.mask.sum()),
+    }
+    return mesh, written, report
 
 
 # options shared by the commands that build meshes

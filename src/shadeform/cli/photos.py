@@ -127,10 +127,9 @@ def reconstruct(
                 integrator=integrator,
                 refine=refine,
             )
-        mesh, written = write_model(
-            err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+        mesh, written, report = write_model(
+            outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
-        outputs.commit()
     timings["total"] = time.perf_counter() - total
 
     height, width = pixels.shape
@@ -139,9 +138,7 @@ def reconstruct(
             {
                 "command": "reconstruct",
                 "input": {"path": image, "width": width, "height": height, "channel": channel},
-                "files": {"mesh": output, "depth": depth, "normals": normals},
-                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
-                "object_pixels": int(rec.mask.sum()),
+                **report,
                 "light": rec.light,
                 "info": rec.info,
                 "timings": timings,
@@ -244,10 +241,9 @@ def stereo(
                 method=method,
                 integrator=integrator,
             )
-        mesh, written = write_model(
-            err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+        mesh, written, report = write_model(
+            outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
-        outputs.commit()
     timings["total"] = time.perf_counter() - total
 
     height, width = rec.shape
@@ -256,9 +252,7 @@ def stereo(
             {
                 "command": "stereo",
                 "input": {"photos": [str(p) for p in photos.paths], "width": width, "height": height},
-                "files": {"mesh": output, "depth": depth, "normals": normals},
-                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
-                "object_pixels": int(rec.mask.sum()),
+                **report,
                 "info": rec.info,
                 "timings": timings,
             }

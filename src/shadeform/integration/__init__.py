@@ -81,8 +81,14 @@ def available_integrators() -> dict[str, str]:
     return {name: integrator.description for name, integrator in _INTEGRATORS.items()}
 
 
-def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
-              origin: tuple[int, int] | None = None, K: np.ndarray | None = None) -> np.ndarray:
+def integrate(
+    normals: np.ndarray,
+    mask: np.ndarray,
+    *,
+    method: str = "paths",
+    origin: tuple[int, int] | None = None,
+    K: np.ndarray | None = None,
+) -> np.ndarray:
     """Depth from a normal field over a mask.
 
     Parameters
@@ -115,8 +121,9 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
     if K is not None:
         if not integrator.perspective:
             perspective = [name for name, i in _INTEGRATORS.items() if i.perspective]
-            raise InputError(f"a perspective camera (K) needs method={' or '.join(map(repr, perspective))}, "
-                             f"not {method!r}")
+            raise InputError(
+                f"a perspective camera (K) needs method={' or '.join(map(repr, perspective))}, not {method!r}"
+            )
         return integrator.load()(normals, mask, K=K)
     if origin is None:
         origin = np.unravel_index(np.argmax(np.where(mask, normals[..., 2], -np.inf)), mask.shape)
@@ -126,12 +133,32 @@ def integrate(normals: np.ndarray, mask: np.ndarray, *, method: str = "paths",
     return integrator.load()(normals, mask, origin=origin)
 
 
-register(Integrator("paths", "shadeform.integration.paths:integrate_paths",
-                    "the 2002 report's: the average of many integration paths from the reference"))
-register(Integrator("poisson", "shadeform.integration.poisson:integrate_poisson",
-                    "least squares over the object (multigrid conjugate gradients)"))
-register(Integrator("fourier", "shadeform.integration.fourier:integrate_fourier",
-                    "least squares on the bounding rectangle by one DCT solve: the fastest"))
-register(Integrator("bilateral", "shadeform.integration.bilateral:bilateral_depth",
-                    "keeps depth jumps at occluding edges (bilateral, BiNI); also perspective",
-                    perspective=True))
+register(
+    Integrator(
+        "paths",
+        "shadeform.integration.paths:integrate_paths",
+        "the 2002 report's: the average of many integration paths from the reference",
+    )
+)
+register(
+    Integrator(
+        "poisson",
+        "shadeform.integration.poisson:integrate_poisson",
+        "least squares over the object (multigrid conjugate gradients)",
+    )
+)
+register(
+    Integrator(
+        "fourier",
+        "shadeform.integration.fourier:integrate_fourier",
+        "least squares on the bounding rectangle by one DCT solve: the fastest",
+    )
+)
+register(
+    Integrator(
+        "bilateral",
+        "shadeform.integration.bilateral:bilateral_depth",
+        "keeps depth jumps at occluding edges (bilateral, BiNI); also perspective",
+        perspective=True,
+    )
+)

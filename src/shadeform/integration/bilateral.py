@@ -70,18 +70,18 @@ def _check(normals, mask, K, sharpness, iterations, tol):
     normals = np.asarray(normals, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool)
     if normals.ndim != 3 or normals.shape[2] != 3 or normals.shape[:2] != mask.shape:
-        raise InputError(f"normals must be (H, W, 3) and mask (H, W), got {normals.shape} "
-                         f"and {mask.shape}")
+        raise InputError(f"normals must be (H, W, 3) and mask (H, W), got {normals.shape} and {mask.shape}")
     if not mask.any():
         raise InputError("mask is empty; it must mark the object's pixels")
     if not np.isfinite(normals[mask]).all():
-        raise InputError("normals have NaN inside the mask; fill them or leave those pixels "
-                         "out of the mask")
+        raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
     if K is not None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise InputError("K must be a finite 3x3 pinhole matrix (OpenCV layout: fx 0 cx / "
-                             "0 fy cy / 0 0 1) with fx, fy > 0")
+            raise InputError(
+                "K must be a finite 3x3 pinhole matrix (OpenCV layout: fx 0 cx / "
+                "0 fy cy / 0 0 1) with fx, fy > 0"
+            )
     positive(sharpness, "sharpness")
     if int(iterations) != iterations or iterations < 0:
         raise InputError(f"iterations must be a non-negative integer, got {iterations!r}")
@@ -134,10 +134,18 @@ class BilateralResult:
     energy: tuple[float, ...]
 
 
-def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray | None = None,
-                        sharpness: float = 2.0, iterations: int = 150, tol: float = 1e-4,
-                        cg_tol: float = 0.1, min_scale: float = MIN_SCALE,
-                        origin: tuple[int, int] | None = None) -> BilateralResult:
+def integrate_bilateral(
+    normals: np.ndarray,
+    mask: np.ndarray,
+    *,
+    K: np.ndarray | None = None,
+    sharpness: float = 2.0,
+    iterations: int = 150,
+    tol: float = 1e-4,
+    cg_tol: float = 0.1,
+    min_scale: float = MIN_SCALE,
+    origin: tuple[int, int] | None = None,
+) -> BilateralResult:
     """Depth from normals that keeps depth discontinuities (bilateral normal integration).
 
     Parameters
@@ -188,9 +196,11 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
         raise InputError(f"min_scale must be in (0, 1], got {min_scale!r}")
     if not (np.isfinite(cg_tol) and 0 < cg_tol < 1):
         raise InputError(f"cg_tol must be in (0, 1), got {cg_tol!r}")
-    if origin is not None and (K is not None or not (0 <= origin[0] < mask.shape[0]
-                                                      and 0 <= origin[1] < mask.shape[1])
-                               or not mask[tuple(origin)]):
+    if origin is not None and (
+        K is not None
+        or not (0 <= origin[0] < mask.shape[0] and 0 <= origin[1] < mask.shape[1])
+        or not mask[tuple(origin)]
+    ):
         raise InputError("origin must be a (row, col) on the mask, and only with K=None")
     rows = np.flatnonzero(mask.any(axis=1))
     cols = np.flatnonzero(mask.any(axis=0))
@@ -250,8 +260,12 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
         dyu = np.zeros((h, w))
         dxl[:, 1:] = dx[:, :-1]
         dyu[1:] = dy[:-1]
-        res = (np.where(hx, ax * (dx - p), 0.0) ** 2, np.where(has_l, ax * (dxl - p), 0.0) ** 2,
-               np.where(vy, ay * (dy - q), 0.0) ** 2, np.where(has_u, ay * (dyu - q), 0.0) ** 2)
+        res = (
+            np.where(hx, ax * (dx - p), 0.0) ** 2,
+            np.where(has_l, ax * (dxl - p), 0.0) ** 2,
+            np.where(vy, ay * (dy - q), 0.0) ** 2,
+            np.where(has_u, ay * (dyu - q), 0.0) ** 2,
+        )
         diffs = ((ax * dx) ** 2, (ax * dxl) ** 2, (ay * dy) ** 2, (ay * dyu) ** 2)
         return res, diffs
 
@@ -277,8 +291,7 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
             hier = PairHierarchy(m, px, py)
             u, its, _ = hier.solve_pairs(b, u, tol=cg_tol, maxiter=MAX_CG, from_start=True)
         else:
-            u, its, _ = hier.solve_pairs(b, u, px=px, py=py, tol=cg_tol, maxiter=MAX_CG,
-                                         from_start=True)
+            u, its, _ = hier.solve_pairs(b, u, px=px, py=py, tol=cg_tol, maxiter=MAX_CG, from_start=True)
         rebuild = its > REBUILD_AFTER
         cg_total += its
         (rr, rl, rd, ru), (sr, sl, sd, su) = residuals(u)
@@ -290,8 +303,9 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
     labels = hier.labels
     on = labels >= 0
     n_parts = max(hier.n_parts, 1)
-    means = (np.bincount(labels[on], weights=u[on], minlength=n_parts)
-             / np.maximum(np.bincount(labels[on], minlength=n_parts), 1))
+    means = np.bincount(labels[on], weights=u[on], minlength=n_parts) / np.maximum(
+        np.bincount(labels[on], minlength=n_parts), 1
+    )
     u = np.where(on, u - means[np.where(on, labels, 0)], 0.0)
     out = np.full(mask.shape, np.nan)
     if K is None:
@@ -300,8 +314,9 @@ def integrate_bilateral(normals: np.ndarray, mask: np.ndarray, *, K: np.ndarray 
             out -= out[tuple(origin)]
     else:
         out[r0:r1, c0:c1][m] = np.exp(u[m])
-    return BilateralResult(depth=out, iterations=done if iterations else 0, cg_iterations=cg_total,
-                           energy=tuple(energies))
+    return BilateralResult(
+        depth=out, iterations=done if iterations else 0, cg_iterations=cg_total, energy=tuple(energies)
+    )
 
 
 def bilateral_depth(normals: np.ndarray, mask: np.ndarray, **options) -> np.ndarray:

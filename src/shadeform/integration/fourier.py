@@ -25,7 +25,9 @@ from scipy import fft
 from shadeform.integration._slopes import MIN_NZ, slopes
 
 
-def integrate_fourier(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int, int] | None = None) -> np.ndarray:
+def integrate_fourier(
+    normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int, int] | None = None
+) -> np.ndarray:
     """Least-squares depth over the mask's bounding rectangle by one DCT solve.
 
     Parameters
@@ -46,11 +48,13 @@ def integrate_fourier(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[in
     rows = np.flatnonzero(mask.any(axis=1))
     cols = np.flatnonzero(mask.any(axis=0))
     box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
-    divergence = _divergence(np.ascontiguousarray(normals[box], dtype=np.float64),
-                             np.ascontiguousarray(mask[box]), MIN_NZ)
+    divergence = _divergence(
+        np.ascontiguousarray(normals[box], dtype=np.float64), np.ascontiguousarray(mask[box]), MIN_NZ
+    )
     h, w = divergence.shape
-    eigen = ((2 - 2 * np.cos(np.pi * np.arange(h) / h))[:, None]
-             + (2 - 2 * np.cos(np.pi * np.arange(w) / w))[None, :])
+    eigen = (2 - 2 * np.cos(np.pi * np.arange(h) / h))[:, None] + (2 - 2 * np.cos(np.pi * np.arange(w) / w))[
+        None, :
+    ]
     spectrum = fft.dctn(divergence, type=2, norm="ortho", workers=-1, overwrite_x=True)
     eigen[0, 0] = 1.0  # the free offset: its coefficient is set to 0 below
     spectrum /= eigen

@@ -40,8 +40,7 @@ def _paths_kernel(zx, zy, mask, r0, c0, depth, layer, queue):
                 rr, cc = r + dr, c + dc
                 if 0 <= rr < h and 0 <= cc < w and layer[rr, cc] == layer[r, c] - 1:
                     # step from (rr, cc) to (r, c): dx = -dc, dy = +dr (y is up, rows go down)
-                    step = (0.5 * (zx[rr, cc] + zx[r, c]) * (-dc)
-                            + 0.5 * (zy[rr, cc] + zy[r, c]) * dr)
+                    step = 0.5 * (zx[rr, cc] + zx[r, c]) * (-dc) + 0.5 * (zy[rr, cc] + zy[r, c]) * dr
                     total += depth[rr, cc] + step
                     count += 1
             depth[r, c] = total / count
@@ -78,7 +77,9 @@ def integrate_paths(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int,
     return depth
 
 
-def integrate_paths_reference(normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int, int]) -> np.ndarray:
+def integrate_paths_reference(
+    normals: np.ndarray, mask: np.ndarray, *, origin: tuple[int, int]
+) -> np.ndarray:
     """Slow, plain-Python version of :func:`integrate_paths`, for the tests only."""
     mask = np.asarray(mask, dtype=bool)
     zx, zy = slopes(normals, mask)

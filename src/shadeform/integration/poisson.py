@@ -75,6 +75,7 @@ def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, t
     shape = mask.shape
     info = {}
     if not mask.any():
+
         def solve_empty(normals: np.ndarray) -> np.ndarray:
             return np.full(shape, np.nan)
 
@@ -82,17 +83,16 @@ def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, t
         return solve_empty
     box = _bounding_box(mask)
     r0, c0 = box[0].start, box[1].start
-    hierarchy = Hierarchy(np.ascontiguousarray(mask[box]), np.ascontiguousarray(pixel_weights[box]),
-                          top)
+    hierarchy = Hierarchy(np.ascontiguousarray(mask[box]), np.ascontiguousarray(pixel_weights[box]), top)
 
     def solve(normals: np.ndarray) -> np.ndarray:
         normals = np.ascontiguousarray(normals, dtype=np.float64)
         if normals.shape != (*shape, 3):
-            raise InputError(f"normals must be {(*shape, 3)} to match the mask, "
-                             f"got {normals.shape}")
+            raise InputError(f"normals must be {(*shape, 3)} to match the mask, got {normals.shape}")
         depth = np.full(shape, np.nan)
-        iterations, residual = hierarchy.solve(normals, r0, c0, MIN_NZ, depth, tol=tol,
-                                               maxiter=MAX_ITERATIONS)
+        iterations, residual = hierarchy.solve(
+            normals, r0, c0, MIN_NZ, depth, tol=tol, maxiter=MAX_ITERATIONS
+        )
         info.update(iterations=iterations, residual=residual)
         return depth
 
@@ -100,8 +100,14 @@ def poisson_integrator(mask: np.ndarray, *, weights: np.ndarray | None = None, t
     return solve
 
 
-def integrate_poisson(normals: np.ndarray, mask: np.ndarray, *, weights: np.ndarray | None = None,
-                      origin: tuple[int, int] | None = None, tol: float = 1e-8) -> np.ndarray:
+def integrate_poisson(
+    normals: np.ndarray,
+    mask: np.ndarray,
+    *,
+    weights: np.ndarray | None = None,
+    origin: tuple[int, int] | None = None,
+    tol: float = 1e-8,
+) -> np.ndarray:
     """Least-squares depth from normals over an arbitrary mask.
 
     Parameters
@@ -132,6 +138,7 @@ def integrate_poisson(normals: np.ndarray, mask: np.ndarray, *, weights: np.ndar
 # Reference: the same least-squares problem, assembled as sparse matrices and solved directly
 # ---------------------------------------------------------------------------------------------
 
+
 def _difference_system(mask, weights):
     """Difference operator over every 4-neighbour pair of object pixels.
 
@@ -148,8 +155,9 @@ def _difference_system(mask, weights):
     rv, cv = np.nonzero(mask[:-1, :] & mask[1:, :])
     a = np.concatenate([index[rh, ch], index[rv, cv]])
     b = np.concatenate([index[rh, ch + 1], index[rv + 1, cv]])
-    wts = np.concatenate([np.minimum(weights[rh, ch], weights[rh, ch + 1]),
-                          np.minimum(weights[rv, cv], weights[rv + 1, cv])])
+    wts = np.concatenate(
+        [np.minimum(weights[rh, ch], weights[rh, ch + 1]), np.minimum(weights[rv, cv], weights[rv + 1, cv])]
+    )
     m = len(a)
     eq = np.arange(m)
     D = sp.csr_matrix((np.r_[-np.ones(m), np.ones(m)], (np.r_[eq, eq], np.r_[a, b])), shape=(m, n))
@@ -159,8 +167,7 @@ def _difference_system(mask, weights):
 def _steps(zx, zy, pairs):
     """Trapezoid-rule depth steps along each pair: +x to the right, -y one row down."""
     rh, ch, rv, cv = pairs
-    return np.concatenate([0.5 * (zx[rh, ch] + zx[rh, ch + 1]),
-                           -0.5 * (zy[rv, cv] + zy[rv + 1, cv])])
+    return np.concatenate([0.5 * (zx[rh, ch] + zx[rh, ch + 1]), -0.5 * (zy[rv, cv] + zy[rv + 1, cv])])
 
 
 def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None = None):
@@ -194,8 +201,9 @@ def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None
         z = np.zeros(n)
         if factor is not None:
             z[free] = factor.solve(b[free])
-        z -= (np.bincount(labels, weights=z, minlength=n_parts)
-              / np.bincount(labels, minlength=n_parts))[labels]
+        z -= (np.bincount(labels, weights=z, minlength=n_parts) / np.bincount(labels, minlength=n_parts))[
+            labels
+        ]
         depth = np.full(mask.shape, np.nan)
         depth[mask] = z
         return depth

@@ -124,9 +124,7 @@ def _write_obj(mesh: Mesh, file_obj: BinaryIO) -> None:
 
 
 def _write_ply(mesh: Mesh, file_obj: BinaryIO) -> None:
-    data = _trimesh(mesh, with_uv=False).export(
-        file_type="ply", encoding="binary", vertex_normal=True
-    )
+    data = _trimesh(mesh, with_uv=False).export(file_type="ply", encoding="binary", vertex_normal=True)
     file_obj.write(data)
 
 
@@ -141,9 +139,7 @@ def _write_glb(mesh: Mesh, file_obj: BinaryIO) -> None:
 
 
 register(".wrl", write_vrml, description="VRML 2.0 (VRML97), per-vertex normals, texture coords")
-register(
-    ".iv", write_inventor, description="Open Inventor 2.1 ASCII, per-vertex normals, texture coords"
-)
+register(".iv", write_inventor, description="Open Inventor 2.1 ASCII, per-vertex normals, texture coords")
 register(".obj", _write_obj, description="Wavefront OBJ, per-vertex normals")
 register(".ply", _write_ply, description="PLY (binary), per-vertex normals")
 register(".stl", _write_stl, description="STL (binary), face normals only")

@@ -185,9 +185,7 @@ def select_channel(pixels: np.ndarray, channel: str = "luma") -> np.ndarray:
 
 def _check_channel(channel) -> None:
     if not isinstance(channel, str) or channel not in CHANNELS:
-        raise InputError(
-            f"unknown channel {channel!r}; choose one of {', '.join(map(repr, CHANNELS))}"
-        )
+        raise InputError(f"unknown channel {channel!r}; choose one of {', '.join(map(repr, CHANNELS))}")
 
 
 def load_image_rgb(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) -> np.ndarray:
@@ -351,9 +349,7 @@ def _drop_alpha(samples: np.ndarray) -> np.ndarray:
 
 def _decode_png(path: _Source, head: bytes, max_pixels: int) -> tuple[np.ndarray, int]:
     if len(head) < 33 or head[12:16] != b"IHDR":
-        raise InputError(
-            f"truncated or damaged PNG: '{path}' has no IHDR header; save or download it again"
-        )
+        raise InputError(f"truncated or damaged PNG: '{path}' has no IHDR header; save or download it again")
     width, height, bitdepth = struct.unpack(">IIB", head[16:25])
     _check_dimensions(path, width, height, max_pixels)
     orientation = _png_orientation(path)
@@ -455,9 +451,7 @@ def _tiff_samples_to_unit(
         )
     if photometric == _PALETTE:
         if colormap is None:
-            raise InputError(
-                f"truncated or damaged TIFF: '{path}' is indexed but has no colour map"
-            )
+            raise InputError(f"truncated or damaged TIFF: '{path}' is indexed but has no colour map")
         index = samples[:, :, 0].astype(np.intp)
         if index.max() >= colormap.shape[1]:
             raise InputError(

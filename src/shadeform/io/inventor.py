@@ -62,9 +62,7 @@ def write_inventor(mesh: Mesh, file_obj: BinaryIO) -> None:
     if has_uv:
         file_obj.write(b"  TextureCoordinate2 {\n    point [\n")
         write_rows(file_obj, mesh.uv, "%.6g %.6g,\n")
-        file_obj.write(
-            b"    ]\n  }\n  TextureCoordinateBinding {\n    value PER_VERTEX_INDEXED\n  }\n"
-        )
+        file_obj.write(b"    ]\n  }\n  TextureCoordinateBinding {\n    value PER_VERTEX_INDEXED\n  }\n")
 
     # format the indices once, write them two or three times
     index_parts = list(format_rows(mesh.faces, "%d, %d, %d, -1,\n"))

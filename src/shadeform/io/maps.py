@@ -78,9 +78,7 @@ def save_normal_map(normals: np.ndarray, path: str | os.PathLike[str]) -> Path:
     encoded[missing] = BACKGROUND_RGB
     # PNG stores 16-bit samples big-endian; pack rows ourselves so pypng does no per-pixel work
     packed = encoded.astype(">u2").reshape(normals.shape[0], -1)
-    writer = png.Writer(
-        width=normals.shape[1], height=normals.shape[0], greyscale=False, bitdepth=16
-    )
+    writer = png.Writer(width=normals.shape[1], height=normals.shape[0], greyscale=False, bitdepth=16)
     with atomic_write(path) as file_obj:
         writer.write_packed(file_obj, (row.tobytes() for row in packed))
     return path
@@ -133,9 +131,7 @@ def _read_png(path: Path) -> tuple[np.ndarray, int]:
     return pixels, 16 if pixels.dtype == np.uint16 else 8
 
 
-def load_normal_map(
-    path: str | os.PathLike[str], *, mask: np.ndarray | None = None
-) -> np.ndarray:
+def load_normal_map(path: str | os.PathLike[str], *, mask: np.ndarray | None = None) -> np.ndarray:
     """Read a normal map PNG (8 or 16 bits, OpenGL convention) into unit normals.
 
     Parameters
@@ -167,9 +163,7 @@ def load_normal_map(
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != empty.shape:
-            raise InputError(
-                f"mask has shape {mask.shape} but the normal map {empty.shape}; they must match"
-            )
+            raise InputError(f"mask has shape {mask.shape} but the normal map {empty.shape}; they must match")
         empty |= ~mask
     with np.errstate(invalid="ignore", divide="ignore"):
         normals /= lengths
@@ -180,9 +174,7 @@ def load_normal_map(
 def _depth_suffix(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in _DEPTH_SUFFIXES:
-        raise InputError(
-            f"cannot handle depth file '{path.name}'; use a name ending in .tif, .tiff or .npy"
-        )
+        raise InputError(f"cannot handle depth file '{path.name}'; use a name ending in .tif, .tiff or .npy")
     return suffix
 
 

@@ -45,9 +45,14 @@ class PhotoSet:
     mask: np.ndarray | None
 
 
-def load_photo_set(sources, *, lights: str | os.PathLike | None = None,
-                   intensities: str | os.PathLike | None = None,
-                   mask: str | os.PathLike | None = None, srgb: bool = False) -> PhotoSet:
+def load_photo_set(
+    sources,
+    *,
+    lights: str | os.PathLike | None = None,
+    intensities: str | os.PathLike | None = None,
+    mask: str | os.PathLike | None = None,
+    srgb: bool = False,
+) -> PhotoSet:
     """Read photos and their light files.
 
     Parameters
@@ -87,23 +92,29 @@ def load_photo_set(sources, *, lights: str | os.PathLike | None = None,
             first = image.shape
             images = np.empty((len(photos),) + first, dtype=np.float32)
         elif image.shape != first:
-            raise InputError(f"photo '{photo}' is {image.shape[1]}x{image.shape[0]} but "
-                             f"'{photos[0]}' is {first[1]}x{first[0]}; give photos from one still "
-                             "camera")
+            raise InputError(
+                f"photo '{photo}' is {image.shape[1]}x{image.shape[0]} but "
+                f"'{photos[0]}' is {first[1]}x{first[0]}; give photos from one still "
+                "camera"
+            )
         images[i] = image
     found_mask = load_mask(mask, shape=first) if mask is not None else None
     return PhotoSet(tuple(photos), images, directions, strengths, found_mask)
 
 
-def read_rows(path: str | os.PathLike, what: str, count: int,
-              columns: tuple[int, ...]) -> np.ndarray:
+def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
     """A text file of ``count`` rows of numbers (whitespace or commas; blank lines and ``#``
     lines skipped) as ``(count, columns)``, or ``(count,)`` for one column."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8").replace(",", " ")
-        values = np.array([[float(v) for v in line.split()] for line in text.splitlines()
-                           if line.strip() and not line.lstrip().startswith("#")])
+        values = np.array(
+            [
+                [float(v) for v in line.split()]
+                for line in text.splitlines()
+                if line.strip() and not line.lstrip().startswith("#")
+            ]
+        )
     except FileNotFoundError:
         raise InputError(f"{what} file '{path}' does not exist; check the path") from None
     except (ValueError, UnicodeDecodeError):
@@ -111,8 +122,9 @@ def read_rows(path: str | os.PathLike, what: str, count: int,
     if values.ndim != 2 or values.shape[0] != count or values.shape[1] not in columns:
         shape = "x".join(str(n) for n in values.shape) or "empty"
         wanted = " or ".join(str(c) for c in columns)
-        raise InputError(f"{what} file '{path}' must have {count} rows (one per photo) of {wanted} "
-                         f"numbers, found {shape}")
+        raise InputError(
+            f"{what} file '{path}' must have {count} rows (one per photo) of {wanted} numbers, found {shape}"
+        )
     return values[:, 0] if values.shape[1] == 1 else values
 
 
@@ -124,10 +136,17 @@ def _find(sources: list[Path], lights, intensities, mask):
         if listing.is_file():
             photos = [folder / name for name in listing.read_text(encoding="utf-8").split()]
         else:
-            photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in PHOTO_SUFFIXES
-                            and p.stem.lower() not in ("mask", "normal_gt", "normal_map"))
-        found = {name: folder / name for name in ("light_directions.txt", "light_intensities.txt",
-                                                   "mask.png") if (folder / name).is_file()}
+            photos = sorted(
+                p
+                for p in folder.iterdir()
+                if p.suffix.lower() in PHOTO_SUFFIXES
+                and p.stem.lower() not in ("mask", "normal_gt", "normal_map")
+            )
+        found = {
+            name: folder / name
+            for name in ("light_directions.txt", "light_intensities.txt", "mask.png")
+            if (folder / name).is_file()
+        }
         lights = lights or found.get("light_directions.txt")
         intensities = intensities or found.get("light_intensities.txt")
         mask = mask or found.get("mask.png")

@@ -25,8 +25,19 @@ import numpy as np
 from shadeform._checks import check_choice
 from shadeform.solvers.problem import Problem, Reference, Solution
 
-__all__ = ["AUTO", "NOISY", "Problem", "Reference", "Solution", "Solver", "available_methods",
-           "choose", "get_solver", "register", "solver_names"]
+__all__ = [
+    "AUTO",
+    "NOISY",
+    "Problem",
+    "Reference",
+    "Solution",
+    "Solver",
+    "available_methods",
+    "choose",
+    "get_solver",
+    "register",
+    "solver_names",
+]
 
 #: The method name that asks :func:`choose` to pick a solver.
 AUTO = "auto"
@@ -88,7 +99,9 @@ class Solver:
 
     def __post_init__(self):
         if not self.name.isidentifier() or self.name == AUTO:
-            raise ValueError(f"solver name must be a Python identifier other than {AUTO!r}, got {self.name!r}")
+            raise ValueError(
+                f"solver name must be a Python identifier other than {AUTO!r}, got {self.name!r}"
+            )
         if self.lights not in LIGHTS:
             raise ValueError(f"lights must be one of {LIGHTS}, got {self.lights!r}")
         if self.integrator is None and not self.depth:
@@ -131,8 +144,10 @@ def available_methods() -> dict[str, str]:
         Method name to a one-line description, "auto" first, then in registration order.
     """
     rule = ", else ".join(solver.name + _conditions(solver) for solver in _ranked())
-    return {AUTO: f"picks the best measured solver: {rule}",
-            **{name: s.description for name, s in _SOLVERS.items()}}
+    return {
+        AUTO: f"picks the best measured solver: {rule}",
+        **{name: s.description for name, s in _SOLVERS.items()},
+    }
 
 
 def get_solver(method: str) -> Solver:
@@ -169,7 +184,8 @@ def _ranked() -> list[Solver]:
 def _conditions(solver: Solver) -> str:
     """When "auto" takes ``solver``, in words: `` (light at the camera, clean image)``."""
     words = (["light at the camera"] if solver.lights == "frontal" else []) + (
-        ["clean image"] if solver.max_noise < math.inf else [])
+        ["clean image"] if solver.max_noise < math.inf else []
+    )
     return f" ({', '.join(words)})" if words else ""
 
 
@@ -182,19 +198,37 @@ def is_frontal(light) -> bool:
 # benchmarks/results/methods.md. Preview budgets: about 0.1 s of solver time on one core of the
 # 2-core machine of benchmarks/results/app.md (the oblique descent costs ~50x more per pixel than
 # fast marching on grids this small).
-register(Solver(
-    "propagation", "shadeform.solvers.propagation:solve", lights="any", integrator="paths",
-    description="the 2002 ModelBuilder method: normals grown from the brightest pixel, convex "
-                "unless marked, refined for integrability",
-))
-register(Solver(
-    "eikonal", "shadeform.solvers.eikonal:solve", lights="frontal", depth="eikonal (fast-marching depth)",
-    auto=0, max_noise=NOISY,
-    description="fast marching from the bright caps and marked dents (light at the camera only); "
-                "the most accurate on clean images",
-))
-register(Solver(
-    "oblique", "shadeform.solvers.oblique:solve", lights="any", depth="oblique (chord-equation descent depth)",
-    preview_pixels=2_500, denoise="gaussian:2", auto=1,
-    description="any light, with attached shadows: marching from the brightest pixels, then descent",
-))
+register(
+    Solver(
+        "propagation",
+        "shadeform.solvers.propagation:solve",
+        lights="any",
+        integrator="paths",
+        description="the 2002 ModelBuilder method: normals grown from the brightest pixel, convex "
+        "unless marked, refined for integrability",
+    )
+)
+register(
+    Solver(
+        "eikonal",
+        "shadeform.solvers.eikonal:solve",
+        lights="frontal",
+        depth="eikonal (fast-marching depth)",
+        auto=0,
+        max_noise=NOISY,
+        description="fast marching from the bright caps and marked dents (light at the camera only); "
+        "the most accurate on clean images",
+    )
+)
+register(
+    Solver(
+        "oblique",
+        "shadeform.solvers.oblique:solve",
+        lights="any",
+        depth="oblique (chord-equation descent depth)",
+        preview_pixels=2_500,
+        denoise="gaussian:2",
+        auto=1,
+        description="any light, with attached shadows: marching from the brightest pixels, then descent",
+    )
+)

@@ -92,14 +92,19 @@ class Problem:
         """``(row, col)`` of the main reference, where ``z = 0``."""
         return self.references[0].pixel
 
-    def integrate(self, normals: np.ndarray, mask: np.ndarray | None = None, *,
-                  origin: tuple[int, int] | None = None) -> np.ndarray:
+    def integrate(
+        self, normals: np.ndarray, mask: np.ndarray | None = None, *, origin: tuple[int, int] | None = None
+    ) -> np.ndarray:
         """Depth from ``normals`` over ``mask`` (default: the object) by :attr:`integrator`, ``z = 0``
         at ``origin`` (default: the main reference). See :func:`shadeform.integration.integrate`."""
         from shadeform.integration import integrate
 
-        return integrate(normals, self.mask if mask is None else mask, method=self.integrator,
-                         origin=self.main if origin is None else origin)
+        return integrate(
+            normals,
+            self.mask if mask is None else mask,
+            method=self.integrator,
+            origin=self.main if origin is None else origin,
+        )
 
 
 @dataclass(frozen=True, eq=False)

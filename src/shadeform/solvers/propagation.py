@@ -137,8 +137,9 @@ _OFFSETS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
 
 
 @numba.njit(cache=True)
-def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, seed_r, seed_c,
-                      seed_normal, normals, done, queue):
+def _propagate_kernel(
+    cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, seed_r, seed_c, seed_normal, normals, done, queue
+):
     # work arrays come from the caller so that numpy (and memory profilers) see them
     h, w = mask.shape
     normals[seed_r, seed_c, :] = seed_normal
@@ -163,8 +164,21 @@ def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, s
                         mx += normals[rr, cc, 0]
                         my += normals[rr, cc, 1]
                         mz += normals[rr, cc, 2]
-            _choose_normal(cos_t[r, c], gx[r, c], gy[r, c], g_min, concave_x[r, c],
-                           concave_y[r, c], light[0], light[1], light[2], mx, my, mz, chosen)
+            _choose_normal(
+                cos_t[r, c],
+                gx[r, c],
+                gy[r, c],
+                g_min,
+                concave_x[r, c],
+                concave_y[r, c],
+                light[0],
+                light[1],
+                light[2],
+                mx,
+                my,
+                mz,
+                chosen,
+            )
             normals[r, c, 0] = chosen[0]
             normals[r, c, 1] = chosen[1]
             normals[r, c, 2] = chosen[2]
@@ -173,7 +187,19 @@ def _propagate_kernel(cos_t, gx, gy, g_min, mask, concave_x, concave_y, light, s
             tail += 1
 
 
-def _prepare(image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor):
+def _prepare(
+    image,
+    mask,
+    *,
+    light,
+    reference,
+    reference_normal=None,
+    albedo,
+    concave_x=None,
+    concave_y=None,
+    gradient_floor=1e-6,
+):
+    """The arguments of :func:`propagate_normals`, checked, and what both versions compute first."""
     image = np.asarray(image, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool)
     if image.ndim != 2 or mask.shape != image.shape:
@@ -183,7 +209,9 @@ def _prepare(image, mask, light, reference, albedo, concave_x, concave_y, gradie
     light = np.asarray(light, dtype=np.float64)
     r, c = reference
     if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]) or not mask[r, c]:
-        raise InputError(f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask")
+        raise InputError(
+            f"reference pixel (row {r}, col {c}) is not on the object; pick a pixel inside the mask"
+        )
     if albedo <= 0:
         raise InputError("the object is black at the reference; pick a lit reference pixel")
     shape = mask.shape
@@ -191,11 +219,33 @@ def _prepare(image, mask, light, reference, albedo, concave_x, concave_y, gradie
     cy = np.zeros(shape) if concave_y is None else np.asarray(concave_y, dtype=np.float64)
     cos_t = np.clip(np.where(mask, image / albedo, 0.0), 0.0, 1.0)
     gx, gy = image_gradient(image / albedo, mask)
-    return image, mask, light, (int(r), int(c)), cos_t, gx, gy, cx, cy, float(gradient_floor)
+    return (
+        image,
+        mask,
+        light,
+        (int(r), int(c)),
+        reference_normal,
+        cos_t,
+        gx,
+        gy,
+        cx,
+        cy,
+        float(gradient_floor),
+    )
 
 
-def propagate_normals(image, mask, *, light, reference, reference_normal=None, albedo,
-                      concave_x=None, concave_y=None, gradient_floor=1e-6):
+def propagate_normals(
+    image,
+    mask,
+    *,
+    light,
+    reference,
+    reference_normal=None,
+    albedo,
+    concave_x=None,
+    concave_y=None,
+    gradient_floor=1e-6,
+):
     """Grow a normal field over the mask from one reference pixel (compiled).
 
     Parameters
@@ -224,12 +274,22 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, a
     normals : (H, W, 3) float64
         Unit normals; NaN outside the mask and on mask pixels not connected to the reference.
     """
-    image, mask, light, (r, c), cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor)
+    image, mask, light, (r, c), reference_normal, cos_t, gx, gy, cx, cy, g_min = _prepare(
+        image,
+        mask,
+        light=light,
+        reference=reference,
+        reference_normal=reference_normal,
+        albedo=albedo,
+        concave_x=concave_x,
+        concave_y=concave_y,
+        gradient_floor=gradient_floor,
+    )
     seed = np.empty(3)
     if reference_normal is None:
-        _choose_normal(cos_t[r, c], gx[r, c], gy[r, c], g_min, cx[r, c], cy[r, c], *light,
-                       0.0, 0.0, 0.0, seed)
+        _choose_normal(
+            cos_t[r, c], gx[r, c], gy[r, c], g_min, cx[r, c], cy[r, c], *light, 0.0, 0.0, 0.0, seed
+        )
     else:
         seed[:] = reference_normal
     normals = np.full(mask.shape + (3,), np.nan)
@@ -239,14 +299,14 @@ def propagate_normals(image, mask, *, light, reference, reference_normal=None, a
     return normals
 
 
-def propagate_normals_reference(image, mask, *, light, reference, reference_normal=None, albedo,
-                                concave_x=None, concave_y=None, gradient_floor=1e-6):
+def propagate_normals_reference(image, mask, **options):
     """Slow, plain-Python version of :func:`propagate_normals` (same arguments and result).
 
     Written for clarity, to test the compiled kernel against; use only on small images.
     """
-    image, mask, light, (r, c), cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image, mask, light, reference, albedo, concave_x, concave_y, gradient_floor)
+    image, mask, light, (r, c), reference_normal, cos_t, gx, gy, cx, cy, g_min = _prepare(
+        image, mask, **options
+    )
     choose = _choose_normal.py_func
     h, w = mask.shape
     normals = np.full((h, w, 3), np.nan)
@@ -269,8 +329,7 @@ def propagate_normals_reference(image, mask, *, light, reference, reference_norm
             known = normals[window][done[window]]
             mean = known.sum(axis=0) if len(known) else np.zeros(3)
             out = np.empty(3)
-            choose(cos_t[rr, cc], gx[rr, cc], gy[rr, cc], g_min, cx[rr, cc], cy[rr, cc], *light,
-                   *mean, out)
+            choose(cos_t[rr, cc], gx[rr, cc], gy[rr, cc], g_min, cx[rr, cc], cy[rr, cc], *light, *mean, out)
             normals[rr, cc] = out
             done[rr, cc] = True
             queue.append((rr, cc))
@@ -300,8 +359,9 @@ def project_to_cone(normals: np.ndarray, cos_theta: np.ndarray, light: np.ndarra
     return cos_theta[..., None] * light + sin_theta[..., None] * tilt
 
 
-def refine_by_integrability(normals: np.ndarray, cos_theta: np.ndarray, mask: np.ndarray, *,
-                            light: np.ndarray, iterations: int = 3) -> np.ndarray:
+def refine_by_integrability(
+    normals: np.ndarray, cos_theta: np.ndarray, mask: np.ndarray, *, light: np.ndarray, iterations: int = 3
+) -> np.ndarray:
     """Correct the tilt directions of a propagated field so that it becomes integrable.
 
     The 2002 rule takes each normal's tilt from the intensity gradient, which is exact on surfaces
@@ -358,13 +418,21 @@ def solve(problem: Problem) -> Solution:
         part_mask = labels == part
         depth_main = None
         for ref in (ref for ref in problem.references if labels[ref.pixel] == part):
-            field = propagate_normals(problem.image, part_mask, light=problem.light, reference=ref.pixel,
-                                      reference_normal=ref.normal, albedo=problem.albedo,
-                                      concave_x=problem.concave_x, concave_y=problem.concave_y)
+            field = propagate_normals(
+                problem.image,
+                part_mask,
+                light=problem.light,
+                reference=ref.pixel,
+                reference_normal=ref.normal,
+                albedo=problem.albedo,
+                concave_x=problem.concave_x,
+                concave_y=problem.concave_y,
+            )
             problem.lap("normals")
             if problem.refine:
-                field = refine_by_integrability(field, cos_theta, part_mask, light=problem.light,
-                                                iterations=problem.refine)
+                field = refine_by_integrability(
+                    field, cos_theta, part_mask, light=problem.light, iterations=problem.refine
+                )
                 problem.lap("refine")
             depth = problem.integrate(field, part_mask, origin=ref.pixel)
             problem.lap("depth")

@@ -28,7 +28,6 @@ from shadeform.errors import InputError
 from shadeform.preprocess import Filter, apply_filter
 from shadeform.solvers.eikonal.marching import STEEP, run_march, slope_fields
 from shadeform.solvers.eikonal.normals import cone_normals
-from shadeform.solvers.problem import Problem, Solution
 from shadeform.solvers.eikonal.singular import (
     EIGHT,
     TOL,
@@ -36,6 +35,7 @@ from shadeform.solvers.eikonal.singular import (
     find_singular_points,
     place_heights,
 )
+from shadeform.solvers.problem import Problem, Solution
 
 __all__ = ["EikonalResult", "eikonal_depth"]
 
@@ -254,14 +254,22 @@ def solve(problem: Problem) -> Solution:
     an integrator (then ``z = 0`` at the first singular point). The registry gives it only
     lights at +z."""
     given = [ref.pixel for ref in problem.references[: problem.given]]
-    result = eikonal_depth(problem.image, problem.mask, albedo=problem.albedo, references=given or None,
-                           concave_x=problem.concave_x, concave_y=problem.concave_y)
+    result = eikonal_depth(
+        problem.image,
+        problem.mask,
+        albedo=problem.albedo,
+        references=given or None,
+        concave_x=problem.concave_x,
+        concave_y=problem.concave_y,
+    )
     problem.lap("normals")
     depth = result.depth.copy()
     if problem.integrator is not None:
         first = result.singular_points[0]
         depth = problem.integrate(result.normals, origin=(first.row, first.col))
     problem.lap("depth")
-    points = [{"row": p.row, "col": p.col, "kind": p.kind, "height": float(p.height)}
-              for p in result.singular_points]
+    points = [
+        {"row": p.row, "col": p.col, "kind": p.kind, "height": float(p.height)}
+        for p in result.singular_points
+    ]
     return Solution(result.normals.copy(), depth, {"singular_points": points})

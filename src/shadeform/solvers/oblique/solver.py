@@ -315,13 +315,24 @@ def solve(problem: Problem) -> Solution:
     relative = problem.noise / problem.albedo
     if relative > NOISY:
         levels = {"tol": max(TOL, 2 * relative), "dark": 2 * relative}
-    result = oblique_depth(problem.image, problem.mask, light=problem.light, albedo=problem.albedo,
-                           concave_x=problem.concave_x, concave_y=problem.concave_y, **levels)
+    result = oblique_depth(
+        problem.image,
+        problem.mask,
+        light=problem.light,
+        albedo=problem.albedo,
+        concave_x=problem.concave_x,
+        concave_y=problem.concave_y,
+        **levels,
+    )
     problem.lap("normals")
     depth = result.depth - result.depth[problem.main]
     if problem.integrator is not None:
         depth = problem.integrate(result.normals)
     problem.lap("depth")
-    info = {"sources": len(result.info["sources"]), "levels": result.info["levels"],
-            "sweeps": result.info["sweeps"], "shadowed": int(np.count_nonzero(problem.mask & ~result.lit))}
+    info = {
+        "sources": len(result.info["sources"]),
+        "levels": result.info["levels"],
+        "sweeps": result.info["sweeps"],
+        "shadowed": int(np.count_nonzero(problem.mask & ~result.lit)),
+    }
     return Solution(result.normals.copy(), depth, info)
