@@ -13,9 +13,11 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _before(key_a, item_a, key_b, item_b) -> bool:
-    return key_a < key_b or (key_a == key_b and item_a < item_b)
+    if key_a != key_b:
+        return key_a < key_b
+    return item_a < item_b
 
 
 @numba.njit(cache=True)
