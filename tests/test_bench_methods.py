@@ -49,8 +49,7 @@ class TestMethods:
         }
         assert len(labels) == len(solvers) + 1
 
-    def test_picks_up_a_new_solver(self, monkeypatch):
-        monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))
+    def test_picks_up_a_new_solver(self, registries):
         solvers.register(
             solvers.Solver(
                 "newcomer",

@@ -127,11 +127,11 @@ def reconstruct(
     lap("mask")
     shading = apply_filter(image, mask, user_filter) if user_filter else image
     lap("filter")
-    info: dict[str, Any] = {}
+    decided: dict[str, Any] = {}  # what was settled on the way, for info
     if estimate_wanted:
         estimate = estimate_light(shading, mask)
         light = np.asarray(estimate.light, dtype=np.float64)
-        info["light_estimate"] = {
+        decided["light_estimate"] = {
             "slant": float(estimate.slant),
             "tilt": float(estimate.tilt),
             "albedo": float(estimate.albedo),
@@ -150,7 +150,7 @@ def reconstruct(
             denoise = parse_filter(solver.denoise)
             shading = apply_filter(shading, mask, denoise)
             noise = noise_level(shading, mask, inside=inside)
-            info["auto_filter"] = str(denoise)
+            decided["auto_filter"] = str(denoise)
             lap("filter")
         if solver.denoise is None:
             noise = None
@@ -200,7 +200,7 @@ def reconstruct(
         "albedo": float(albedo),
         "timings": timer.timings,
         **solution.info,
-        **info,
+        **decided,
     }
     return Reconstruction(
         normals=normals, depth=depth, mask=mask, light=light, albedo=float(albedo), info=info

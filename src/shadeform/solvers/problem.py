@@ -114,7 +114,8 @@ class Solution:
     Attributes
     ----------
     normals : (H, W, 3) float64
-        Unit normals on the mask (values off it are ignored).
+        Unit normals on the mask (values off it are ignored). ``reconstruct`` copies both arrays,
+        so a solver may hand over arrays it keeps.
     depth : (H, W) float64
         Height in pixel units, ``z = 0`` at the main reference (values off the mask are ignored).
     info : dict

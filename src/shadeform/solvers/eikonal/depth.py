@@ -263,7 +263,7 @@ def solve(problem: Problem) -> Solution:
         concave_y=problem.concave_y,
     )
     problem.lap("normals")
-    depth = result.depth.copy()
+    depth = result.depth
     if problem.integrator is not None:
         first = result.singular_points[0]
         depth = problem.integrate(result.normals, origin=(first.row, first.col))
@@ -272,4 +272,4 @@ def solve(problem: Problem) -> Solution:
         {"row": p.row, "col": p.col, "kind": p.kind, "height": float(p.height)}
         for p in result.singular_points
     ]
-    return Solution(result.normals.copy(), depth, {"singular_points": points})
+    return Solution(result.normals, depth, {"singular_points": points})

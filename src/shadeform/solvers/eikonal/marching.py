@@ -47,7 +47,8 @@ from shadeform.solvers._heap import heap_pop, heap_update, new_heap
 __all__ = ["COS_FLOOR", "STEEP", "arrival_times", "arrival_times_reference"]
 
 #: Default slope ``f`` above which the semi-Lagrangian arc update replaces finite differences.
-#: Measured on the noise-free 256 px synthetic scenes: ``benchmarks/results/eikonal.md``, Constants.
+#: Checked by a sweep on the noise-free 256 px synthetic scenes (``benchmarks/results/eikonal.md``,
+#: Constants): the scenes the benchmarks report, so not a held-out choice.
 STEEP = 1.5
 #: ``c`` is floored here before ``f`` is computed, so a black pixel is a steep wall, not inf.
 COS_FLOOR = 1e-3

@@ -49,7 +49,7 @@ KINDS = ("max", "min", "saddle")
 #: Default tolerance on ``c = I / k``: a singular region's top reaches ``1 - tol`` and rises
 #: ``tol`` above the pass to any brighter one. Noisy images need more: 2e-2 at 1% noise after a
 #: Gaussian of sigma 2. Both measured on the 256 px synthetic scenes, noise-free and at 1% noise:
-#: ``benchmarks/results/eikonal.md``, Constants.
+#: ``benchmarks/results/eikonal.md``, Constants; the scenes the benchmarks report, so not held out.
 TOL = 1e-3
 #: The marching starts from a singular region's pixels within this fraction of ``tol`` of its top
 #: (a ridge's crest or a plateau, not its flanks). A choice, not a measurement.

@@ -335,4 +335,4 @@ def solve(problem: Problem) -> Solution:
         "sweeps": result.info["sweeps"],
         "shadowed": int(np.count_nonzero(problem.mask & ~result.lit)),
     }
-    return Solution(result.normals.copy(), depth, info)
+    return Solution(result.normals, depth, info)
