@@ -56,18 +56,29 @@ class TestReconstructFiles:
                 load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth, atol=1e-4, equal_nan=True
             )  # float32 file
 
-    def test_srgb(self, out, tmp_path):
+    def test_encoding(self, out, tmp_path):
+        """Each photo is read as reconstruct reads it: 8-bit sRGB made linear, 16-bit linear,
+        ``linear=`` overriding; the result says what was decided."""
+        from shadeform.io.images import read_photo
+
         scene = synth.scene("sphere", size=48)
-        path = tmp_path / "srgb.png"
         encoded = np.where(
             scene.image <= 0.0031308, 12.92 * scene.image, 1.055 * scene.image ** (1 / 2.4) - 0.055
         )
-        save_gray(encoded, path, bitdepth=16)
-        reconstruct_files([path], out, suffix=".ply", depth=True, srgb=True, workers=1)
-        linear = shadeform.reconstruct(shadeform.preprocess.srgb_to_linear(shadeform.load_image(path)))
-        np.testing.assert_allclose(
-            load_depth(out / "srgb_depth.tiff"), linear.depth, atol=1e-4, equal_nan=True
-        )
+        eight, deep = tmp_path / "eight.png", tmp_path / "deep.png"
+        save_gray(encoded, eight, bitdepth=8)
+        save_gray(encoded, deep, bitdepth=16)
+        for linear, expected in ((None, ("srgb", "linear")), (False, ("srgb", "srgb"))):
+            results = reconstruct_files(
+                [eight, deep], out, suffix=".ply", depth=True, linear=linear, workers=1
+            )
+            assert [r.photo_info["encoding"] for r in results] == list(expected)
+            assert results[0].photo_info["encoding_from"] == ("file" if linear is None else "user")
+            for photo in (eight, deep):
+                rec = shadeform.reconstruct(read_photo(photo, linear=linear).image)
+                np.testing.assert_allclose(
+                    load_depth(out / f"{photo.stem}_depth.tiff"), rec.depth, atol=1e-4, equal_nan=True
+                )
 
     def test_a_bad_photo_fails_alone(self, photos, out, tmp_path):
         bad = tmp_path / "black.png"
@@ -98,6 +109,8 @@ class TestReconstructFiles:
             ({"method": "magic"}, "method"),
             ({"integrator": "x"}, "integrator"),
             ({"filter": "blur:2"}, "filter"),
+            ({"channel": "green"}, "channel"),
+            ({"linear": "yes"}, "linear"),
         ):
             with pytest.raises(InputError, match=match):
                 reconstruct_files([tmp_path / "never-read.png"], out, **options)
@@ -124,6 +137,14 @@ class TestBatchCommand:
         assert [Path(p["photo"]).name for p in report["photos"]] == [p.name for p in photos]
         assert all(p["error"] is None for p in report["photos"])
         assert len(list(folder.iterdir())) == 6
+        assert [p["photo_info"]["encoding"] for p in report["photos"]] == ["linear"] * 3  # 16-bit
+
+    def test_srgb_flag_and_table(self, photos, tmp_path, cli):
+        result = cli(
+            "batch", photos[0], "--out", tmp_path / "m", "--workers", "1", "--srgb", "--channel", "g"
+        )
+        assert result.exit_code == 0, result.output
+        assert "16-bit sRGB, made linear (as told), channel gray" in result.stdout
 
     def test_failures_exit_2_with_one_line_each(self, photos, tmp_path, cli):
         bad = tmp_path / "notes.png"
@@ -142,6 +163,7 @@ class TestBatchCommand:
             ("--method", "magic", "method"),
             ("--integrator", "magic", "integrator"),
             ("--filter", "blur:2", "filter"),
+            ("--channel", "green", "channel"),
         ],
     )
     def test_bad_option_is_one_line(self, photos, tmp_path, option, value, fragment, cli):

@@ -722,11 +722,13 @@ class TestStereo:
     def test_needs_lights(self, photo_set, out):
         assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
 
-    @pytest.mark.parametrize("option, value", [("--method", "magic"), ("--integrator", "magic")])
+    @pytest.mark.parametrize(
+        "option, value", [("--method", "magic"), ("--integrator", "magic"), ("--channel", "magic")]
+    )
     def test_unknown_choice_before_any_work(self, photo_set, out, monkeypatch, option, value):
         from shadeform.io import photoset
 
-        monkeypatch.setattr(photoset, "load_image_rgb", lambda *a, **k: pytest.fail("photos read"))
+        monkeypatch.setattr(photoset, "read_photo", lambda *a, **k: pytest.fail("photos read"))
         result = invoke("stereo", photo_set["folder"], "-o", out / "m.glb", option, value)
         assert_fails(result, out, "unknown", value)
 
@@ -759,8 +761,9 @@ class TestStereo:
         assert_fails(result, out, "one still camera")
 
 
-class TestSrgb:
-    """--srgb undoes the encoding of 8-bit photos: shading methods need linear light."""
+class TestEncoding:
+    """8-bit photos are sRGB and are made linear by default (shading needs linear light); 16-bit
+    ones are linear; --linear / --srgb say otherwise; what was decided is in the info."""
 
     @staticmethod
     def encoded(image):
@@ -771,24 +774,68 @@ class TestSrgb:
         path, mask = tmp_path / "photo.png", tmp_path / "mask.png"
         save_gray(self.encoded(scene.image), path, bitdepth=8)
         save_gray(scene.mask.astype(float), mask, bitdepth=8)
-        errors = {}
-        for flag in ((), ("--srgb",)):
-            normals = out / f"n{len(flag)}.png"
+        errors, infos = {}, {}
+        for flag in ((), ("--linear",), ("--srgb",)):
+            normals = out / f"n{len(flag)}{''.join(flag)}.png"
             result = invoke(
                 "reconstruct",
                 path,
                 "-o",
-                out / f"m{len(flag)}.ply",
+                out / "m.ply",
                 "--normals",
                 normals,
                 "--mask",
                 mask,
+                "--json",
                 *flag,
             )
             assert result.exit_code == 0, result.output
+            infos[flag] = json.loads(result.stdout)["info"]["photo"]
             errors[flag] = metrics.angular_error(load_normal_map(normals), scene.normals, scene.mask)
-        # measured: 13.1 degrees read as linear, 1.4 undone (what is left is 8-bit quantisation)
-        assert errors[("--srgb",)] < 2.0 and errors[()] > 5 * errors[("--srgb",)]
+        # measured: 1.4 degrees decoded (by default or --srgb), 13.1 read as linear (--linear)
+        assert errors[()] == errors[("--srgb",)] < 2.0
+        assert errors[("--linear",)] > 5 * errors[()]
+        clipped = infos[()].pop("clipped")
+        assert infos[()] == {
+            "bits": 8,
+            "encoding": "srgb",
+            "encoding_from": "file",
+            "channel": "gray",
+            "channel_from": "auto",
+        }
+        assert list(clipped) == ["gray"] and 0 < clipped["gray"] < 0.01  # the sphere's brightest pixels
+        assert (infos[("--linear",)]["encoding"], infos[("--linear",)]["encoding_from"]) == ("linear", "user")
+        assert (infos[("--srgb",)]["encoding"], infos[("--srgb",)]["encoding_from"]) == ("srgb", "user")
+
+    def test_16_bit_stays_linear_and_the_summary_says_so(self, sphere, out):
+        result = invoke("reconstruct", sphere["image"], "-o", out / "m.ply")
+        assert result.exit_code == 0, result.output
+        assert "16-bit linear, channel gray" in result.stdout
+        assert result.stderr == ""  # nothing decided that needs a note
+        decoded = invoke("reconstruct", sphere["image"], "-o", out / "d.ply", "--srgb")
+        assert "16-bit sRGB, made linear (as told)" in decoded.stdout
+
+    def test_channel_of_a_colour_photo(self, tmp_path, out):
+        scene = synth.scene("sphere", size=48)
+        path = tmp_path / "red.png"
+        linear = np.stack([np.clip(1.5 * scene.image, 0, 1), 0.7 * scene.image, 0.4 * scene.image], axis=2)
+        Image.fromarray(np.rint(self.encoded(linear) * 255).astype(np.uint8)).save(path)
+        result = invoke("reconstruct", path, "-o", out / "m.ply", "--json")
+        assert result.exit_code == 0, result.output
+        report = json.loads(result.stdout)
+        photo = report["info"]["photo"]
+        assert (photo["channel"], photo["channel_from"]) == ("g", "auto") and report["input"][
+            "channel"
+        ] == "g"
+        assert photo["clipped"]["r"] > 0.25 and photo["clipped"]["g"] == 0.0
+        # the one decision worth a note: a channel other than luma
+        note = result.stderr.strip().splitlines()
+        assert len(note) == 1 and note[0].startswith("note: ") and "solving on g" in note[0]
+        summary = invoke("reconstruct", path, "-o", out / "s.ply")
+        assert "8-bit sRGB, made linear, channel g (least clipped)" in summary.stdout
+        told = invoke("reconstruct", path, "-o", out / "l.ply", "--channel", "luma", "--json")
+        assert json.loads(told.stdout)["info"]["photo"]["channel_from"] == "user"
+        assert told.stderr == ""
 
     def test_stereo(self, photo_set, tmp_path, out):
         folder = tmp_path / "srgb"
@@ -796,22 +843,50 @@ class TestSrgb:
         for photo in photo_set["photos"]:
             linear = shadeform.load_image(photo)
             save_gray(self.encoded(linear), folder / photo.name, bitdepth=8)
-        errors = {}
+        errors, infos = {}, {}
         scene = photo_set["scene"]
         inner = scene.mask & (scene.normals[..., 2] > 0.3)
-        for flag in ((), ("--srgb",)):
-            normals = out / f"n{len(flag)}.png"
+        for flag in ((), ("--linear",), ("--srgb",)):
+            normals = out / f"n{len(flag)}{''.join(flag)}.png"
             result = invoke(
                 "stereo",
                 *sorted(folder.iterdir()),
                 "--lights",
                 photo_set["lights"],
                 "-o",
-                out / f"m{len(flag)}.ply",
+                out / "m.ply",
                 "--normals",
                 normals,
+                "--json",
                 *flag,
             )
             assert result.exit_code == 0, result.output
+            infos[flag] = json.loads(result.stdout)["info"]["photo"]
             errors[flag] = metrics.angular_error(load_normal_map(normals), scene.normals, inner)
-        assert errors[("--srgb",)] < 1.0 < errors[()]
+        assert errors[()] == errors[("--srgb",)] < 1.0 < errors[("--linear",)]
+        assert infos[()] == {
+            "bits": 8,
+            "encoding": "srgb",
+            "encoding_from": "file",
+            "channel": "gray",
+            "channel_from": "auto",
+        }
+        assert infos[("--linear",)]["encoding_from"] == "user"
+
+    def test_a_calibrated_set_is_linear(self, photo_set, tmp_path, out):
+        folder = tmp_path / "calibrated"
+        folder.mkdir()
+        for photo in photo_set["photos"]:
+            save_gray(shadeform.load_image(photo), folder / photo.name, bitdepth=8)  # linear 8-bit
+        (folder / "light_directions.txt").write_bytes(photo_set["lights"].read_bytes())
+        np.savetxt(folder / "light_intensities.txt", np.ones(len(photo_set["photos"])))
+        result = invoke("stereo", folder, "-o", out / "m.ply", "--normals", out / "n.png", "--json")
+        assert result.exit_code == 0, result.output
+        photo = json.loads(result.stdout)["info"]["photo"]
+        assert (photo["encoding"], photo["encoding_from"]) == ("linear", "set")
+        scene = photo_set["scene"]
+        inner = scene.mask & (scene.normals[..., 2] > 0.3)
+        assert metrics.angular_error(load_normal_map(out / "n.png"), scene.normals, inner) < 1.0
+        # one photo of the set, on its own, is linear too
+        single = invoke("reconstruct", folder / "000.png", "-o", out / "one.ply", "--json")
+        assert json.loads(single.stdout)["info"]["photo"]["encoding_from"] == "set"

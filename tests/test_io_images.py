@@ -14,7 +14,18 @@ import tifffile
 from PIL import Image, ImageFile, ImageOps
 
 from shadeform.errors import InputError
-from shadeform.io.images import CHANNELS, load_image, load_image_rgb, load_mask
+from shadeform.io.images import (
+    CALIBRATED_SET_FILE,
+    CHANNELS,
+    CLIP_MARGIN,
+    load_image,
+    load_image_rgb,
+    load_mask,
+    load_pixels,
+    read_photo,
+    select_channel,
+)
+from shadeform.preprocess import srgb_to_linear
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -68,7 +79,22 @@ def luma(rgb):
     return rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 
+def srgb_encode(linear):
+    """Linear values in [0, 1] -> sRGB-encoded (IEC 61966-2-1), written out here independently."""
+    linear = np.clip(linear, 0.0, 1.0)
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+
+def png8(path, linear):
+    """Save linear values (H, W) or (H, W, 3) as an 8-bit sRGB-encoded PNG, as a camera would."""
+    Image.fromarray(np.rint(srgb_encode(linear) * 255).astype(np.uint8)).save(path)
+    return path
+
+
 class TestLoadImage:
+    """Decoding: the values as the file stores them (``linear=True`` for 8-bit files, which are
+    otherwise decoded from sRGB: TestEncoding)."""
+
     def test_smoke(self, tmp_path):
         path = tmp_path / "rgb.png"
         Image.fromarray(RGB8).save(path)
@@ -89,11 +115,11 @@ class TestLoadImage:
         path = tmp_path / "rgb.png"
         Image.fromarray(RGB8).save(path)
         rgb = unit8(RGB8)
-        np.testing.assert_array_equal(load_image(path, channel="r"), rgb[:, :, 0])
-        np.testing.assert_array_equal(load_image(path, channel="g"), rgb[:, :, 1])
-        np.testing.assert_array_equal(load_image(path, channel="b"), rgb[:, :, 2])
-        np.testing.assert_array_equal(load_image(path, channel="max"), rgb.max(axis=2))
-        np.testing.assert_allclose(load_image(path, channel="luma"), luma(rgb), atol=1e-6)
+        np.testing.assert_array_equal(load_image(path, channel="r", linear=True), rgb[:, :, 0])
+        np.testing.assert_array_equal(load_image(path, channel="g", linear=True), rgb[:, :, 1])
+        np.testing.assert_array_equal(load_image(path, channel="b", linear=True), rgb[:, :, 2])
+        np.testing.assert_array_equal(load_image(path, channel="max", linear=True), rgb.max(axis=2))
+        np.testing.assert_allclose(load_image(path, channel="luma", linear=True), luma(rgb), atol=1e-6)
 
     def test_luma_of_one_pixel_by_hand(self, tmp_path):
         values = np.zeros((3, 3, 3), np.uint8)
@@ -102,7 +128,7 @@ class TestLoadImage:
         values[2, 2] = (0, 0, 255)
         path = tmp_path / "primaries.png"
         Image.fromarray(values).save(path)
-        image = load_image(path)
+        image = load_image(path, channel="luma", linear=True)
         assert image[1, 1] == pytest.approx(0.299, abs=1e-6)
         assert image[0, 0] == pytest.approx(0.587, abs=1e-6)
         assert image[2, 2] == pytest.approx(0.114, abs=1e-6)
@@ -112,7 +138,7 @@ class TestLoadImage:
     def test_gray_image_every_channel_is_the_gray(self, tmp_path, channel):
         path = tmp_path / "gray.png"
         Image.fromarray(GRAY8).save(path)
-        np.testing.assert_array_equal(load_image(path, channel=channel), unit8(GRAY8))
+        np.testing.assert_array_equal(load_image(path, channel=channel, linear=True), unit8(GRAY8))
 
     def test_palette_png_goes_through_its_palette(self, tmp_path):
         index = RNG.integers(0, 4, size=(6, 7), dtype=np.uint8)
@@ -123,20 +149,20 @@ class TestLoadImage:
         image.save(path)
         assert Image.open(path).mode == "P"
         expected = unit8(palette[index])
-        np.testing.assert_array_equal(load_image_rgb(path), expected)
-        np.testing.assert_array_equal(load_image(path, channel="r"), expected[:, :, 0])
+        np.testing.assert_array_equal(load_image_rgb(path, linear=True), expected)
+        np.testing.assert_array_equal(load_image(path, channel="r", linear=True), expected[:, :, 0])
 
     def test_gray_alpha_ignores_alpha(self, tmp_path):
         values = np.stack([GRAY8, 255 - GRAY8], axis=2)
         path = tmp_path / "la.png"
         Image.fromarray(values, mode="LA").save(path)
-        np.testing.assert_array_equal(load_image(path, channel="g"), unit8(GRAY8))
+        np.testing.assert_array_equal(load_image(path, channel="g", linear=True), unit8(GRAY8))
 
     def test_rgba_ignores_alpha(self, tmp_path):
         alpha = np.zeros((12, 17, 1), np.uint8)  # fully transparent: the colour must survive
         path = tmp_path / "rgba.png"
         Image.fromarray(np.concatenate([RGB8, alpha], axis=2), mode="RGBA").save(path)
-        np.testing.assert_array_equal(load_image_rgb(path), unit8(RGB8))
+        np.testing.assert_array_equal(load_image_rgb(path, linear=True), unit8(RGB8))
 
     def test_one_bit(self, tmp_path):
         bits = RNG.random((9, 11)) > 0.5
@@ -148,7 +174,7 @@ class TestLoadImage:
     def test_bmp(self, tmp_path):
         path = tmp_path / "rgb.bmp"
         Image.fromarray(RGB8).save(path)
-        np.testing.assert_array_equal(load_image_rgb(path), unit8(RGB8))
+        np.testing.assert_array_equal(load_image_rgb(path, linear=True), unit8(RGB8))
 
     def test_jpeg(self, tmp_path):
         # A smooth picture survives JPEG with small errors.
@@ -156,12 +182,12 @@ class TestLoadImage:
         values = np.stack([rows * 6, cols * 5, 255 - rows * 4], axis=2).astype(np.uint8)
         path = tmp_path / "photo.jpg"
         Image.fromarray(values).save(path, quality=95)
-        np.testing.assert_allclose(load_image_rgb(path), unit8(values), atol=0.04)
+        np.testing.assert_allclose(load_image_rgb(path, linear=True), unit8(values), atol=0.04)
 
     def test_name_does_not_matter(self, tmp_path):
         path = tmp_path / "really_a_png.jpg"
         Image.fromarray(GRAY8).save(path, format="PNG")
-        np.testing.assert_array_equal(load_image(path), unit8(GRAY8))
+        np.testing.assert_array_equal(load_image(path, linear=True), unit8(GRAY8))
 
     def test_png16_gray_exact(self, tmp_path):
         path = write_png16(tmp_path / "gray16.png", GRAY16)
@@ -210,9 +236,11 @@ class TestLoadImage:
         colormap = RNG.integers(0, 65536, size=(3, 256), dtype=np.uint16)
         tifffile.imwrite(tmp_path / "pal.tif", index, photometric="palette", colormap=colormap)
         expected = unit16(colormap[:, index].transpose(1, 2, 0))
-        np.testing.assert_array_equal(load_image_rgb(tmp_path / "pal.tif"), expected)
+        np.testing.assert_array_equal(load_image_rgb(tmp_path / "pal.tif", linear=True), expected)
         tifffile.imwrite(tmp_path / "white.tif", GRAY8, photometric="miniswhite")
-        np.testing.assert_allclose(load_image(tmp_path / "white.tif"), 1 - unit8(GRAY8), atol=1e-7)
+        np.testing.assert_allclose(
+            load_image(tmp_path / "white.tif", linear=True), 1 - unit8(GRAY8), atol=1e-7
+        )
 
     def test_tiff_orientation_tag(self, tmp_path):
         path = tmp_path / "rotated.tif"
@@ -224,12 +252,12 @@ class TestLoadImage:
         path8, path16 = tmp_path / "lzw8.tif", tmp_path / "lzw16.tif"
         Image.fromarray(RGB8).save(path8, compression="tiff_lzw")
         Image.fromarray(GRAY16).save(path16, compression="tiff_lzw")
-        np.testing.assert_array_equal(load_image_rgb(path8), unit8(RGB8))
+        np.testing.assert_array_equal(load_image_rgb(path8, linear=True), unit8(RGB8))
         if importlib.util.find_spec("imagecodecs") is not None:
-            np.testing.assert_array_equal(load_image(path16), unit16(GRAY16))
+            np.testing.assert_array_equal(load_image(path16, linear=True), unit16(GRAY16))
         else:
             with pytest.raises(InputError, match="imagecodecs"):
-                load_image(path16)
+                load_image(path16, linear=True)
 
     def test_exif_rotated_jpeg(self, tmp_path):
         # Stored 16 rows x 24 cols with a bright block at the top-left corner; orientation 6
@@ -240,7 +268,7 @@ class TestLoadImage:
         exif[0x0112] = 6
         path = tmp_path / "rotated.jpg"
         Image.fromarray(stored).save(path, exif=exif, quality=95)
-        image = load_image(path)
+        image = load_image(path, linear=True)
         assert image.shape == (24, 16)
         assert image[:8, -8:].mean() > 0.8 and image[:8, :8].mean() < 0.25
         assert image[-8:, -8:].mean() < 0.25
@@ -254,7 +282,7 @@ class TestLoadImage:
         path = tmp_path / f"o{orientation}.png"
         Image.fromarray(RGB8).save(path, exif=exif)
         expected = unit8(np.asarray(ImageOps.exif_transpose(Image.open(path)).convert("RGB")))
-        np.testing.assert_array_equal(load_image_rgb(path), expected)
+        np.testing.assert_array_equal(load_image_rgb(path, linear=True), expected)
 
     def test_real_16bit_png(self):
         path = DATA / "diligent-ball" / "001.png"
@@ -435,14 +463,14 @@ class TestLoadImageRgb:
     def test_smoke(self, tmp_path):
         path = tmp_path / "rgb.png"
         Image.fromarray(RGB8).save(path)
-        rgb = load_image_rgb(path)
+        rgb = load_image_rgb(path, linear=True)
         assert rgb.shape == (12, 17, 3) and rgb.dtype == np.float32
         np.testing.assert_array_equal(rgb, unit8(RGB8))
 
     def test_gray_is_replicated(self, tmp_path):
         path = tmp_path / "gray.png"
         Image.fromarray(GRAY8).save(path)
-        rgb = load_image_rgb(path)
+        rgb = load_image_rgb(path, linear=True)
         assert rgb.shape == (12, 17, 3)
         for c in range(3):
             np.testing.assert_array_equal(rgb[:, :, c], unit8(GRAY8))
@@ -501,3 +529,195 @@ class TestLoadMask:
         path.write_text("0 1 1 0")
         with pytest.raises(InputError, match="not an image"):
             load_mask(path)
+
+
+class TestEncoding:
+    """8-bit files are sRGB and are made linear; 16-bit and float files are linear; a calibrated
+    photo set's folder says linear; ``linear=`` overrides; the decision is recorded."""
+
+    def test_8bit_is_decoded_from_srgb(self, tmp_path):
+        path = tmp_path / "gray.png"
+        Image.fromarray(GRAY8).save(path)
+        photo = read_photo(path)
+        assert (photo.bits, photo.encoding, photo.encoding_from) == (8, "srgb", "file")
+        assert photo.image.dtype == np.float32 and photo.pixels.dtype == np.float32
+        np.testing.assert_allclose(photo.image, srgb_to_linear(unit8(GRAY8)), rtol=1e-6, atol=1e-7)
+        np.testing.assert_array_equal(load_image(path), photo.image)
+        # 0 and 1 stay where they are: the ends of the curve
+        assert srgb_to_linear(np.array([0.0, 1.0])).tolist() == [0.0, 1.0]
+
+    def test_jpeg_and_colour(self, tmp_path):
+        path = tmp_path / "photo.jpg"
+        Image.fromarray(RGB8).save(path, quality=100)
+        stored = load_image_rgb(path, linear=True)
+        photo = read_photo(path, channel="r")
+        assert photo.encoding == "srgb" and photo.pixels.shape == (12, 17, 3)
+        np.testing.assert_allclose(photo.pixels, srgb_to_linear(stored), rtol=1e-6, atol=1e-7)
+        np.testing.assert_array_equal(load_image_rgb(path), photo.pixels)
+
+    def test_16bit_and_float_stay_linear(self, tmp_path):
+        tifffile.imwrite(tmp_path / "rgb.tif", RGB16, photometric="rgb")
+        values = np.linspace(0, 1, 30, dtype=np.float32).reshape(5, 6)
+        tifffile.imwrite(tmp_path / "float.tif", values)
+        cases = [
+            (write_png16(tmp_path / "gray16.png", GRAY16), 16, unit16(GRAY16)[:, :, None]),
+            (tmp_path / "rgb.tif", 16, unit16(RGB16)),
+            (tmp_path / "float.tif", 32, values[:, :, None]),
+        ]
+        for path, bits, stored in cases:
+            photo = read_photo(path)
+            assert (photo.bits, photo.encoding, photo.encoding_from) == (bits, "linear", "file"), path
+            np.testing.assert_array_equal(photo.pixels, stored)
+
+    def test_overrides(self, tmp_path):
+        path8 = tmp_path / "gray.png"
+        Image.fromarray(GRAY8).save(path8)
+        kept = read_photo(path8, linear=True)
+        assert (kept.encoding, kept.encoding_from) == ("linear", "user")
+        np.testing.assert_array_equal(kept.image, unit8(GRAY8))
+        path16 = write_png16(tmp_path / "gray16.png", GRAY16)
+        decoded = read_photo(path16, linear=False)
+        assert (decoded.encoding, decoded.encoding_from) == ("srgb", "user")
+        np.testing.assert_allclose(decoded.image, srgb_to_linear(unit16(GRAY16)), rtol=1e-6, atol=1e-7)
+        np.testing.assert_array_equal(load_image(path16, linear=False), decoded.image)
+
+    @pytest.mark.parametrize("bad", ["yes", 1, 0.0])
+    def test_bad_linear(self, tmp_path, bad):
+        path = tmp_path / "gray.png"
+        Image.fromarray(GRAY8).save(path)
+        with pytest.raises(InputError, match="linear must be True .* or None") as err:
+            load_image(path, linear=bad)
+        assert "\n" not in str(err.value)
+
+    def test_a_calibrated_set_is_linear(self, tmp_path):
+        path = tmp_path / "001.png"
+        Image.fromarray(GRAY8).save(path)
+        (tmp_path / CALIBRATED_SET_FILE).write_text("1\n")
+        photo = read_photo(path)
+        assert (photo.encoding, photo.encoding_from) == ("linear", "set")
+        np.testing.assert_array_equal(photo.image, unit8(GRAY8))
+        assert read_photo(path, linear=False).encoding == "srgb"  # the user still decides
+        # the same file's bytes have no folder: decided by the bit depth
+        assert read_photo(path.read_bytes()).encoding == "srgb"
+
+    def test_pixels_and_channels_agree(self, tmp_path):
+        path = png8(tmp_path / "rgb.png", unit8(RGB8))
+        photo = read_photo(path, channel="luma")
+        np.testing.assert_array_equal(load_pixels(path), photo.pixels)
+        for channel in CHANNELS:
+            np.testing.assert_array_equal(
+                select_channel(load_pixels(path), channel), load_image(path, channel=channel)
+            )
+
+    def test_info_is_plain(self, tmp_path):
+        import json
+
+        path = png8(tmp_path / "rgb.png", unit8(RGB8) * 0.5)
+        info = read_photo(path).info
+        assert json.loads(json.dumps(info)) == info
+        assert info == {
+            "bits": 8,
+            "encoding": "srgb",
+            "encoding_from": "file",
+            "channel": "luma",
+            "channel_from": "auto",
+            "clipped": {"r": 0.0, "g": 0.0, "b": 0.0, "any": 0.0},
+        }
+
+    def test_real_diligent_photos_are_linear(self):
+        folder = DATA / "real" / "diligent"
+        if not folder.is_dir():
+            pytest.skip(f"real DiLiGenT photos not found at {folder}")
+        objects = sorted(p for p in folder.iterdir() if p.is_dir())
+        assert len(objects) == 7
+        for obj in objects:
+            photo = read_photo(obj / "001.png")
+            # 8-bit PNGs without colour chunks, yet linear camera data: the set says so
+            assert (photo.bits, photo.encoding, photo.encoding_from) == (8, "linear", "set"), obj.name
+            np.testing.assert_array_equal(photo.pixels, load_image_rgb(obj / "001.png", linear=True))
+
+
+class TestChannelChoice:
+    """``channel=None`` / ``"auto"``: luma, unless one colour channel clips on clearly fewer pixels."""
+
+    @staticmethod
+    def sphere_photo(tmp_path, gains):
+        from shadeform import synth
+
+        scene = synth.scene("sphere", size=64)
+        linear = np.stack([np.clip(gain * scene.image, 0, 1) for gain in gains], axis=2)
+        return scene, png8(tmp_path / "colour.png", linear)
+
+    def test_gray_photo(self, tmp_path):
+        path = tmp_path / "gray.png"
+        Image.fromarray(GRAY8).save(path)
+        photo = read_photo(path)
+        assert (photo.channel, photo.channel_from) == ("gray", "auto")
+        assert photo.clipped == {"gray": np.count_nonzero(GRAY8 == 255) / GRAY8.size}
+        assert read_photo(path, channel="r").channel == "gray"  # a gray photo has only gray
+
+    def test_unclipped_colour_is_luma(self, tmp_path):
+        _, path = self.sphere_photo(tmp_path, (0.9, 0.7, 0.4))
+        photo = read_photo(path)
+        assert (photo.channel, photo.channel_from, photo.clipped["any"]) == ("luma", "auto", 0.0)
+        np.testing.assert_array_equal(photo.image, load_image(path, channel="luma"))
+
+    def test_the_unclipped_channel_of_a_red_object(self, tmp_path):
+        from shadeform import metrics, reconstruct
+
+        scene, path = self.sphere_photo(tmp_path, (1.5, 0.7, 0.4))  # red saturates on the bright part
+        photo = read_photo(path)
+        assert photo.clipped["r"] > 0.25 and photo.clipped["g"] == photo.clipped["b"] == 0.0
+        # green and blue are both unclipped: green, which weighs most in luma, wins the tie
+        assert (photo.channel, photo.channel_from) == ("g", "auto")
+        np.testing.assert_array_equal(load_image(path), load_image(path, channel="g"))
+        np.testing.assert_array_equal(load_image(path, channel="auto"), photo.image)
+        errors = {
+            channel: metrics.angular_error(
+                reconstruct(load_image(path, channel=channel), mask=scene.mask).normals,
+                scene.normals,
+                scene.mask,
+            )
+            for channel in ("g", "luma", "r")
+        }
+        # measured: 1.4 degrees on the chosen green, 7.0 on luma, 25.1 on the clipped red
+        assert errors["g"] < 2.0 and errors["luma"] > 3 * errors["g"] and errors["r"] > 15
+
+    def test_a_white_highlight_keeps_luma(self, tmp_path):
+        # every channel clips at the same pixels: no channel is better than luma there
+        _, path = self.sphere_photo(tmp_path, (1.3, 1.3, 1.3))
+        photo = read_photo(path)
+        assert photo.clipped["any"] > 0.1 and photo.channel == "luma"
+
+    def test_a_few_clipped_pixels_keep_luma(self, tmp_path):
+        values = np.full((40, 50, 3), 0.5)
+        values[:2, :4, 0] = 1.0  # 8 of 2,000 pixels: 0.4 %, under the margin
+        path = png8(tmp_path / "speck.png", values)
+        photo = read_photo(path)
+        assert photo.clipped["r"] == pytest.approx(0.004) and photo.clipped["r"] < CLIP_MARGIN
+        assert photo.channel == "luma"
+        values[:4, :4, 0] = 1.0  # 16 pixels: 0.8 %
+        assert read_photo(png8(tmp_path / "patch.png", values)).channel == "g"
+
+    def test_near_equals_go_to_green(self, tmp_path):
+        # blue clips on 10 % of the photo, green on 0.2 %, red on none: red is least clipped, but
+        # green is within the margin of it, and green goes first (as on DiLiGenT's reading)
+        values = np.full((40, 50, 3), 0.5)
+        values[:4, :, 2] = 1.0
+        values[0, :4, 1] = 1.0
+        photo = read_photo(png8(tmp_path / "bluish.png", values))
+        assert photo.clipped["r"] == 0.0 < photo.clipped["g"] < CLIP_MARGIN < photo.clipped["b"]
+        assert photo.channel == "g"
+        values[0, :, 1] = 1.0  # green now clips on 2.5 %: red, clearly fewer
+        assert read_photo(png8(tmp_path / "green.png", values)).channel == "r"
+
+    def test_the_user_decides(self, tmp_path):
+        _, path = self.sphere_photo(tmp_path, (1.5, 0.7, 0.4))
+        photo = read_photo(path, channel="luma")
+        assert (photo.channel, photo.channel_from) == ("luma", "user")
+
+    def test_unknown_channel(self, tmp_path):
+        path = tmp_path / "gray.png"
+        Image.fromarray(GRAY8).save(path)
+        with pytest.raises(InputError, match="unknown channel 'green'; choose one of 'auto', 'luma'"):
+            read_photo(path, channel="green")

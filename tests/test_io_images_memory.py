@@ -54,7 +54,7 @@ class TestBytes:
 
     def test_values(self, tmp_path):
         data = files(tmp_path)["rgb8.png"].read_bytes()
-        np.testing.assert_array_equal(load_image(data, channel="g"), unit8(RGB8[:, :, 1]))
+        np.testing.assert_array_equal(load_image(data, channel="g", linear=True), unit8(RGB8[:, :, 1]))
 
     def test_empty(self):
         with pytest.raises(InputError, match="empty file: the image data has 0 bytes"):

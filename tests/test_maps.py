@@ -233,7 +233,7 @@ class TestSaveGray:
         path = save_gray(ramp, tmp_path / "ramp.png", bitdepth=bitdepth)
         stored = np.asarray(Image.open(path), dtype=np.float64) / (2**bitdepth - 1)
         np.testing.assert_allclose(stored, ramp, atol=0.5 / (2**bitdepth - 1) + 1e-12)
-        np.testing.assert_allclose(load_image(path), ramp, atol=0.5 / (2**bitdepth - 1) + 1e-6)
+        np.testing.assert_allclose(load_image(path, linear=True), ramp, atol=0.5 / (2**bitdepth - 1) + 1e-6)
 
     def test_clips_and_takes_a_mask(self, tmp_path):
         values = np.array([[-1.0, 0.5], [2.0, 1.0]])

@@ -23,6 +23,8 @@ _EXPORTS = {
     "load_image": "shadeform.io.images",
     "load_mask": "shadeform.io.images",
     "load_image_rgb": "shadeform.io.images",
+    "read_photo": "shadeform.io.images",
+    "Photo": "shadeform.io.images",
     "save_normal_map": "shadeform.io.maps",
     "load_normal_map": "shadeform.io.maps",
     "save_depth": "shadeform.io.maps",

@@ -18,6 +18,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from shadeform.errors import InputError
 
@@ -42,6 +43,9 @@ class BatchResult:
         Wall time of the task.
     error : str or None
         The one-line message of the user mistake that stopped this photo; None if it worked.
+    photo_info : dict or None
+        What was decided in reading the photo (:attr:`shadeform.io.images.Photo.info`: bit depth,
+        encoding, channel, clipping); None if it could not be read.
     """
 
     photo: Path
@@ -50,6 +54,7 @@ class BatchResult:
     faces: int
     seconds: float
     error: str | None = None
+    photo_info: dict[str, Any] | None = None
 
 
 def reconstruct_files(
@@ -58,8 +63,8 @@ def reconstruct_files(
     *,
     suffix: str = ".glb",
     step: int = 1,
-    channel: str = "luma",
-    srgb: bool = False,
+    channel: str | None = None,
+    linear: bool | None = None,
     depth: bool = False,
     normals: bool = False,
     workers: int | None = None,
@@ -79,10 +84,14 @@ def reconstruct_files(
         Mesh format, one of :func:`shadeform.available_formats`.
     step : int
         Mesh granularity in pixels per vertex.
-    channel : str
-        Image channel (:func:`shadeform.load_image`).
-    srgb : bool
-        Undo the sRGB encoding of 8-bit photos first (:func:`shadeform.preprocess.srgb_to_linear`).
+    channel : {None, "auto", "luma", "r", "g", "b", "max"}
+        Image channel (:func:`shadeform.io.images.read_photo`); by default luma, or the least
+        clipped colour channel of a photo where one clips on clearly fewer pixels.
+    linear : bool or None
+        How the photos hold their values (:func:`shadeform.io.images.read_photo`): None decides
+        per photo (8-bit files are sRGB and are made linear; 16-bit and float files, and photos in
+        a folder holding ``light_intensities.txt``, are linear); True keeps the values, False
+        decodes them from sRGB.
     depth, normals : bool
         Also write each photo's depth map and normal map.
     workers : int, optional
@@ -103,13 +112,14 @@ def reconstruct_files(
     ------
     InputError
         No photos, two photos with the same name, a missing output folder, an unknown mesh
-        suffix, ``workers < 1``, an unknown ``method`` or ``integrator``, a malformed
-        ``filter``, or Dask not installed: all before any photo is read. Problems with one photo
-        are reported in its result instead.
+        suffix, ``workers < 1``, an unknown ``channel``, ``method`` or ``integrator``, a
+        ``linear`` that is not a bool or None, a malformed ``filter``, or Dask not installed: all
+        before any photo is read. Problems with one photo are reported in its result instead.
     """
     from shadeform._checks import check_choice
     from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
+    from shadeform.io.images import CHANNELS
     from shadeform.preprocess import parse_filter
     from shadeform.solvers import available_methods
 
@@ -129,6 +139,10 @@ def reconstruct_files(
             f"unknown mesh format suffix '{suffix}'; use one of {', '.join(available_formats())}"
         )
     # the options every photo shares are checked once, not found wrong in every task
+    if channel not in (None, "auto"):
+        check_choice(channel, ("auto", *CHANNELS), "channel")
+    if linear is not None and not isinstance(linear, bool):
+        raise InputError(f"linear must be True, False or None (decide per photo), got {linear!r}")
     check_choice(options.get("method", "auto"), tuple(available_methods()), "method")
     if options.get("integrator") is not None:
         check_choice(options["integrator"], tuple(available_integrators()), "integrator")
@@ -156,7 +170,7 @@ def reconstruct_files(
         for photo in photos
     ]
     tasks = [
-        dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, srgb, options)
+        dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, linear, options)
         for photo, files in jobs
     ]
     done = [0]
@@ -173,22 +187,26 @@ def reconstruct_files(
 
 
 def _reconstruct_one(
-    photo: Path, files: tuple[Path, ...], step: int, channel: str, srgb: bool, options: dict
+    photo: Path,
+    files: tuple[Path, ...],
+    step: int,
+    channel: str | None,
+    linear: bool | None,
+    options: dict,
 ) -> BatchResult:
     """One photo: load, reconstruct, mesh, write; a user mistake becomes the result's error."""
     import shadeform
     from shadeform.io.atomic import OutputSet
+    from shadeform.io.images import read_photo
     from shadeform.io.maps import save_depth, save_normal_map
-    from shadeform.preprocess import srgb_to_linear
 
     start = time.perf_counter()
+    read = None
     try:
         with OutputSet() as outputs:  # a photo's files appear together or not at all
             temps = [outputs.temp(path) for path in files]
-            image = shadeform.load_image(photo, channel=channel)
-            if srgb:
-                image = srgb_to_linear(image)
-            rec = shadeform.reconstruct(image, **options)
+            read = read_photo(photo, channel=channel, linear=linear)
+            rec = shadeform.reconstruct(read.image, **options)
             mesh = shadeform.to_mesh(rec, step=step)
             shadeform.export(mesh, temps[0])
             for path, temp in zip(files[1:], temps[1:]):
@@ -198,7 +216,8 @@ def _reconstruct_one(
                     save_normal_map(rec.normals, temp)
             outputs.commit()
     except InputError as err:
-        return BatchResult(photo, (), 0, 0, time.perf_counter() - start, str(err))
+        info = None if read is None else read.info
+        return BatchResult(photo, (), 0, 0, time.perf_counter() - start, str(err), info)
     except OSError as err:
         reason = err.strerror or type(err).__name__
         return BatchResult(
@@ -209,4 +228,5 @@ def _reconstruct_one(
             time.perf_counter() - start,
             f"cannot read or write the files of '{photo}': {reason}",
         )
-    return BatchResult(photo, files, mesh.n_vertices, mesh.n_faces, time.perf_counter() - start)
+    seconds = time.perf_counter() - start
+    return BatchResult(photo, files, mesh.n_vertices, mesh.n_faces, seconds, photo_info=read.info)

@@ -29,12 +29,17 @@ class StoredImage:
     name : str
         Display name (the upload's file name without folders, or the example's name).
     pixels : (H, W, C) float32
-        As :func:`shadeform.io.images.load_pixels` returns it, ``C`` 1 (gray) or 3 (colour).
+        As :func:`shadeform.io.images.load_pixels` returns it (linear), ``C`` 1 (gray) or 3
+        (colour).
     mask : (H, W) bool or None
         A known object mask (the synthetic examples have their true one); None: found
         automatically from the chosen channel.
     suggested : dict or None
         Suggested :class:`shadeform.app.schema.ReconstructParams` fields, or None.
+    photo : dict or None
+        How a photo file was read: bit depth, encoding (8-bit files are sRGB and were made
+        linear), what decided it, clipped fractions (:attr:`shadeform.io.images.Photo.info`
+        less the channel); None for an example made in memory.
     """
 
     image_id: str
@@ -42,6 +47,7 @@ class StoredImage:
     pixels: np.ndarray
     mask: np.ndarray | None = None
     suggested: dict[str, Any] | None = None
+    photo: dict[str, Any] | None = None
 
     @property
     def nbytes(self) -> int:

@@ -180,6 +180,29 @@ def format_vector(values) -> str:
     return "(" + ", ".join(f"{float(v):.3g}" for v in values) + ")"
 
 
+def describe_photo(info: dict) -> str:
+    """What was decided in reading a photo (``Photo.info`` or ``PhotoSet.info``), in a few words."""
+    told = {"file": "", "set": " (calibrated set)", "user": " (as told)"}[info["encoding_from"]]
+    encoding = "sRGB, made linear" if info["encoding"] == "srgb" else "linear"
+    channel = info["channel"]
+    chosen = " (least clipped)" if info["channel_from"] == "auto" and channel in ("r", "g", "b") else ""
+    return f"{info['bits']}-bit {encoding}{told}, channel {channel}{chosen}"
+
+
+def note_channel(console: Console, info: dict) -> None:
+    """One line on stderr when the channel was switched from luma because another clips less."""
+    if info["channel_from"] != "auto" or info["channel"] not in ("r", "g", "b"):
+        return
+    clipped = info["clipped"]
+    shares = ", ".join(f"{name} {100 * clipped[name]:.1f} %" for name in "rgb")
+    console.print(
+        f"note: pixels at the white level: {shares}; solving on {info['channel']} "
+        "(--channel luma to solve on luma)",
+        soft_wrap=True,
+        highlight=False,
+    )
+
+
 def print_files(console: Console, rows: list[tuple[Path, str]]) -> None:
     """One line per file, path first; never wrapped or shortened, so it can be copied."""
     width = max(len(str(path)) for path, _ in rows)
@@ -260,10 +283,21 @@ IntegratorOption = Annotated[
 RefineOption = Annotated[
     int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")
 ]
-SrgbOption = Annotated[
-    bool,
+LinearOption = Annotated[
+    bool | None,
     typer.Option(
-        "--srgb", help="Undo the sRGB encoding of 8-bit photos (JPEG) first: shading needs linear light."
+        "--linear/--srgb",
+        help="How the photo file holds its values: --srgb decodes sRGB (JPEG, phone photos) to linear "
+        "light, --linear keeps them. Default: 8-bit files are sRGB, 16-bit and float ones linear, and so "
+        "is a photo in a folder with light_intensities.txt (a calibrated photo set).",
+        show_default=False,
+    ),
+]
+ChannelOption = Annotated[
+    str,
+    typer.Option(
+        help="Image channel: auto (luma, or the least clipped colour channel where one clips on "
+        "clearly fewer pixels), luma, r, g, b or max."
     ),
 ]
 FilterOption = Annotated[

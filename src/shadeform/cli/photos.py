@@ -4,6 +4,7 @@ photos under known lights) and ``batch`` (many photos in parallel)."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -13,16 +14,19 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from shadeform.cli._shell import (
+    ChannelOption,
     FilterOption,
     IntegratorOption,
+    LinearOption,
     MethodOption,
     RefineOption,
-    SrgbOption,
     StepOption,
     app,
     check_outputs,
+    describe_photo,
     format_seconds,
     format_vector,
+    note_channel,
     output_temps,
     parse_reference,
     print_files,
@@ -64,8 +68,8 @@ def reconstruct(
         float | None,
         typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant."),
     ] = None,
-    channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
-    srgb: SrgbOption = False,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
     concave: Annotated[
         Path | None,
         typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False),
@@ -96,7 +100,7 @@ def reconstruct(
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
     import shadeform
-    from shadeform.preprocess import srgb_to_linear
+    from shadeform.io.images import read_photo
     from shadeform.regions import parse_regions
 
     # everything the user typed is checked before any work
@@ -111,9 +115,8 @@ def reconstruct(
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
         with stage(err, f"loading {escape(str(image))}", timings, "load"):
-            pixels = shadeform.load_image(image, channel=channel)
-            if srgb:
-                pixels = srgb_to_linear(pixels)
+            photo = read_photo(image, channel=channel, linear=linear)
+            pixels = photo.image
             object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
         with stage(err, f"reconstructing ({method})", timings, "reconstruct"):
             rec = shadeform.reconstruct(
@@ -127,17 +130,19 @@ def reconstruct(
                 integrator=integrator,
                 refine=refine,
             )
+        rec = replace(rec, info={**rec.info, "photo": photo.info})
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
     timings["total"] = time.perf_counter() - total
 
     height, width = pixels.shape
+    note_channel(err, photo.info)
     if as_json:
         print_json(
             {
                 "command": "reconstruct",
-                "input": {"path": image, "width": width, "height": height, "channel": channel},
+                "input": {"path": image, "width": width, "height": height, "channel": photo.channel},
                 **report,
                 "light": rec.light,
                 "info": rec.info,
@@ -150,7 +155,7 @@ def reconstruct(
     info = rec.info
     refs = ", ".join(f"({r}, {c})" for r, c in info["references"])
     stages = ", ".join(f"{name} {format_seconds(t)}" for name, t in info["timings"].items())
-    out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {channel})")
+    out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {describe_photo(photo.info)})")
     out.print(
         f"  {info['method']} (refine {info['refine']}), {info['integrator']} integration, "
         f"filter {info['filter']}, light {format_vector(rec.light)}"
@@ -207,7 +212,13 @@ def stereo(
         str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")
     ] = "poisson",
     step: StepOption = 1,
-    srgb: SrgbOption = False,
+    channel: Annotated[
+        str,
+        typer.Option(
+            help="Image channel: auto (colour photos are solved on all three channels), luma, r, g, b or max."
+        ),
+    ] = "auto",
+    linear: LinearOption = None,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
@@ -231,7 +242,9 @@ def stereo(
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
         with stage(err, "loading the photos", timings, "load"):
-            photos = load_photo_set(sources, lights=lights, intensities=intensities, mask=mask, srgb=srgb)
+            photos = load_photo_set(
+                sources, lights=lights, intensities=intensities, mask=mask, linear=linear, channel=channel
+            )
         with stage(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
             rec = reconstruct_stereo(
                 photos.images,
@@ -241,6 +254,7 @@ def stereo(
                 method=method,
                 integrator=integrator,
             )
+        rec = replace(rec, info={**rec.info, "photo": photos.info})
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
@@ -260,8 +274,8 @@ def stereo(
         return
     out = stdout_console()
     out.print(
-        f"[bold]reconstructed[/] {len(photos.paths)} photos ({width}x{height}) by {rec.info['method']}, "
-        f"{integrator} integration"
+        f"[bold]reconstructed[/] {len(photos.paths)} photos ({width}x{height}, {describe_photo(photos.info)}) "
+        f"by {rec.info['method']}, {integrator} integration"
     )
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
@@ -298,8 +312,8 @@ def batch(
     ] = None,
     slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
     tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
-    channel: Annotated[str, typer.Option(help="Image channel: luma, r, g, b or max.")] = "luma",
-    srgb: SrgbOption = False,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
     method: MethodOption = "auto",
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
@@ -341,7 +355,7 @@ def batch(
             suffix=suffix,
             step=step,
             channel=channel,
-            srgb=srgb,
+            linear=linear,
             depth=depth,
             normals=normals,
             workers=workers,
@@ -366,6 +380,7 @@ def batch(
                         "vertices": r.vertices,
                         "faces": r.faces,
                         "seconds": r.seconds,
+                        "photo_info": r.photo_info,
                         "error": r.error,
                     }
                     for r in results
@@ -373,10 +388,11 @@ def batch(
             }
         )
     else:
-        table = Table("photo", "vertices", "triangles", "seconds", "written")
+        table = Table("photo", "read as", "vertices", "triangles", "seconds", "written")
         for r in results:
             table.add_row(
                 escape(str(r.photo)),
+                describe_photo(r.photo_info) if r.photo_info else "",
                 f"{r.vertices:,}",
                 f"{r.faces:,}",
                 format_seconds(r.seconds),

@@ -1,10 +1,11 @@
 """Read photos and masks into arrays, keeping every bit the file holds.
 
 One internal decoder turns a file into an ``(H, W, C)`` float32 array in ``[0, 1]`` with ``C = 1``
-(gray) or ``C = 3`` (colour); :func:`load_image` picks one channel from it, :func:`load_image_rgb`
-keeps the colour for texturing, :func:`load_mask` keeps the non-zero pixels. :func:`load_pixels`
-keeps the array as stored (gray or colour) for :func:`select_channel` to pick from later. The
-readers take a path or the file's content as ``bytes`` (an upload, decoded from memory).
+(gray) or ``C = 3`` (colour); :func:`read_photo` makes it linear and picks the channel to solve on,
+and says what it decided (a :class:`Photo`); :func:`load_image` returns just that channel,
+:func:`load_image_rgb` keeps the colour, :func:`load_pixels` keeps the array gray or colour as
+stored for :func:`select_channel` to pick from later, :func:`load_mask` keeps the non-zero pixels.
+The readers take a path or the file's content as ``bytes`` (an upload, decoded from memory).
 
 Decoders, chosen by the file's first bytes (never its name):
 
@@ -19,6 +20,17 @@ Decoders, chosen by the file's first bytes (never its name):
 Conventions (``docs/conventions.md``): 16-bit samples become ``value / 65535`` exactly, 8-bit
 ones ``value / 255``; EXIF orientation is applied; palette images become RGB through their
 palette; alpha is ignored.
+
+Encoding: shading needs values proportional to the light received. Files of 8 bits or fewer per
+sample (JPEG, most PNGs) are taken to be sRGB-encoded, as cameras and phones write them, and are
+decoded to linear values (IEC 61966-2-1); 16-bit, 32-bit and float files are taken to be linear
+already, and so is every photo in a folder holding :data:`CALIBRATED_SET_FILE` (a radiometrically
+calibrated photo set such as DiLiGenT's, which is linear camera data even in 8-bit PNGs).
+``linear=True`` or ``False`` overrides the rule. Colour profiles and PNG gamma chunks are not read.
+
+Channel: by default (``channel=None`` or ``"auto"``) a colour photo is solved on its luma, unless
+one colour channel clips at the white level on clearly fewer pixels than luma does (see
+:data:`CLIP_MARGIN`): then on the least clipped channel, green first among near-equals.
 """
 
 from __future__ import annotations
@@ -27,6 +39,7 @@ import io
 import struct
 import warnings
 import zlib
+from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 
@@ -38,6 +51,8 @@ from PIL import Image, UnidentifiedImageError
 from shadeform.errors import InputError
 
 __all__ = [
+    "Photo",
+    "read_photo",
     "load_image",
     "load_image_rgb",
     "load_mask",
@@ -45,10 +60,27 @@ __all__ = [
     "select_channel",
     "ImageTooLargeError",
     "CHANNELS",
+    "CALIBRATED_SET_FILE",
+    "CLIP_MARGIN",
 ]
 
-#: Channel names accepted by :func:`load_image`.
+#: Channel names accepted by :func:`load_image` (which also takes ``"auto"`` or None: see
+#: :func:`read_photo`).
 CHANNELS = ("luma", "r", "g", "b", "max")
+
+#: A photo in a folder holding this file belongs to a radiometrically calibrated photo set (the
+#: DiLiGenT layout, ``docs/conventions.md``): its values are linear whatever its bit depth, since
+#: light strengths can only be divided out of linear values.
+CALIBRATED_SET_FILE = "light_intensities.txt"
+
+#: How many fewer pixels (a fraction of the photo's) one colour channel must clip at the white
+#: level than luma does before ``channel="auto"`` solves on it instead of luma; channels within
+#: this of the least clipped one count as equals (green is taken first). The few highlight pixels
+#: of a glossy object, which clip in every channel alike or almost, leave luma and its lower noise;
+#: a colour channel saturated over a part of the object moves the choice. A judgement, not a fit:
+#: of the 792 photos in ``../shared/data/real`` it moves 5 (DiLiGenT reading under bluish lights:
+#: blue clips on 0.7-0.9 % of the photo, green on 0.2 %) to green.
+CLIP_MARGIN = 0.005
 
 # Rec. 601 luma weights (docs/conventions.md).
 _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
@@ -75,10 +107,65 @@ class ImageTooLargeError(InputError):
     """
 
 
-def load_image(
-    path: str | PathLike | bytes, *, channel: str = "luma", max_pixels: int = 250_000_000
-) -> np.ndarray:
-    """Read a photo as one channel of intensities.
+@dataclass(frozen=True, eq=False)
+class Photo:
+    """A photo read for shading: linear values, the channel to solve on, and how both were decided.
+
+    Made by :func:`read_photo`; :attr:`info` is what ``Reconstruction.info["photo"]`` records.
+
+    Attributes
+    ----------
+    pixels : (H, W, C) float32
+        Every channel of the photo, linear, in ``[0, 1]``: ``C = 1`` gray, ``C = 3`` R, G, B.
+    image : (H, W) float32
+        The channel shading is solved on (:attr:`channel`), linear, in ``[0, 1]``.
+    channel : {"luma", "r", "g", "b", "max", "gray"}
+        Which channel :attr:`image` is; ``"gray"`` for a gray photo, whatever was asked.
+    channel_from : {"auto", "user"}
+        Chosen by the least-clipping rule (:data:`CLIP_MARGIN`), or given by the caller.
+    bits : int
+        Bits per sample in the file: 1 to 8 for sRGB-style files, 16 or 32 for linear ones.
+    encoding : {"srgb", "linear"}
+        How the file holds its values; ``"srgb"`` ones were decoded to linear (IEC 61966-2-1).
+    encoding_from : {"file", "set", "user"}
+        Decided by the file's bit depth, by its folder being a calibrated photo set
+        (:data:`CALIBRATED_SET_FILE`), or given by the caller (``linear=``).
+    clipped : dict of str to float
+        Fraction of the photo's pixels at the white level (the largest value the file holds):
+        ``{"gray": f}`` for a gray photo; ``{"r", "g", "b", "any"}`` for a colour one, ``"any"``
+        counting the pixels clipped in at least one channel (where luma and max are wrong).
+    """
+
+    pixels: np.ndarray
+    image: np.ndarray
+    channel: str
+    channel_from: str
+    bits: int
+    encoding: str
+    encoding_from: str
+    clipped: dict[str, float]
+
+    @property
+    def info(self) -> dict:
+        """The decisions as plain JSON-ready values (everything but the arrays)."""
+        return {
+            "bits": self.bits,
+            "encoding": self.encoding,
+            "encoding_from": self.encoding_from,
+            "channel": self.channel,
+            "channel_from": self.channel_from,
+            "clipped": dict(self.clipped),
+        }
+
+
+def read_photo(
+    path: str | PathLike | bytes,
+    *,
+    channel: str | None = None,
+    linear: bool | None = None,
+    max_pixels: int = 250_000_000,
+) -> Photo:
+    """Read a photo as linear intensities, and say what was decided on the way.
 
     Parameters
     ----------
@@ -87,10 +174,19 @@ def load_image(
         gray, gray + alpha, RGB, RGBA or palette; float TIFFs are taken to hold values in
         ``[0, 1]`` and are clipped to it. ``bytes`` (or ``bytearray``, ``memoryview``) are the
         content of such a file, already in memory (e.g. an upload).
-    channel : {"luma", "r", "g", "b", "max"}
-        Which intensity to return for a colour image: Rec. 601 luma
-        ``0.299 R + 0.587 G + 0.114 B``, one of the colour channels, or the largest of R, G, B.
-        A gray image returns its gray values for every choice.
+    channel : {None, "auto", "luma", "r", "g", "b", "max"}
+        Which intensity to solve on for a colour photo. None or ``"auto"``: luma, unless one
+        colour channel clips at the white level on at least :data:`CLIP_MARGIN` of the photo's
+        pixels fewer than luma does (luma is wrong wherever any channel clips); then the least
+        clipped channel, green first, then red, among channels within that margin of it (green
+        weighs most in luma and has the most sensor sites). Otherwise Rec. 601
+        luma ``0.299 R + 0.587 G + 0.114 B``, one colour channel, or the largest of R, G, B. A gray
+        photo gives its gray values for every choice.
+    linear : bool or None
+        None: decide from the file: 8 bits per sample or fewer is sRGB and is decoded to linear,
+        16-bit and float is linear, and so is any photo in a folder holding
+        :data:`CALIBRATED_SET_FILE`. True: the file holds linear values; keep them. False: the
+        file is sRGB-encoded; decode it.
     max_pixels : int
         Refuse images that declare more pixels than this, before decoding anything (guards against
         corrupt files and decompression bombs). For files Pillow decodes, Pillow's own limit
@@ -98,15 +194,76 @@ def load_image(
 
     Returns
     -------
-    (H, W) float32
-        Intensities in ``[0, 1]``, row 0 at the top of the upright (EXIF-rotated) picture;
-        16-bit samples are ``value / 65535`` and 8-bit ones ``value / 255``.
+    Photo
+        The linear pixels, the chosen channel and the decisions; 16-bit samples are
+        ``value / 65535`` and 8-bit ones ``value / 255`` before any decoding, and the pictures are
+        upright (EXIF orientation applied).
 
     Raises
     ------
     InputError
         If the file is missing, empty, not an image, truncated or damaged, smaller than 3x3 or
-        larger than ``max_pixels``, holds NaN or infinite samples, or ``channel`` is unknown.
+        larger than ``max_pixels``, holds NaN or infinite samples, or ``channel`` or ``linear``
+        is not one of the choices.
+
+    Examples
+    --------
+    >>> photo = read_photo("phone.jpg")  # doctest: +SKIP
+    >>> photo.encoding, photo.channel, photo.image.shape  # doctest: +SKIP
+    ('srgb', 'luma', (3024, 4032))
+    """
+    asked = _check_channel(channel, auto=True)
+    pixels, bits, encoding, encoding_from, clipped = _read(path, linear, max_pixels)
+    if pixels.shape[2] == 1:
+        chosen = "gray"
+    else:
+        chosen = asked or _least_clipped(clipped)
+    image = select_channel(pixels, "luma" if chosen == "gray" else chosen)
+    return Photo(
+        pixels,
+        image,
+        chosen,
+        "auto" if asked is None else "user",
+        bits,
+        encoding,
+        encoding_from,
+        clipped,
+    )
+
+
+def load_image(
+    path: str | PathLike | bytes,
+    *,
+    channel: str | None = None,
+    linear: bool | None = None,
+    max_pixels: int = 250_000_000,
+) -> np.ndarray:
+    """Read a photo as one channel of linear intensities.
+
+    The image of :func:`read_photo`, without the record of what was decided.
+
+    Parameters
+    ----------
+    path : str, path-like or bytes
+        Any file :func:`read_photo` reads, or its content.
+    channel : {None, "auto", "luma", "r", "g", "b", "max"}
+        As in :func:`read_photo`: by default luma, or the least clipped colour channel when one
+        channel clips clearly less.
+    linear : bool or None
+        As in :func:`read_photo`: by default 8-bit files are decoded from sRGB, 16-bit and float
+        ones kept; True keeps the values as stored, False decodes them from sRGB.
+    max_pixels : int
+        As in :func:`read_photo`.
+
+    Returns
+    -------
+    (H, W) float32
+        Linear intensities in ``[0, 1]``, row 0 at the top of the upright (EXIF-rotated) picture.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_photo`.
 
     Examples
     --------
@@ -114,12 +271,13 @@ def load_image(
     >>> image.shape, image.dtype  # doctest: +SKIP
     ((512, 612), dtype('float32'))
     """
-    _check_channel(channel)
-    return select_channel(_decode(path, max_pixels), channel)
+    return read_photo(path, channel=channel, linear=linear, max_pixels=max_pixels).image
 
 
-def load_pixels(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) -> np.ndarray:
-    """Read a photo as it is stored: gray stays one channel, colour keeps three.
+def load_pixels(
+    path: str | PathLike | bytes, *, linear: bool | None = None, max_pixels: int = 250_000_000
+) -> np.ndarray:
+    """Read a photo with its channels: gray stays one channel, colour keeps three.
 
     For a caller that picks channels later, again and again, without decoding again (the app
     keeps this array and calls :func:`select_channel` per request).
@@ -127,21 +285,23 @@ def load_pixels(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) 
     Parameters
     ----------
     path : str, path-like or bytes
-        Any file :func:`load_image` reads, or its content.
+        Any file :func:`read_photo` reads, or its content.
+    linear : bool or None
+        As in :func:`read_photo`.
     max_pixels : int
-        As in :func:`load_image`.
+        As in :func:`read_photo`.
 
     Returns
     -------
     (H, W, C) float32
-        ``C = 1`` for gray files, ``C = 3`` (R, G, B) for colour ones; values in ``[0, 1]``.
+        ``C = 1`` for gray files, ``C = 3`` (R, G, B) for colour ones; linear values in ``[0, 1]``.
 
     Raises
     ------
     InputError
-        As :func:`load_image`; :class:`ImageTooLargeError` if the image has too many pixels.
+        As :func:`read_photo`; :class:`ImageTooLargeError` if the image has too many pixels.
     """
-    return _decode(path, max_pixels)
+    return _read(path, linear, max_pixels, measure=False)[0]
 
 
 def select_channel(pixels: np.ndarray, channel: str = "luma") -> np.ndarray:
@@ -152,7 +312,7 @@ def select_channel(pixels: np.ndarray, channel: str = "luma") -> np.ndarray:
     pixels : (H, W), (H, W, 1) or (H, W, 3) float32
         E.g. from :func:`load_pixels`; values in ``[0, 1]``.
     channel : {"luma", "r", "g", "b", "max"}
-        As in :func:`load_image`; a gray picture returns its gray values for every choice.
+        As in :func:`read_photo`; a gray picture returns its gray values for every choice.
 
     Returns
     -------
@@ -183,20 +343,30 @@ def select_channel(pixels: np.ndarray, channel: str = "luma") -> np.ndarray:
     return np.ascontiguousarray(pixels[:, :, "rgb".index(channel)])
 
 
-def _check_channel(channel) -> None:
+def _check_channel(channel, *, auto: bool = False) -> str | None:
+    """The channel asked for; None where ``auto`` allows the rule to choose (None or "auto")."""
+    if auto and (channel is None or channel == "auto"):
+        return None
     if not isinstance(channel, str) or channel not in CHANNELS:
-        raise InputError(f"unknown channel {channel!r}; choose one of {', '.join(map(repr, CHANNELS))}")
+        choices = ("auto", *CHANNELS) if auto else CHANNELS
+        raise InputError(f"unknown channel {channel!r}; choose one of {', '.join(map(repr, choices))}")
+    return channel
 
 
-def load_image_rgb(path: str | PathLike | bytes, *, max_pixels: int = 250_000_000) -> np.ndarray:
-    """Read a photo in colour, e.g. to texture a mesh with it.
+def load_image_rgb(
+    path: str | PathLike | bytes, *, linear: bool | None = None, max_pixels: int = 250_000_000
+) -> np.ndarray:
+    """Read a photo in colour.
 
     Parameters
     ----------
     path : str, path-like or bytes
-        Any file :func:`load_image` reads, or its content.
+        Any file :func:`read_photo` reads, or its content.
+    linear : bool or None
+        As in :func:`read_photo`. A texture shows the photo as it looks: read it with
+        ``linear=True``, which keeps the values as stored.
     max_pixels : int
-        As in :func:`load_image`.
+        As in :func:`read_photo`.
 
     Returns
     -------
@@ -206,12 +376,71 @@ def load_image_rgb(path: str | PathLike | bytes, *, max_pixels: int = 250_000_00
     Raises
     ------
     InputError
-        As :func:`load_image`.
+        As :func:`read_photo`.
     """
-    pixels = _decode(path, max_pixels)
+    pixels = load_pixels(path, linear=linear, max_pixels=max_pixels)
     if pixels.shape[2] == 1:
         return np.repeat(pixels, 3, axis=2)
     return pixels
+
+
+def _read(path: str | PathLike | bytes, linear: bool | None, max_pixels: int, *, measure: bool = True):
+    """The one reading: (pixels made linear, bits, encoding, encoding_from, clipped fractions).
+
+    ``measure=False`` skips counting the clipped pixels (``clipped`` is then empty)."""
+    if linear is not None and not isinstance(linear, (bool, np.bool_)):
+        raise InputError(
+            f"linear must be True (the file holds linear values), False (it is sRGB-encoded) or "
+            f"None (decide from the file), got {linear!r}"
+        )
+    pixels, bits, source = _decode(path, max_pixels)
+    clipped = _clipped(pixels) if measure else {}
+    if linear is not None:
+        encoding, encoding_from = ("linear" if linear else "srgb"), "user"
+    elif isinstance(source, Path) and (source.parent / CALIBRATED_SET_FILE).is_file():
+        encoding, encoding_from = "linear", "set"
+    else:
+        encoding, encoding_from = ("srgb" if bits <= 8 else "linear"), "file"
+    if encoding == "srgb":
+        pixels = _srgb_decode(pixels)
+    return pixels, bits, encoding, encoding_from, clipped
+
+
+def _clipped(pixels: np.ndarray) -> dict[str, float]:
+    """Fraction of the pixels at the white level, per channel (and in any channel for colour)."""
+    count = pixels.shape[0] * pixels.shape[1]
+    if pixels.shape[2] == 1:
+        return {"gray": int(np.count_nonzero(pixels >= 1.0)) / count}
+    fractions = {name: int(np.count_nonzero(pixels[:, :, i] >= 1.0)) / count for i, name in enumerate("rgb")}
+    fractions["any"] = int(np.count_nonzero(pixels.max(axis=2) >= 1.0)) / count
+    return fractions
+
+
+def _least_clipped(clipped: dict[str, float]) -> str:
+    """The rule of ``channel="auto"`` for a colour photo (:func:`read_photo`)."""
+    fewest = min(clipped[name] for name in "rgb")
+    if clipped["any"] - fewest < CLIP_MARGIN:
+        return "luma"
+    # green, then red, then blue: the first within the margin of the least clipped
+    return next(name for name in "grb" if clipped[name] - fewest < CLIP_MARGIN)
+
+
+def _srgb_decode(values: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> linear (IEC 61966-2-1), a new array of the same float type.
+
+    The one implementation of the transfer curve (:func:`shadeform.preprocess.srgb_to_linear`
+    checks its input and calls this)."""
+    number = values.dtype.type  # float32 stays float32
+    encoded = ((values + number(0.055)) / number(1.055)) ** number(2.4)
+    return np.where(values <= number(0.04045), values / number(12.92), encoded)
+
+
+def _srgb_encode(values: np.ndarray) -> np.ndarray:
+    """Linear values in [0, 1] -> sRGB-encoded, the inverse of :func:`_srgb_decode` (to show a
+    decoded photo as it looked: 8-bit values come back exactly)."""
+    number = values.dtype.type
+    encoded = number(1.055) * values ** number(1 / 2.4) - number(0.055)
+    return np.where(values <= number(0.0031308), values * number(12.92), encoded)
 
 
 def load_mask(path: str | PathLike, *, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -236,7 +465,7 @@ def load_mask(path: str | PathLike, *, shape: tuple[int, ...] | None = None) -> 
         If the file cannot be read as an image (see :func:`load_image`), its size differs from
         ``shape``, or it has no non-zero pixel.
     """
-    mask = (_decode(path, 250_000_000) > 0).any(axis=2)
+    mask = (_decode(path, 250_000_000)[0] > 0).any(axis=2)
     if shape is not None:
         height, width = (int(n) for n in tuple(shape)[:2])
         if mask.shape != (height, width):
@@ -272,8 +501,9 @@ def _open(source: _Source):
     return io.BytesIO(source.data) if isinstance(source, _Memory) else open(source, "rb")
 
 
-def _decode(path: str | PathLike | bytes, max_pixels: int) -> np.ndarray:
-    """File -> (H, W, C) float32 in [0, 1], C in {1, 3}, upright (EXIF orientation applied)."""
+def _decode(path: str | PathLike | bytes, max_pixels: int) -> tuple[np.ndarray, int, _Source]:
+    """File -> (H, W, C) float32 in [0, 1], C in {1, 3}, upright (EXIF orientation applied), with
+    the file's bits per sample and the checked source it was read from."""
     whole = isinstance(max_pixels, (int, np.integer)) and not isinstance(max_pixels, bool)
     if not whole or max_pixels < 1:
         raise InputError(f"max_pixels must be a positive whole number, got {max_pixels!r}")
@@ -281,12 +511,12 @@ def _decode(path: str | PathLike | bytes, max_pixels: int) -> np.ndarray:
     with _open(path) as fh:
         head = fh.read(33)
     if head.startswith(_PNG_SIGNATURE):
-        pixels, orientation = _decode_png(path, head, max_pixels)
+        pixels, orientation, bits = _decode_png(path, head, max_pixels)
     elif head[:4] in _TIFF_MAGICS:
-        pixels, orientation = _decode_tiff(path, max_pixels)
+        pixels, orientation, bits = _decode_tiff(path, max_pixels)
     else:
-        pixels, orientation = _decode_pillow(path, max_pixels)
-    return np.ascontiguousarray(_orient(pixels, orientation))
+        pixels, orientation, bits = _decode_pillow(path, max_pixels)
+    return np.ascontiguousarray(_orient(pixels, orientation)), bits, path
 
 
 def _existing_file(path: str | PathLike | bytes) -> _Source:
@@ -347,15 +577,15 @@ def _drop_alpha(samples: np.ndarray) -> np.ndarray:
 # --- PNG ---------------------------------------------------------------------------------------
 
 
-def _decode_png(path: _Source, head: bytes, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_png(path: _Source, head: bytes, max_pixels: int) -> tuple[np.ndarray, int, int]:
     if len(head) < 33 or head[12:16] != b"IHDR":
         raise InputError(f"truncated or damaged PNG: '{path}' has no IHDR header; save or download it again")
     width, height, bitdepth = struct.unpack(">IIB", head[16:25])
     _check_dimensions(path, width, height, max_pixels)
     orientation = _png_orientation(path)
     if bitdepth != 16:
-        pixels, _ = _decode_pillow(path, max_pixels)
-        return pixels, orientation
+        pixels, _, _ = _decode_pillow(path, max_pixels)
+        return pixels, orientation, bitdepth
     samples = _decode_png16(path)
     if samples.ndim == 2:
         samples = samples[:, :, None]
@@ -364,7 +594,7 @@ def _decode_png(path: _Source, head: bytes, max_pixels: int) -> tuple[np.ndarray
             f"truncated or damaged PNG: '{path}' decodes to {samples.shape} {samples.dtype}, "
             f"not {height} x {width} 16-bit; save or download the file again"
         )
-    return _unsigned_to_unit(_drop_alpha(samples), 16), orientation
+    return _unsigned_to_unit(_drop_alpha(samples), 16), orientation, 16
 
 
 def _decode_png16(path: _Source) -> np.ndarray:
@@ -397,7 +627,7 @@ def _png_orientation(path: _Source) -> int:
 # --- TIFF --------------------------------------------------------------------------------------
 
 
-def _decode_tiff(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_tiff(path: _Source, max_pixels: int) -> tuple[np.ndarray, int, int]:
     try:
         with _open(path) as fh, tifffile.TiffFile(fh) as tif:
             page = tif.pages.first
@@ -430,15 +660,15 @@ def _decode_tiff(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
         raise _damaged(path, "TIFF", err) from None
     if codec not in tifffile.TIFF.DECOMPRESSORS:
         # 8-bit data loses nothing in Pillow, which has the common codecs built in.
-        pixels, _ = _decode_pillow(path, max_pixels)
-        return pixels, orientation
+        pixels, _, _ = _decode_pillow(path, max_pixels)
+        return pixels, orientation, bits
 
     if axes == "SYX":
         samples = np.moveaxis(samples, 0, -1)
     if samples.ndim == 2:
         samples = samples[:, :, None]
     pixels = _tiff_samples_to_unit(path, samples, bits, photometric, colormap)
-    return pixels, orientation
+    return pixels, orientation, bits
 
 
 def _tiff_samples_to_unit(
@@ -487,7 +717,7 @@ def _tiff_samples_to_unit(
 # --- Pillow ------------------------------------------------------------------------------------
 
 
-def _decode_pillow(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
+def _decode_pillow(path: _Source, max_pixels: int) -> tuple[np.ndarray, int, int]:
     try:
         # Pillow warns about large images and only raises past twice its limit; refuse both.
         with warnings.catch_warnings():
@@ -498,6 +728,7 @@ def _decode_pillow(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
                 image.load()
                 orientation = image.getexif().get(_EXIF_ORIENTATION, 1)
                 pixels = _pillow_pixels(path, image)
+                bits = 16 if image.mode.startswith("I;16") else 1 if image.mode == "1" else 8
     except UnidentifiedImageError:
         raise _not_an_image(path) from None
     except (Image.DecompressionBombError, Image.DecompressionBombWarning):
@@ -508,7 +739,7 @@ def _decode_pillow(path: _Source, max_pixels: int) -> tuple[np.ndarray, int]:
         ) from None
     except (OSError, SyntaxError, EOFError, struct.error, zlib.error) as err:
         raise _damaged(path, "image", err) from None
-    return pixels, orientation
+    return pixels, orientation, bits
 
 
 def _pillow_pixels(path: _Source, image: Image.Image) -> np.ndarray:
