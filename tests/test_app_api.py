@@ -580,6 +580,156 @@ class TestExport:
         )
 
 
+# ----------------------------------------------------------------------------------- masks
+
+
+def mask_text(mask) -> str:
+    """A mask as ReconstructParams.mask: base64 of a PNG, 255 on the object."""
+    return base64.b64encode(png_bytes(np.where(mask, 255, 0).astype(np.uint8))).decode()
+
+
+def decoded_mask(text: str) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(text)))) > 0
+
+
+def half_bowl():
+    """The bowl's true mask with its left half taken off: a mask the automatic one is not."""
+    _, info = load_example("synth:bowl", size=SIZE)
+    mask = info["mask"].copy()
+    mask[:, : SIZE // 2] = False
+    return mask
+
+
+class TestMasks:
+    def test_auto_is_what_a_solve_uses(self, client, bowl):
+        result = client.post(f"/api/images/{bowl['image_id']}/mask/auto", json={}).json()
+        solved = reconstruct(client, bowl["image_id"]).json()
+        np.testing.assert_array_equal(decoded_mask(result["mask_png"]), decoded_mask(solved["mask_png"]))
+        assert result["note"] == "the example's true mask"
+        np.testing.assert_array_equal(
+            decoded_mask(result["mask_png"]), load_example("synth:bowl", size=SIZE)[1]["mask"]
+        )
+
+    def test_auto_photo_is_the_library_mask(self, client):
+        from shadeform.masks import find_object
+
+        image_id = client.post("/api/examples/coin").json()["image_id"]
+        result = client.post(f"/api/images/{image_id}/mask/auto", json={"channel": "luma"}).json()
+        found = find_object(load_example("coin")[0])
+        np.testing.assert_array_equal(decoded_mask(result["mask_png"]), found.mask)
+        assert result["pixels"] == found.mask.sum() and result["dark"] is False
+        assert result["threshold"] == pytest.approx(found.threshold) and result["note"] == found.note
+
+    def test_threshold(self, client):
+        from shadeform.masks import threshold_object
+
+        image, _ = load_example("coin")
+        image_id = client.post("/api/examples/coin").json()["image_id"]
+        for dark in (False, True):
+            result = client.post(
+                f"/api/images/{image_id}/mask/auto", json={"threshold": 0.3, "dark": dark}
+            ).json()
+            np.testing.assert_array_equal(
+                decoded_mask(result["mask_png"]), threshold_object(image, 0.3, dark=dark)
+            )
+            assert result["threshold"] == 0.3 and result["dark"] is dark
+
+    def test_seeds(self, client):
+        from shadeform.masks import segment_from_seeds
+
+        gray = np.zeros((40, 80), dtype=np.uint8)
+        gray[5:35, 5:30] = 200
+        gray[5:35, 45:75] = 120
+        image_id = upload(client, png_bytes(gray)).json()["image_id"]
+        result = client.post(
+            f"/api/images/{image_id}/mask/seeds", json={"inside": [[20, 60]], "outside": [[2, 40]]}
+        ).json()
+        mask = decoded_mask(result["mask_png"])
+        assert mask[5:35, 45:75].all() and mask.sum() == 30 * 30
+        image = gray / 255.0  # the same object whether the upload was made linear or not
+        np.testing.assert_array_equal(mask, segment_from_seeds(image, [(20, 60)], [(2, 40)]))
+        assert result["note"] == "grown from 1 click on the object and 1 on the background"
+
+    def test_file_is_checked_and_made_a_grey_png(self, client, bowl):
+        mask = half_bowl()
+        rgba = np.zeros((SIZE, SIZE, 4), dtype=np.uint8)
+        rgba[mask] = (255, 255, 255, 255)
+        rgba[~mask, 3] = 255
+        data = base64.b64encode(png_bytes(rgba)).decode()
+        result = client.post(f"/api/images/{bowl['image_id']}/mask/file", json={"data": data}).json()
+        png = Image.open(io.BytesIO(base64.b64decode(result["mask_png"])))
+        assert png.mode == "L" and set(np.unique(np.asarray(png))) == {0, 255}
+        np.testing.assert_array_equal(np.asarray(png) > 0, mask)
+        assert result["pixels"] == mask.sum()
+
+    def test_reconstruct_and_preview_use_the_mask(self, client, bowl):
+        mask = half_bowl()
+        params = {"step": 2, "mask": mask_text(mask)}
+        image, info = load_example("synth:bowl", size=SIZE)
+        rec = shadeform.reconstruct(image, light=info["light"], mask=mask)
+        expected = shadeform.to_mesh(rec, step=2)
+        for preview in (True, False):
+            body = {"image_id": bowl["image_id"], "params": params, "preview": preview}
+            result = client.post("/api/reconstruct", json=body).json()
+            np.testing.assert_array_equal(decoded_mask(result["mask_png"]), mask)
+            positions = decode_mesh(result["mesh"])["positions"]
+            assert positions[:, 0].min() >= SIZE // 2  # nothing left of the mask's edge
+        np.testing.assert_array_equal(positions, expected.vertices.astype(np.float32))
+        plain = reconstruct(client, bowl["image_id"], step=2).json()
+        assert plain["mesh"]["vertex_count"] > 1.8 * result["mesh"]["vertex_count"]
+
+    def test_export_uses_the_mask(self, client, bowl, tmp_path):
+        mask = half_bowl()
+        image, info = load_example("synth:bowl", size=SIZE)
+        expected = shadeform.to_mesh(shadeform.reconstruct(image, light=info["light"], mask=mask), step=2)
+        request = {"image_id": bowl["image_id"], "params": {"step": 2, "mask": mask_text(mask)}}
+        response = client.post("/api/export?format=.obj", json=request)
+        assert response.status_code == 200, response.text
+        assert response.content == shadeform.export(expected, tmp_path / "expected.obj").read_bytes()
+
+    @pytest.mark.parametrize(
+        ("make", "fragments"),
+        [
+            (lambda: mask_text(np.ones((10, 12), dtype=bool)), ["mask is 12x10 but the image is 64x64"]),
+            (lambda: mask_text(np.zeros((SIZE, SIZE), dtype=bool)), ["mask is empty"]),
+            (lambda: base64.b64encode(b"not a picture").decode(), ["mask:", "not an image"]),
+            (lambda: "%%% not base64 %%%", ["not base64"]),
+            (lambda: "", ["empty file"]),
+        ],
+    )
+    def test_bad_masks(self, client, bowl, make, fragments):
+        text = make()
+        assert_error(reconstruct(client, bowl["image_id"], mask=text), 422, *fragments)
+        assert_error(
+            client.post(
+                "/api/export?format=.wrl", json={"image_id": bowl["image_id"], "params": {"mask": text}}
+            ),
+            422,
+            *fragments,
+        )
+        assert_error(
+            client.post(f"/api/images/{bowl['image_id']}/mask/file", json={"data": text}), 422, *fragments
+        )
+
+    def test_bad_requests(self, client, bowl):
+        route = f"/api/images/{bowl['image_id']}/mask"
+        assert_error(
+            client.post(f"{route}/auto", json={"threshold": 2.0}), 422, "no pixel is above threshold 2"
+        )
+        assert_error(client.post(f"{route}/auto", json={"channel": "pink"}), 422, "channel")
+        assert_error(client.post(f"{route}/seeds", json={"inside": []}), 422, "inside")
+        assert_error(
+            client.post(f"{route}/seeds", json={"inside": [[99, 0]]}), 422, "not a pixel of the 64x64 image"
+        )
+        assert_error(
+            client.post(f"{route}/seeds", json={"inside": [[0, 0]]}), 422, "look like the background"
+        )
+        assert_error(client.post(f"{route}/seeds", json={"inside": [[9, 9]], "radius": 500}), 422, "radius")
+        assert_error(client.post(f"{route}/file", json={}), 422, "data", "missing")
+        assert_error(client.post("/api/images/feedfacefeedface/mask/auto", json={}), 404, "unknown image id")
+        assert_error(client.get(f"{route}/auto"), 405, "not allowed")
+
+
 # ------------------------------------------------------------------- guard, routes, static
 
 

@@ -15,6 +15,7 @@ A full-page screenshot of the app is kept in ``tests/artifacts/app.png``.
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import socket
@@ -503,3 +504,249 @@ def test_a_dropped_image_opens_and_a_dropped_non_image_shows_the_servers_message
     assert "not an image" in toast.inner_text()
     # the open image and its model stay
     assert page.evaluate("window.shadeform.state().image.name") == "egg.png"
+
+
+# ------------------------------------------------------------------------------- the mask tool
+
+
+def mask_state(page) -> dict:
+    return page.evaluate("window.shadeform.mask()")
+
+
+def params_mask(page) -> np.ndarray | None:
+    """The user's mask the client sends with every solve (params.mask), decoded."""
+    from PIL import Image
+
+    text = page.evaluate("window.shadeform.state().params.mask")
+    if text is None:
+        return None
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(text))).convert("L")) > 0
+
+
+def shown_cells(page) -> np.ndarray:
+    """(row, col) of every vertex of the mesh on screen."""
+    positions = np.array(page.evaluate("window.shadeform.mesh().positions")).reshape(-1, 3)
+    return np.column_stack([-positions[:, 1], positions[:, 0]]).round().astype(int)
+
+
+def drag(page, points) -> None:
+    """Press at the first image point (x, y), move through the others, release."""
+    start = page.evaluate(f"window.shadeform.pagePoint({points[0][0]}, {points[0][1]})")
+    page.mouse.move(start["x"], start["y"])
+    page.mouse.down()
+    for x, y in points[1:]:
+        at = page.evaluate(f"window.shadeform.pagePoint({x}, {y})")
+        page.mouse.move(at["x"], at["y"], steps=6)
+    page.mouse.up()
+
+
+SPHERE = "synth:sphere"  # 256 px, its true mask a disk of radius ~108 about (127.5, 127.5)
+
+
+def test_mask_brush_polygon_invert_drive_the_solve(page):
+    from shadeform.examples import load_example
+
+    open_example(page, SPHERE)
+    _, info = load_example(SPHERE)
+    truth = info["mask"]
+    state = mask_state(page)
+    assert state["user"] is False and state["pixels"] == truth.sum()
+    full = page.evaluate("window.shadeform.lastResult().vertex_count")
+
+    # K: the mask tool; erase a band across the sphere with a 12-pixel brush
+    page.keyboard.press("k")
+    page.click('#mask-op [data-mask-op="erase"]')
+    page.fill("#mask-radius", "12")
+    before = applied(page)
+    drag(page, [(40, 128), (128, 128), (216, 128)])
+    wait_for_result(page, before)
+    mask = params_mask(page)
+    assert mask is not None and mask_state(page)["user"] is True
+    assert not mask[118:139, 40:217].any() and mask[60, 128] and mask[196, 128]
+    assert not page.evaluate("window.shadeform.maskAt(128, 128)")
+    # the solve used it: no vertex in the erased band, and fewer of them
+    cells = shown_cells(page)
+    band = (np.abs(cells[:, 0] - 128) <= 10) & (cells[:, 1] >= 45) & (cells[:, 1] <= 211)
+    assert not band.any()
+    assert page.evaluate("window.shadeform.lastResult().vertex_count") < 0.9 * full
+
+    # a polygon in Add mode puts a square of the band back
+    page.click('#mask-mode [data-mask-mode="polygon"]')
+    page.click('#mask-op [data-mask-op="add"]')
+    before = applied(page)
+    for x, y in [(100, 110), (156, 110), (156, 146)]:
+        click_image(page, x, y)
+    click_image(page, 100, 146)
+    page.keyboard.press("Enter")
+    wait_for_result(page, before)
+    mask = params_mask(page)
+    assert mask[128, 128] and mask[111:146, 101:156].all() and not mask[128, 60]
+    assert (np.abs(shown_cells(page) - [128, 128]).max(axis=1) <= 2).any()  # vertices there again
+
+    # Invert swaps object and background; inverting again gives the same mask and model back
+    edited, vertices = mask, page.evaluate("window.shadeform.lastResult().vertex_count")
+    sent = page.evaluate("window.shadeform.requests()")
+    page.click("#mask-invert")
+    page.wait_for_function(f"window.shadeform.requests() > {sent}")
+    np.testing.assert_array_equal(params_mask(page), ~edited)
+    before = applied(page)
+    page.click("#mask-invert")
+    wait_for_result(page, before)
+    np.testing.assert_array_equal(params_mask(page), edited)
+    assert page.evaluate("window.shadeform.lastResult().vertex_count") == vertices
+
+    # a dab of the eraser inside the object makes one more hole; Fill holes closes them all
+    # (the band stops short of the rim: its two parts are holes too)
+    page.click('#mask-mode [data-mask-mode="brush"]')
+    page.click('#mask-op [data-mask-op="erase"]')
+    before = applied(page)
+    drag(page, [(128, 70), (129, 70)])
+    wait_for_result(page, before)
+    assert not params_mask(page)[70, 128]
+    before = applied(page)
+    page.click("#mask-fill")
+    wait_for_result(page, before)
+    np.testing.assert_array_equal(params_mask(page), truth)
+    assert page.evaluate("window.shadeform.lastResult().vertex_count") == full
+
+    # Automatic goes back to the example's own mask
+    before = applied(page)
+    page.click("#mask-auto")
+    wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.mask") is None
+    assert mask_state(page)["user"] is False and mask_state(page)["pixels"] == truth.sum()
+    assert page.evaluate("window.shadeform.lastResult().vertex_count") == full
+
+
+def test_mask_threshold_slider_outlines_live_and_solves_on_release(page):
+    from shadeform.examples import load_example
+    from shadeform.masks import threshold_object
+
+    open_example(page, SPHERE)
+    image, _ = load_example(SPHERE)
+    page.click('#tools [data-tool="mask"]')
+    before, sent = applied(page), page.evaluate("window.shadeform.requests()")
+    # a drag: input events only; the outline follows, nothing is solved
+    page.evaluate(
+        """async () => {
+            const slider = document.getElementById('mask-threshold');
+            for (const value of [300, 400, 500, 600]) {
+                slider.value = String(value);
+                slider.dispatchEvent(new Event('input'));
+                await new Promise((resolve) => setTimeout(resolve, 30));
+            }
+        }"""
+    )
+    expected = threshold_object(image, 0.36)  # position 600 of 1000 on the square-root scale
+    page.wait_for_function(f"window.shadeform.mask().pixels === {int(expected.sum())}")
+    assert page.evaluate("window.shadeform.requests()") == sent and applied(page) == before
+    assert "release to use it" in mask_state(page)["note"]
+    # the release: that mask is the user's, and solved
+    page.evaluate(
+        """() => {
+            const slider = document.getElementById('mask-threshold');
+            slider.value = '600';
+            slider.dispatchEvent(new Event('change'));
+        }"""
+    )
+    wait_for_result(page, before)
+    np.testing.assert_array_equal(params_mask(page), expected)
+    cells = shown_cells(page)
+    assert expected[cells[:, 0], cells[:, 1]].all()  # every vertex on the thresholded disk
+    assert mask_state(page)["note"].startswith("Your mask")
+
+
+def test_mask_click_the_object(page, tmp_path):
+    from PIL import Image
+
+    # two lit spheres: the automatic mask takes the larger; a click takes the other
+    rows, cols = np.mgrid[0:100, 0:220]
+    image = np.zeros((100, 220))
+    for (row, col), radius in (((50, 55), 35), ((50, 160), 45)):
+        distance = np.hypot(rows - row, cols - col)
+        image += np.sqrt(np.clip(1 - (distance / radius) ** 2, 0, 1))
+    png = tmp_path / "two.png"
+    Image.fromarray(np.rint(image * 65535).astype(np.uint16)).save(png)  # 16-bit: linear
+    before = applied(page)
+    page.set_input_files("#file-image", str(png))
+    wait_for_result(page, before, timeout=FIRST_RESULT_MS)
+    assert page.evaluate("window.shadeform.maskAt(50, 160)") and not page.evaluate(
+        "window.shadeform.maskAt(50, 55)"
+    )
+
+    page.keyboard.press("k")
+    page.click('#mask-mode [data-mask-mode="object"]')
+    before = applied(page)
+    click_image(page, 55, 50)
+    wait_for_result(page, before)
+    mask = params_mask(page)
+    left = np.hypot(rows - 50, cols - 55) < 34
+    assert mask[left].all() and not mask[:, 110:].any()
+    assert mask_state(page)["clicks"] == {"inside": 1, "outside": 0}
+    assert (shown_cells(page)[:, 1] < 100).all()  # the model is the left sphere
+
+    # Esc forgets the clicks; an "object" click on the black background is refused, and the
+    # message stays; the mask and the model stay too
+    page.keyboard.press("Escape")
+    assert mask_state(page)["clicks"] == {"inside": 0, "outside": 0}
+    click_image(page, 108, 5)
+    page.wait_for_function("window.shadeform.mask().error !== null")
+    assert "look like the background" in mask_state(page)["error"]
+    page.wait_for_timeout(7500)  # longer than a toast lasts
+    assert page.locator("#mask-error").is_visible()
+    assert mask_state(page)["clicks"] == {"inside": 0, "outside": 0}  # the failed click is taken back
+    np.testing.assert_array_equal(params_mask(page), mask)
+
+
+def test_mask_save_load_and_reload(page, tmp_path):
+    from PIL import Image
+
+    from shadeform import load_mask
+    from shadeform.examples import load_example
+
+    open_example(page, SPHERE)
+    _, info = load_example(SPHERE)
+    page.click('#tools [data-tool="mask"]')
+    with page.expect_download(timeout=RESULT_MS) as started:
+        page.click("#mask-save")
+    saved = tmp_path / started.value.suggested_filename
+    started.value.save_as(saved)
+    assert saved.name == "synth_sphere.mask.png"
+    np.testing.assert_array_equal(load_mask(saved), info["mask"])  # what the CLI's --mask reads
+
+    # Clear empties the mask to paint on; nothing is solved until the next edit
+    sent = page.evaluate("window.shadeform.requests()")
+    page.click("#mask-clear")
+    assert mask_state(page)["pixels"] == 0 and mask_state(page)["user"] is True
+    assert page.evaluate("window.shadeform.state().params.mask") is None
+    assert page.evaluate("window.shadeform.requests()") == sent
+
+    # load the right half of it: the solve follows
+    half = info["mask"].copy()
+    half[:, :128] = False
+    half_file = tmp_path / "half.png"
+    Image.fromarray(np.where(half, 255, 0).astype(np.uint8)).save(half_file)
+    before = applied(page)
+    page.set_input_files("#file-mask", str(half_file))
+    wait_for_result(page, before)
+    np.testing.assert_array_equal(params_mask(page), half)
+    assert (shown_cells(page)[:, 1] >= 128).all()
+    assert "half.png" in mask_state(page)["note"]
+
+    # a mask of another size is refused with a message that stays; the model stays
+    small = tmp_path / "small.png"
+    Image.fromarray(np.full((10, 12), 255, dtype=np.uint8)).save(small)
+    page.set_input_files("#file-mask", str(small))
+    page.wait_for_function("window.shadeform.mask().error !== null")
+    assert "mask is 12x10 but the image is 256x256" in mask_state(page)["error"]
+    np.testing.assert_array_equal(params_mask(page), half)
+
+    # a reload keeps the user's mask (and solves with it)
+    page.wait_for_timeout(400)  # the session is written shortly after the last change
+    page.reload()
+    page.evaluate("window.shadeform.ready")
+    wait_for_result(page, 0)
+    np.testing.assert_array_equal(params_mask(page), half)
+    page.wait_for_function(f"window.shadeform.mask().pixels === {int(half.sum())}")
+    assert mask_state(page)["user"] is True
+    assert (shown_cells(page)[:, 1] >= 128).all()

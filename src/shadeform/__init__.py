@@ -47,6 +47,7 @@ _SUBMODULES = {
     "synth",
     "metrics",
     "preprocess",
+    "masks",
     "light",
     "regions",
     "solvers",

@@ -1,9 +1,10 @@
 """Before shading is read: find the object, and smooth the image inside it.
 
-Steps 2 and 3 of the 2002 system (``DESIGN.md``): the object's silhouette on a dark background
-(:func:`object_mask`), then an optional filter with a window radius (:func:`apply_filter`): none,
-Gaussian, mean, median or minimum. Filters work inside the mask only, so the dark background never
-bleeds into the object's edge, where shape from shading is most sensitive.
+Steps 2 and 3 of the 2002 system (``DESIGN.md``): the object's silhouette, on a dark background
+as in 2002 or on a light one (:func:`object_mask`; its rules are in :mod:`shadeform.masks`), then
+an optional filter with a window radius (:func:`apply_filter`): none, Gaussian, mean, median or
+minimum. Filters work inside the mask only, so the background never bleeds into the object's
+edge, where shape from shading is most sensitive.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage as ndi
-from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 
 from shadeform._checks import check_mask, is_number
 from shadeform.errors import InputError
@@ -31,43 +31,41 @@ __all__ = [
 #: Filter kinds, in the order the 2002 system offered them ("none" was called "blank").
 FILTER_KINDS = ("none", "gaussian", "mean", "median", "minimum")
 
-# Hysteresis low threshold: this many noise sigmas above the background level ...
-_NOISE_SIGMAS = 3.0
-# ... and at least this fraction of the way from the background level to the Otsu threshold.
-_LOW_FLOOR = 0.02
-
-# 8-connectivity: a diagonal step stays inside one object.
-_EIGHT = np.ones((3, 3), dtype=bool)
-
 
 def object_mask(
     image: np.ndarray,
     *,
     threshold: float | None = None,
+    dark: bool | None = None,
     fill_holes: bool = True,
     largest: bool = True,
 ) -> np.ndarray:
-    """Find the object in a photo taken on a dark background.
+    """Find the object in a photo: bright on a dark background, or dark on a light one.
 
-    Without ``threshold``, pixels brighter than Otsu's threshold seed the object and it grows
-    (hysteresis) through every connected pixel brighter than a low threshold just above the
-    background: a Lambertian object's rim, where the surface turns away, is dim but still object.
-    The low threshold is the background level (median of the pixels below Otsu's threshold) plus
-    3 noise sigmas, and at least 2 % of the way up to Otsu's threshold. The noise sigma is a
-    one-sided median absolute deviation, ``1.4826 * (upper quartile - median)`` of those pixels:
-    right for Gaussian noise even when it is clipped at black, and unmoved by a few dim object
-    pixels among the background ones.
+    Without ``threshold``, :func:`shadeform.masks.find_object` decides (its description says
+    how): the background is the class of Otsu's split that covers more of the image's frame,
+    with its uneven light (a plane fitted to the frame) taken off; pixels of the object's class
+    seed the object and it grows (hysteresis) through every connected pixel that stands out
+    from the background as the frame shows it (3 noise sigmas, its 95th percentile, at least
+    2 % of the way to Otsu's threshold): a Lambertian object's rim, where the surface turns
+    away, is dim but still object. Parts with most of their outline on the frame are
+    background; a picture with no distinct background (one surface filling the frame) is all
+    object.
 
     Parameters
     ----------
     image : (H, W) array_like
         Intensities, e.g. from :func:`shadeform.load_image`.
     threshold : float, optional
-        Use ``image > threshold`` instead of the automatic choice.
+        Use ``image > threshold`` (``<`` with ``dark=True``) instead of the automatic choice.
+    dark : bool, optional
+        Whether the object is darker than its background. Automatic by default; with
+        ``threshold``, None means False (a bright object).
     fill_holes : bool
         Fill holes inside the object (dark spots, specular pits, shadows enclosed by it).
     largest : bool
-        Keep only the largest 8-connected component (drops dust and stray reflections).
+        Keep only the largest 8-connected part that is not mostly frame border (drops dust,
+        stray reflections and strips of background).
 
     Returns
     -------
@@ -78,7 +76,7 @@ def object_mask(
     ------
     InputError
         If ``image`` is not 2-D or holds NaN, if it is black or constant (nothing to separate),
-        or if no pixel is above ``threshold``.
+        or if no pixel is on the object's side of ``threshold``.
 
     References
     ----------
@@ -86,54 +84,11 @@ def object_mask(
     1979. J. Canny, "A computational approach to edge detection", IEEE TPAMI 8(6), 1986
     (hysteresis).
     """
-    image = _as_image(image)
+    from shadeform.masks import find_object, threshold_object
+
     if threshold is None:
-        mask = _hysteresis_mask(image)
-    else:
-        if not is_number(threshold) or not math.isfinite(threshold):
-            raise InputError(f"threshold must be a finite number, got {threshold!r}")
-        mask = image > threshold
-        if not mask.any():
-            raise InputError(
-                f"no object found: no pixel is above threshold {threshold:g} (the brightest is "
-                f"{image.max():g}); give a lower threshold"
-            )
-    if fill_holes:
-        mask = ndi.binary_fill_holes(mask)
-    if largest:
-        mask = _largest_component(mask)
-    return mask
-
-
-def _hysteresis_mask(image: np.ndarray) -> np.ndarray:
-    brightest, darkest = image.max(), image.min()
-    if brightest <= 0:
-        raise InputError(
-            "no object found: the image is black; check the exposure and the channel, or give a mask"
-        )
-    if brightest == darkest:
-        raise InputError(
-            f"no object found: the image is constant (every pixel is {brightest:g}); "
-            "give a mask or a threshold"
-        )
-    high = threshold_otsu(image)
-    below = image[image <= high]
-    level, upper_quartile = np.percentile(below, [50, 75])
-    # Noise sigma from the upper half only: the lower half is clipped at black in real photos.
-    # The quartile (not the median of the upper half) ignores up to a quarter of dim object
-    # pixels mixed in with the background.
-    sigma = 1.4826 * (upper_quartile - level)
-    low = level + max(_NOISE_SIGMAS * sigma, _LOW_FLOOR * (high - level))
-    return apply_hysteresis_threshold(image, min(low, high), high)
-
-
-def _largest_component(mask: np.ndarray) -> np.ndarray:
-    labels, count = ndi.label(mask, structure=_EIGHT)
-    if count <= 1:
-        return mask
-    sizes = np.bincount(labels.ravel())
-    sizes[0] = 0  # background
-    return labels == np.argmax(sizes)
+        return find_object(image, dark=dark, fill_holes=fill_holes, largest=largest).mask
+    return threshold_object(image, threshold, dark=bool(dark), fill_holes=fill_holes, largest=largest)
 
 
 @dataclass(frozen=True)
@@ -286,18 +241,6 @@ def apply_filter(image: np.ndarray, mask: np.ndarray | None, filter: Filter | st
     return np.where(mask, smoothed, image)
 
 
-def _as_image(image: np.ndarray) -> np.ndarray:
-    image = np.asarray(image, dtype=np.float64)
-    if image.ndim != 2:
-        raise InputError(
-            f"image must be 2-D (H, W), got shape {image.shape}; pick one channel first "
-            "(load_image(..., channel=...))"
-        )
-    if image.size == 0 or not np.isfinite(image).all():
-        raise InputError("image is empty or has NaN or infinite values; give a finite image")
-    return image
-
-
 def noise_level(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | None = None) -> float:
     """Standard deviation of independent pixel noise on the object, from the image alone.
 
@@ -336,12 +279,13 @@ def srgb_to_linear(image: np.ndarray) -> np.ndarray:
 
     Shading methods assume intensities proportional to the light received; an sRGB file stores
     them raised to about 1 / 2.2, which makes a Lambertian surface look flatter and biases its
-    normals. 16-bit and RAW-derived files are often linear already: leave those as they are.
+    normals. :func:`shadeform.load_image` already does this for 8-bit files unless told they are
+    linear (``linear=True``); this is for values obtained otherwise.
 
     Parameters
     ----------
     image : (H, W) or (H, W, C) array_like
-        Encoded values in [0, 1] (as :func:`shadeform.load_image` gives them).
+        Encoded values in [0, 1] (as ``shadeform.load_image(path, linear=True)`` gives them).
 
     Returns
     -------
@@ -359,7 +303,11 @@ def srgb_to_linear(image: np.ndarray) -> np.ndarray:
     >>> round(float(srgb_to_linear(np.array(0.5))), 4)
     0.214
     """
+    from shadeform.io.images import _srgb_decode  # the one implementation of the curve
+
     values = np.asarray(image, dtype=np.float64)
     if not np.isfinite(values).all() or values.min(initial=0.0) < 0 or values.max(initial=0.0) > 1:
-        raise InputError("sRGB values must be finite and in [0, 1], as load_image gives them")
-    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+        raise InputError(
+            "sRGB values must be finite and in [0, 1], as load_image(..., linear=True) gives them"
+        )
+    return _srgb_decode(values)

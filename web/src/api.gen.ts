@@ -50,6 +50,8 @@ export interface ReconstructParams {
   /** Reference pixels ``[row, col]`` chosen by the user; the automatic ones are added. */
   references: [number, number][];
   concave: ConcaveRegions;
+  /** The user's object mask: base64 of an image file (PNG) of the image's size, non-zero = object (``shadeform.load_mask``'s rule); null for the automatic one. Every solve and export uses it. */
+  mask: string | null;
 }
 
 /** A reconstruction (or export) of a stored image with these parameters. */
@@ -146,6 +148,46 @@ export interface ReconstructResult {
   timings: Record<string, number>;
   /** What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused). */
   info: Record<string, unknown>;
+}
+
+/** The automatic object mask of a stored image, or the one of a threshold (:func:`shadeform.preprocess.object_mask`). */
+export interface AutoMaskRequest {
+  channel: Channel;
+  /** Object = pixels above it (below it with ``dark``), the largest part that is not mostly frame border, holes filled; null for the automatic mask. */
+  threshold: number | null;
+  /** The object is darker than its background; null: decided from the image (with a threshold: false). */
+  dark: boolean | null;
+}
+
+/** The object under the user's clicks (:func:`shadeform.masks.segment_from_seeds`). */
+export interface SeedMaskRequest {
+  channel: Channel;
+  /** Pixels ``[row, col]`` on the object. */
+  inside: [number, number][];
+  /** Pixels ``[row, col]`` on the background. */
+  outside: [number, number][];
+  /** Each click marks a disk of this radius, pixels. */
+  radius: number;
+}
+
+/** A mask file the user loads, to be checked against the image and made the app's PNG. */
+export interface MaskFileRequest {
+  /** base64 of the file's bytes (PNG, TIFF, BMP, ...); non-zero = object. */
+  data: string;
+}
+
+/** An object mask made or checked by the server. */
+export interface MaskResult {
+  /** The mask as a base64 8-bit grey PNG (255 = object), the image's size. */
+  mask_png: string;
+  /** How many pixels are object. */
+  pixels: number;
+  /** The threshold nearest to this mask (a place to start a threshold slider), in the channel's units; null when it did not come from one. */
+  threshold: number | null;
+  /** Whether the object is darker than its background. */
+  dark: boolean;
+  /** One line in the user's words saying what was found. */
+  note: string;
 }
 
 /** Every error response: one line saying what was wrong and what to do. */

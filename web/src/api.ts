@@ -3,12 +3,15 @@
 // Every error body is {"detail": "<one line>"}; ApiError carries that line and the status so
 // the UI can show it as it is and react to 404 (the server forgot an image) specially.
 import type {
+  AutoMaskRequest,
   ImageInfo,
+  MaskResult,
   MeshData,
   Options,
   ReconstructParams,
   ReconstructRequest,
   ReconstructResult,
+  SeedMaskRequest,
 } from './api.gen';
 
 export type FilterSpec = ReconstructParams['filter'];
@@ -94,6 +97,26 @@ export async function imageKnown(imageId: string): Promise<boolean> {
 
 export function reconstruct(request: ReconstructRequest, signal?: AbortSignal): Promise<ReconstructResult> {
   return json<ReconstructResult>(postJson('/api/reconstruct', request, signal));
+}
+
+function maskUrl(imageId: string, what: 'auto' | 'seeds' | 'file'): string {
+  return `/api/images/${encodeURIComponent(imageId)}/mask/${what}`;
+}
+
+/** The automatic mask, or a threshold's (``request.threshold``). */
+export function autoMask(imageId: string, request: AutoMaskRequest, signal?: AbortSignal): Promise<MaskResult> {
+  return json<MaskResult>(postJson(maskUrl(imageId, 'auto'), request, signal));
+}
+
+/** The object under the user's clicks. */
+export function seedMask(imageId: string, request: SeedMaskRequest): Promise<MaskResult> {
+  return json<MaskResult>(postJson(maskUrl(imageId, 'seeds'), request));
+}
+
+/** A mask file checked against the image (size, not empty) and made the app's PNG. */
+export async function maskFile(imageId: string, file: Blob): Promise<MaskResult> {
+  const data = bytesToBase64(new Uint8Array(await file.arrayBuffer()));
+  return json<MaskResult>(postJson(maskUrl(imageId, 'file'), { data }));
 }
 
 /** The exported file and the name the server gave it (Content-Disposition). */

@@ -17,6 +17,8 @@ export interface PanelEvents {
   clearReferences(): void;
   drawRegion(): void;
   editReferences(): void;
+  /** Turn on the image pane's mask tool (the Mask group itself belongs to maskTool.ts). */
+  editMask(): void;
   loadRegions(): void;
   saveRegions(): void;
   clearRegions(): void;
@@ -93,6 +95,7 @@ export class Panel {
     }
     $('refs-clear').addEventListener('click', () => events.clearReferences());
     $('refs-tool').addEventListener('click', () => events.editReferences());
+    $('mask-tool').addEventListener('click', () => events.editMask());
     $('regions-tool').addEventListener('click', () => events.drawRegion());
     $('regions-load').addEventListener('click', () => events.loadRegions());
     $('regions-save').addEventListener('click', () => events.saveRegions());

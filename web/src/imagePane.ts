@@ -1,13 +1,15 @@
 // The left pane: the photo (or its preprocessed channel, or both split before/after), the mask
-// overlay, the reference pixels and the concave-region editor, on one canvas.
+// overlay and the mask tool's marks, the reference pixels and the concave-region editor, on one
+// canvas.
 //
 // Image coordinates follow docs/conventions.md: x = column, y = row, pixel centres at whole
 // numbers, so pixel (r, c) covers [c - 0.5, c + 0.5] x [r - 0.5, r + 0.5] (the same grid the
 // library rasterises region polygons on).
 import { insidePolygon, outlineDistance, tidy, type Point } from './geometry';
+import { paintMask, type MaskBits, type MaskTool, type Rect } from './maskTool';
 import type { Axis, Region } from './state';
 
-export type Tool = 'select' | 'polygon' | 'reference';
+export type Tool = 'select' | 'polygon' | 'reference' | 'mask';
 export type Display = 'photo' | 'channel' | 'filtered' | 'split';
 
 export const AXIS_COLOURS: Record<Axis, string> = { x: '#ff9f43', y: '#38bdf8', both: '#c084fc' };
@@ -37,7 +39,8 @@ type Drag =
   | { kind: 'pan'; x: number; y: number; offX: number; offY: number }
   | { kind: 'move'; index: number; x: number; y: number; original: Point[]; moved: boolean }
   | { kind: 'vertex'; index: number; vertex: number; moved: boolean }
-  | { kind: 'split' };
+  | { kind: 'split' }
+  | { kind: 'mask' };
 
 export class ImagePane {
   readonly canvas: HTMLCanvasElement;
@@ -65,6 +68,8 @@ export class ImagePane {
   display: Display = 'photo';
   showMask = true;
   newAxis: Axis = 'both';
+  /** What the mask tool does with presses, keys and drawing on the image. */
+  maskEditor: MaskTool | null = null;
 
   constructor(private readonly host: HTMLElement, private readonly events: PaneEvents) {
     this.canvas = document.createElement('canvas');
@@ -124,19 +129,15 @@ export class ImagePane {
     this.redraw();
   }
 
-  /** The mask from a result (a PNG, object pixels bright) as a tinted overlay with an outline. */
-  setMask(pngBase64: string | null): void {
-    if (!pngBase64) {
+  /** The object mask as a tinted overlay with its outline; ``dirty``: only that part changed. */
+  setMask(mask: MaskBits | null, dirty?: Rect): void {
+    if (!mask) {
       this.maskLayer = null;
-      this.redraw();
-      return;
+    } else {
+      this.maskLayer ??= document.createElement('canvas');
+      paintMask(mask, this.maskLayer, dirty);
     }
-    const image = new Image();
-    image.onload = () => {
-      this.maskLayer = tintedMask(image);
-      this.redraw();
-    };
-    image.src = `data:image/png;base64,${pngBase64}`;
+    this.redraw();
   }
 
   setTool(tool: Tool): void {
@@ -167,6 +168,7 @@ export class ImagePane {
 
   /** Enter closes the polygon being drawn, Escape cancels it, Delete removes the selection. */
   key(event: KeyboardEvent): boolean {
+    if (this.tool === 'mask' && this.maskEditor?.key(event)) return true;
     if (this.tool === 'polygon' && this.draft.length) {
       if (event.key === 'Enter') return this.closeDraft(), true;
       if (event.key === 'Escape') return (this.draft = []), this.hintAndDraw(), true;
@@ -253,6 +255,11 @@ export class ImagePane {
     }
     if (this.tool === 'polygon') return this.polygonClick(at);
     if (this.tool === 'reference') return this.referenceClick(at);
+    if (this.tool === 'mask' && this.maskEditor) {
+      this.drag = { kind: 'mask' };
+      this.maskEditor.down(at, event.altKey);
+      return;
+    }
     this.selectPress(at, event);
   }
 
@@ -320,6 +327,8 @@ export class ImagePane {
     if (drag?.kind === 'pan') {
       this.offX = drag.offX + event.clientX - drag.x;
       this.offY = drag.offY + event.clientY - drag.y;
+    } else if (drag?.kind === 'mask') {
+      this.maskEditor?.move(at);
     } else if (drag?.kind === 'split') {
       this.split = Math.min(1, Math.max(0, (at[0] + 0.5) / this.width));
     } else if (drag?.kind === 'move' && (drag.moved || travelled >= DRAG_START)) {
@@ -342,6 +351,7 @@ export class ImagePane {
     this.drag = null;
     if (this.canvas.hasPointerCapture(event.pointerId)) this.canvas.releasePointerCapture(event.pointerId);
     if ((drag?.kind === 'move' || drag?.kind === 'vertex') && drag.moved) this.events.regions(this.regionList, true);
+    if (drag?.kind === 'mask') this.maskEditor?.up();
   }
 
   private onWheel(event: WheelEvent): void {
@@ -357,6 +367,7 @@ export class ImagePane {
     else if (this.display === 'split' && Math.abs(this.toScreen(at)[0] - this.toScreen([this.split * this.width - 0.5, 0])[0]) < 6) cursor = 'ew-resize';
     else if (this.tool === 'polygon') cursor = this.draft.length >= 3 && this.screenDistance(at, this.draft[0]) <= SNAP ? 'pointer' : 'crosshair';
     else if (this.tool === 'reference') cursor = 'crosshair';
+    else if (this.tool === 'mask') cursor = this.maskEditor?.cursor() ?? 'crosshair';
     else if (this.drag) cursor = 'move';
     else if (this.regionList.some((r) => insidePolygon(at[0], at[1], r.polygon))) cursor = 'move';
     this.canvas.style.cursor = cursor;
@@ -369,6 +380,7 @@ export class ImagePane {
       return 'Click the first corner or press Enter to close · Backspace removes a corner · Esc cancels';
     }
     if (this.tool === 'reference') return 'Click to add a reference pixel · click one to remove it';
+    if (this.tool === 'mask' && this.maskEditor) return this.maskEditor.hint();
     return 'Click a region to select it · drag to move · drag empty space to pan · wheel zooms';
   }
 
@@ -431,7 +443,7 @@ export class ImagePane {
       const image = this.image(url);
       if (image) ctx.drawImage(image, this.offX, this.offY, w, h);
     }
-    if (this.showMask && this.maskLayer) {
+    if ((this.showMask || this.tool === 'mask') && this.maskLayer) {
       ctx.imageSmoothingEnabled = false;
       ctx.drawImage(this.maskLayer, this.offX, this.offY, w, h);
     }
@@ -441,6 +453,7 @@ export class ImagePane {
     this.regionList.forEach((region, i) => this.drawRegion(region, i === this.selected));
     this.drawDraft();
     this.drawReferences();
+    if (this.tool === 'mask') this.maskEditor?.draw(ctx, (p) => this.toScreen(p), this.scale, this.pointer);
     if (this.display === 'split') this.drawSplit();
   }
 
@@ -584,36 +597,4 @@ function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number
   ctx.strokeText(text, x, y);
   ctx.fillStyle = colour;
   ctx.fillText(text, x, y);
-}
-
-/** Object pixels tinted, the silhouette's edge drawn bright; one pixel of the canvas per image pixel. */
-function tintedMask(image: HTMLImageElement): HTMLCanvasElement {
-  const w = image.naturalWidth;
-  const h = image.naturalHeight;
-  const layer = document.createElement('canvas');
-  layer.width = w;
-  layer.height = h;
-  const ctx = layer.getContext('2d', { willReadFrequently: true })!;
-  ctx.drawImage(image, 0, 0);
-  const pixels = ctx.getImageData(0, 0, w, h);
-  const data = pixels.data;
-  const inside = new Uint8Array(w * h);
-  for (let i = 0; i < w * h; i++) inside[i] = data[4 * i] > 127 && data[4 * i + 3] > 127 ? 1 : 0;
-  for (let r = 0; r < h; r++) {
-    for (let c = 0; c < w; c++) {
-      const i = r * w + c;
-      const o = 4 * i;
-      if (!inside[i]) {
-        data[o + 3] = 0;
-        continue;
-      }
-      const edge = c === 0 || r === 0 || c === w - 1 || r === h - 1 || !inside[i - 1] || !inside[i + 1] || !inside[i - w] || !inside[i + w];
-      data[o] = edge ? 94 : 56;
-      data[o + 1] = edge ? 234 : 189;
-      data[o + 2] = edge ? 212 : 248;
-      data[o + 3] = edge ? 230 : 46;
-    }
-  }
-  ctx.putImageData(pixels, 0, 0);
-  return layer;
 }

@@ -1,5 +1,5 @@
-// The app's controller: owns the session (image, parameters, regions, view), talks to the
-// server, and wires the image pane, the side panel and the 3D view together.
+// The app's controller: owns the session (image, parameters, regions, mask, view), talks to the
+// server, and wires the image pane, the side panel, the mask tool and the 3D view together.
 //
 // Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
 // time); a quick look solved at the mesh's grid (or a coarser one) comes first where the image
@@ -11,6 +11,7 @@ import * as api from './api';
 import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, type Display, type Tool } from './imagePane';
+import { MaskTool } from './maskTool';
 import {
   download,
   loadImageBytes,
@@ -72,6 +73,7 @@ class App {
   private readonly pane: ImagePane;
   private readonly viewer: Viewer;
   private readonly panel: Panel;
+  private readonly maskTool: MaskTool;
 
   constructor(private readonly options: Options) {
     const session = loadSession();
@@ -85,6 +87,21 @@ class App {
       hint: (text) => ($('hint').textContent = text),
     });
     this.viewer = new Viewer($('view-host'));
+    this.maskTool = new MaskTool({
+      image: () => this.image && { id: this.image.image_id, width: this.image.width, height: this.image.height, channel: this.params.channel },
+      changed: (png, refit) => {
+        this.refitNext ||= refit;
+        this.change({ mask: png }, 'now');
+      },
+      show: (mask, dirty) => this.pane.setMask(mask, dirty),
+      redraw: () => this.pane.redraw(),
+      hint: (text) => {
+        if (this.pane.tool === 'mask') $('hint').textContent = text;
+      },
+      download: (blob, filename) => download(blob, filename),
+      stem: () => this.stem(),
+    });
+    this.pane.maskEditor = this.maskTool;
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
       axis: (axis) => this.setAxis(axis),
@@ -94,6 +111,7 @@ class App {
       clearReferences: () => this.change({ references: [] }, 'now'),
       drawRegion: () => this.setTool('polygon'),
       editReferences: () => this.setTool('reference'),
+      editMask: () => this.setTool('mask'),
       loadRegions: () => $<HTMLInputElement>('file-regions').click(),
       saveRegions: () => this.saveRegions(),
       clearRegions: () => this.regionsEdited([], true),
@@ -219,7 +237,7 @@ class App {
     name.textContent = info.name;
     $('image-title').append(name, ` ${info.width} × ${info.height} · ${info.channels === 1 ? 'grey' : `${info.channels} channels`}`);
     this.pane.setImage(info.width, info.height, this.sources());
-    this.pane.setMask(null);
+    this.maskTool.open(this.params.mask ?? null);
     this.pane.setRegions(this.params.concave.regions);
     this.viewer.setPhoto(api.photoUrl(info.image_id));
     this.panel.show(this.params);
@@ -246,6 +264,7 @@ class App {
     this.params = { ...this.params, ...structuredClone(patch) };
     this.panel.show(this.params);
     if ('references' in patch) this.showReferences();
+    if (patch.channel !== undefined && patch.channel !== before.channel) this.maskTool.channelChanged();
     if (this.image && (patch.channel !== undefined || patch.filter !== undefined)) {
       if (patch.channel !== before.channel || JSON.stringify(patch.filter) !== JSON.stringify(before.filter)) {
         this.pane.setSources(this.sources());
@@ -391,7 +410,7 @@ class App {
     $('view-empty').hidden = true;
     $('view-host').classList.add('has-model');
     $<HTMLButtonElement>('export-button').disabled = false;
-    this.pane.setMask(result.mask_png);
+    this.maskTool.solvedWith(result.mask_png);
     this.showReferences();
     this.panel.showResult(result);
     const [low, high] = result.depth_range;
@@ -667,6 +686,7 @@ class App {
         v: () => this.setTool('select'),
         p: () => this.setTool('polygon'),
         f: () => this.setTool('reference'),
+        k: () => this.setTool('mask'),
         x: () => this.setAxis('x'),
         y: () => this.setAxis('y'),
         b: () => this.setAxis('both'),
@@ -736,6 +756,10 @@ class App {
           indices: Array.from(this.mesh.indices),
         },
       pagePoint: (x: number, y: number) => this.pane.pagePoint(x, y),
+      /** The mask tool: whose mask is shown (user or automatic), its pixels, note, error. */
+      mask: () => this.maskTool.state(),
+      /** Whether pixel (row, col) is object in the mask the pane shows. */
+      maskAt: (row: number, col: number) => this.maskTool.at(row, col),
     };
   }
 }

@@ -39,6 +39,10 @@ __all__ = [
     "Options",
     "MeshData",
     "ReconstructResult",
+    "AutoMaskRequest",
+    "SeedMaskRequest",
+    "MaskFileRequest",
+    "MaskResult",
     "ErrorBody",
     "typescript",
 ]
@@ -116,6 +120,12 @@ class ReconstructParams(_Model):
         description="Reference pixels ``[row, col]`` chosen by the user; the automatic ones are added.",
     )
     concave: ConcaveRegions = Field(default_factory=ConcaveRegions)
+    mask: str | None = Field(
+        default=None,
+        description="The user's object mask: base64 of an image file (PNG) of the image's size, non-zero "
+        "= object (``shadeform.load_mask``'s rule); null for the automatic one. Every solve and export "
+        "uses it.",
+    )
 
 
 class ReconstructRequest(_Model):
@@ -241,6 +251,55 @@ class ReconstructResult(_Model):
     )
 
 
+class AutoMaskRequest(_Model):
+    """The automatic object mask of a stored image, or the one of a threshold
+    (:func:`shadeform.preprocess.object_mask`)."""
+
+    channel: Channel = "luma"
+    threshold: float | None = Field(
+        default=None,
+        description="Object = pixels above it (below it with ``dark``), the largest part that is not "
+        "mostly frame border, holes filled; null for the automatic mask.",
+    )
+    dark: bool | None = Field(
+        default=None,
+        description="The object is darker than its background; null: decided from the image (with a "
+        "threshold: false).",
+    )
+
+
+class SeedMaskRequest(_Model):
+    """The object under the user's clicks (:func:`shadeform.masks.segment_from_seeds`)."""
+
+    channel: Channel = "luma"
+    inside: list[tuple[int, int]] = Field(
+        min_length=1, max_length=1000, description="Pixels ``[row, col]`` on the object."
+    )
+    outside: list[tuple[int, int]] = Field(
+        default_factory=list, max_length=1000, description="Pixels ``[row, col]`` on the background."
+    )
+    radius: int = Field(default=2, ge=0, le=64, description="Each click marks a disk of this radius, pixels.")
+
+
+class MaskFileRequest(_Model):
+    """A mask file the user loads, to be checked against the image and made the app's PNG."""
+
+    data: str = Field(description="base64 of the file's bytes (PNG, TIFF, BMP, ...); non-zero = object.")
+
+
+class MaskResult(_Model):
+    """An object mask made or checked by the server."""
+
+    mask_png: str = Field(description="The mask as a base64 8-bit grey PNG (255 = object), the image's size.")
+    pixels: int = Field(description="How many pixels are object.")
+    threshold: float | None = Field(
+        description="The threshold nearest to this mask (a place to start a threshold slider), in the "
+        "channel's units; null when it did not come from one.",
+    )
+    dark: bool = Field(description="Whether the object is darker than its background.")
+    note: str = Field(description="One line in the user's words saying what was found.")
+
+
 class ErrorBody(_Model):
     """Every error response: one line saying what was wrong and what to do."""
 
@@ -263,6 +322,10 @@ _EXPORTED = (
     Options,
     MeshData,
     ReconstructResult,
+    AutoMaskRequest,
+    SeedMaskRequest,
+    MaskFileRequest,
+    MaskResult,
     ErrorBody,
 )
 

@@ -11,6 +11,7 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``GET  /api/images/{id}/channel.png``       one channel, filtered (``?channel=&filter=``)
 ``POST /api/reconstruct``                   ``ReconstructRequest`` -> ``ReconstructResult``
 ``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
+``POST /api/images/{id}/mask/...``          masks: :mod:`shadeform.app.masks`
 ==========================================  ===================================================
 
 Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a library
@@ -48,6 +49,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
 from shadeform.app.guard import AppLimits, Guard, add_error_handlers, file_too_large
+from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.schema import (
     ExampleInfo,
     FilterParams,
@@ -146,7 +148,7 @@ def create_app(
 
     @app.post("/api/images", response_model=ImageInfo, status_code=201)
     def post_image(file: UploadFile = File(..., description="The image file.")) -> Response:
-        from shadeform.io.images import ImageTooLargeError, load_pixels
+        from shadeform.io.images import ImageTooLargeError, read_photo
 
         data = file.file.read(limits.max_upload_bytes + 1)
         if len(data) > limits.max_upload_bytes:
@@ -154,12 +156,13 @@ def create_app(
         if not data:
             raise HTTPException(400, "the uploaded file is empty (0 bytes); choose an image file")
         try:
-            pixels = load_pixels(data, max_pixels=limits.max_pixels)
+            # 8-bit uploads are sRGB and are made linear; 16-bit and float ones are linear
+            photo = read_photo(data, max_pixels=limits.max_pixels)
         except ImageTooLargeError as err:
             raise HTTPException(413, str(err)) from None
         except InputError as err:
             raise HTTPException(415, str(err)) from None
-        entry = state.add(_display_name(file.filename), pixels)
+        entry = state.add(_display_name(file.filename), photo.pixels, photo=_read_as(photo))
         return _json(_image_info(entry), status_code=201)
 
     @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
@@ -174,7 +177,7 @@ def create_app(
         entry = state.image(image_id)
         png = state.pngs.get((image_id, "photo"))
         if png is None:
-            png = _png(entry.pixels[:, :, 0] if entry.pixels.shape[2] == 1 else entry.pixels)
+            png = _png(_shown(entry, entry.pixels[:, :, 0] if entry.pixels.shape[2] == 1 else entry.pixels))
             state.pngs.put((image_id, "photo"), png, len(png))
         return Response(png, media_type="image/png", headers={"Cache-Control": "no-cache"})
 
@@ -191,7 +194,9 @@ def create_app(
         image, mask, _ = _channel(state, entry, channel)
         if spec.kind != "none":
             image = apply_filter(image, mask, spec)
-        return Response(_png(image), media_type="image/png", headers={"Cache-Control": "no-cache"})
+        return Response(
+            _png(_shown(entry, image)), media_type="image/png", headers={"Cache-Control": "no-cache"}
+        )
 
     @app.post("/api/reconstruct", response_model=ReconstructResult)
     async def post_reconstruct(body: ReconstructRequest, request: Request) -> Response:
@@ -220,6 +225,8 @@ def create_app(
             media_type=_MEDIA_TYPES.get(suffix, "application/octet-stream"),
             headers={"Content-Disposition": f'attachment; filename="{filename}"'},
         )
+
+    add_mask_routes(app, state)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index() -> Response:
@@ -269,8 +276,10 @@ class _State:
         # one solve at a time: two would only share the cores and both arrive late
         self.solve_lock = asyncio.Lock()
 
-    def add(self, name: str, pixels: np.ndarray, *, mask=None, suggested=None, pinned=False) -> StoredImage:
-        entry = StoredImage(new_image_id(), name, pixels, mask, suggested)
+    def add(
+        self, name: str, pixels: np.ndarray, *, mask=None, suggested=None, pinned=False, photo=None
+    ) -> StoredImage:
+        entry = StoredImage(new_image_id(), name, pixels, mask, suggested, photo)
         self.images.put(entry.image_id, entry, entry.nbytes, pinned=pinned)
         return entry
 
@@ -308,13 +317,29 @@ class _State:
         return entry
 
 
+def _read_as(photo) -> dict[str, Any]:
+    """How a photo file was read (:attr:`shadeform.io.images.Photo.info`), less the channel:
+    the app picks that per request."""
+    return {key: value for key, value in photo.info.items() if not key.startswith("channel")}
+
+
+def _shown(entry: StoredImage, image: np.ndarray) -> np.ndarray:
+    """Values to show for a stored photo: one that was sRGB-encoded is encoded again, so that it
+    looks as the file did (what is solved on stays linear)."""
+    if entry.photo is None or entry.photo["encoding"] != "srgb":
+        return image
+    from shadeform.io.images import _srgb_encode
+
+    return _srgb_encode(np.clip(image, 0.0, 1.0).astype(np.float32))
+
+
 def _store_initial(state: _State, source: str | Path) -> StoredImage:
     """The image given on the command line: a file (a Path) or an example name (a str)."""
     if isinstance(source, Path):
-        from shadeform.io.images import load_pixels
+        from shadeform.io.images import read_photo
 
-        pixels = load_pixels(source, max_pixels=state.limits.max_pixels)
-        return state.add(_display_name(source.name), pixels, pinned=True)
+        photo = read_photo(source, max_pixels=state.limits.max_pixels)
+        return state.add(_display_name(source.name), photo.pixels, pinned=True, photo=_read_as(photo))
     try:
         return state.example(source, None, pinned=True)
     except HTTPException as err:
@@ -383,6 +408,8 @@ def _solve(
         light = (0.0, 0.0, 1.0)
     regions = params.concave.model_dump()
     image, mask, mask_png = _channel(state, entry, params.channel)
+    if params.mask is not None:  # the user's mask
+        mask, mask_png = user_mask(state, params.mask, image.shape)
     settings = dict(
         light=light,
         method=params.method,
@@ -456,7 +483,7 @@ def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequ
         references=[(int(r), int(c)) for r, c in rec.info["references"]],
         depth_range=solved.depth_range,
         timings=timings,
-        info={**_plain(rec.info), "cached": cached},
+        info={**_plain(rec.info), "cached": cached, **({"photo": entry.photo} if entry.photo else {})},
     )
 
 
