@@ -20,6 +20,22 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+@pytest.fixture(scope="session")
+def real_data():
+    """``benchmarks/real_data.py`` (the real photos of ``../shared/data/real`` as cases); skips,
+    saying why, where that folder is absent."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("real_data", ROOT / "benchmarks" / "real_data.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("real_data", module)  # its dataclass looks itself up there
+    spec.loader.exec_module(module)
+    if not module.available():
+        pytest.skip(f"no real photographs at {module.DATA}")
+    return module
+
+
 @pytest.fixture
 def cli():
     """Run the ``shadeform`` command in-process: ``cli("reconstruct", path, "-o", out)``.

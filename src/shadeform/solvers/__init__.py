@@ -195,8 +195,10 @@ def is_frontal(light) -> bool:
 
 
 # The built-in solvers. "auto" ranks and noise limits: the best measured on the synthetic scenes of
-# benchmarks/results/methods.md. Preview budgets: about 0.1 s of solver time on one core of the
-# 2-core machine of benchmarks/results/app.md (the oblique descent costs ~50x more per pixel than
+# benchmarks/results/methods.md. "photo" is far ahead on real photographs (benchmarks/results/real.md)
+# but behind "oblique" on noisy renders (ellipsoid at +z, 1 % noise: 10.4 against 1.5 degrees), and
+# noise alone cannot tell the two apart, so "auto" does not pick it yet. Preview budgets: about
+# 0.1 s of solver time on one core of the 2-core machine of benchmarks/results/app.md (the oblique descent costs ~50x more per pixel than
 # fast marching on grids this small).
 register(
     Solver(
@@ -230,5 +232,16 @@ register(
         denoise="gaussian:2",
         auto=1,
         description="any light, with attached shadows: marching from the brightest pixels, then descent",
+    )
+)
+register(
+    Solver(
+        "photo",
+        "shadeform.solvers.photo:solve",
+        lights="any",
+        depth="photo (robust energy over depth, coarse to fine)",
+        preview_pixels=20_000,
+        description="for real photographs (highlights, shadows, noise): the outline's shape refined "
+        "by the shading it can trust",
     )
 )

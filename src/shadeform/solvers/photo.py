@@ -1,0 +1,390 @@
+"""Shape from one real photograph: the outline's shape, refined by the shading it can trust.
+
+Real photos break the uniform-Lambertian model pixel by pixel (highlights, cast shadows, painted
+albedo, noise), so this solver does not march or propagate from single pixels. It finds the depth
+``z`` (H, W) itself, integrable by construction, as the minimum of one energy over the object:
+
+    E(z) = sum_p rho(max(0, n_p . L) - I_p / a)                          shading, robust
+         + MU  * sum_(p,q) (sqrt(EPS^2 + |n_p - n_q|^2) - EPS)            smooth, creases allowed
+         + NU  * sum_(b on the outline) (n_b . m_b - 1)^2                 occluding contour
+
+with ``n = (-dz/dx, -dz/dy, 1) / |.|`` (``docs/conventions.md``), ``rho`` Cauchy's loss of scale
+:data:`SCALE` (a highlight, a shadow cast on a lit surface or a patch of other paint costs a
+bounded amount, so they cannot drag the shape), ``(p, q)`` neighbouring object pixels and ``m_b``
+the outline's outward normal: on an occluding contour the surface normal lies in the image plane,
+perpendicular to the outline. ``a`` is the brightness of a pixel facing the light, estimated
+robustly as the median of ``I / (n . L)`` over pixels turned toward the light (``n . L > 0.3``)
+under the current shape, twice per level: a single bright highlight does not set it.
+
+The start is the shape of the silhouette alone: ``z = 2 sqrt(u)`` with ``laplacian(u) = -1``
+inside the mask and ``u = 0`` just outside it (exact for a sphere; the image frame is not an
+outline, so ``u`` has no condition there). The energy is minimised coarse to fine (2x2 pyramid
+levels down to about :data:`COARSEST` object pixels) by L-BFGS over a hierarchical basis (the
+depth is the sum of bilinearly upsampled grids of every coarser scale, Szeliski 1990), which
+is what lets a descent move a whole region at once rather than a pixel at a time.
+
+Limits. One light, orthographic camera, albedo uniform up to what the robust loss absorbs; the
+shape is biased toward the silhouette's (a balloon) where the shading is ambiguous, as under a
+light at the camera, where a surface and its mirror image give the same picture. Concave
+regions and references are not used beyond ``z = 0`` at the main reference. Accuracy on real
+photographs with ground truth: ``benchmarks/results/real.md``.
+
+The weights :data:`MU`, :data:`EPS`, :data:`NU` and :data:`SCALE` were set by hand on the
+synthetic sphere and on one real object (MIT-Berkeley ``box``), not swept over the benchmark.
+
+References
+----------
+.. [1] J. T. Barron and J. Malik, "Shape, illumination, and reflectance from shading", IEEE
+   TPAMI 37(8), 1670-1687, 2015 (depth as the unknown, contour prior, pyramid L-BFGS).
+.. [2] M. K. Johnson and E. H. Adelson, "Shape estimation in natural illumination", CVPR 2011.
+.. [3] R. Szeliski, "Fast surface interpolation using hierarchical basis functions", IEEE TPAMI
+   12(6), 513-528, 1990.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy import ndimage as ndi
+from scipy.optimize import minimize
+
+from shadeform.solvers.problem import Problem, Solution
+
+__all__ = ["COARSEST", "EPS", "MU", "NU", "SCALE", "PhotoResult", "photo_depth", "silhouette_depth", "solve"]
+
+#: Smoothness weight per pair of neighbouring pixels.
+MU = 1e-2
+#: Change of the unit normal between neighbours (about 3 degrees) below which smoothness is
+#: quadratic; above it grows linearly, so a crease costs its length, not its square.
+EPS = 0.05
+#: Contour weight per outline pixel.
+NU = 1e-2
+#: Scale of Cauchy's loss on the shading residual, in units of ``N . L``.
+SCALE = 0.1
+#: About this many object pixels at the coarsest pyramid level.
+COARSEST = 4000
+#: L-BFGS iterations at the coarsest level, the next one, and every finer one.
+ITERATIONS = (300, 100, 50)
+#: Times per level the brightness ``a`` is re-estimated and the level solved again.
+ROUNDS = 2
+#: Pixels with ``n . L`` above this vote on the brightness ``a``.
+FACING = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class PhotoResult:
+    """What :func:`photo_depth` found.
+
+    Attributes
+    ----------
+    depth : (H, W) float64
+        Height in pixels (arbitrary offset), NaN off the mask.
+    normals : (H, W, 3) float64
+        Unit normals of ``depth``, NaN off the mask.
+    albedo : float
+        The brightness of a pixel facing the light, as estimated.
+    levels : int
+        Pyramid levels solved.
+    iterations : int
+        L-BFGS iterations over all levels.
+    """
+
+    depth: np.ndarray
+    normals: np.ndarray
+    albedo: float
+    levels: int
+    iterations: int
+
+
+def silhouette_depth(mask: np.ndarray) -> np.ndarray:
+    """The shape of the silhouette alone: ``z = 2 sqrt(u)``, ``laplacian(u) = -1`` inside.
+
+    ``u = 0`` on the pixels just outside the mask; where the mask meets the image frame there is
+    no condition (the object goes on beyond the picture). Exact for a sphere (a disc of radius R
+    gives ``z = sqrt(R^2 - r^2)``).
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+
+    Returns
+    -------
+    (H, W) float64
+        Height in pixels, 0 off the mask.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    index, rows, cols = _index(mask)
+    n = rows.size
+    neighbours = np.zeros(n)
+    pairs_i, pairs_j = [], []
+    for d_row, d_col in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        other, inside = _neighbour(index, rows + d_row, cols + d_col)
+        neighbours += inside  # a neighbour in the frame: on the object, or u = 0 there
+        on_object = other >= 0
+        pairs_i.append(np.flatnonzero(on_object))
+        pairs_j.append(other[on_object])
+    i, j = np.concatenate(pairs_i), np.concatenate(pairs_j)
+    diagonal = np.arange(n)
+    laplacian = sp.csc_matrix(
+        (np.r_[neighbours, -np.ones(i.size)], (np.r_[diagonal, i], np.r_[diagonal, j])), shape=(n, n)
+    )
+    u = spla.spsolve(laplacian, np.ones(n))
+    depth = np.zeros(mask.shape)
+    depth[mask] = 2.0 * np.sqrt(np.maximum(u, 0.0))
+    return depth
+
+
+def photo_depth(
+    image: np.ndarray, mask: np.ndarray, light: np.ndarray, *, albedo: float | None = None
+) -> PhotoResult:
+    """Depth and normals of one photo by the energy of this module's description.
+
+    Parameters
+    ----------
+    image : (H, W) float
+        Linear intensities, >= 0.
+    mask : (H, W) bool
+        The object (not empty).
+    light : (3,) float
+        Unit direction toward the light.
+    albedo : float, optional
+        The brightness of a pixel facing the light; estimated when not given.
+
+    Returns
+    -------
+    PhotoResult
+    """
+    image = np.where(mask, np.asarray(image, dtype=np.float64), 0.0)
+    light = np.asarray(light, dtype=np.float64)
+    pyramid = [(image, mask)]
+    while np.count_nonzero(pyramid[-1][1]) > 4 * COARSEST and min(pyramid[-1][1].shape) >= 16:
+        pyramid.append(_half(*pyramid[-1]))
+    depth = previous = None
+    estimate = albedo
+    total = 0
+    for level, (values, level_mask) in enumerate(reversed(pyramid)):
+        grid = _Level(values, level_mask, light)
+        depth = silhouette_depth(level_mask) if depth is None else _double(depth, previous, level_mask)
+        iterations = ITERATIONS[min(level, len(ITERATIONS) - 1)]
+        for _ in range(1 if albedo is not None else ROUNDS):
+            if albedo is None:
+                estimate = _brightness(grid, depth[level_mask])
+            start = np.zeros(grid.unknowns)
+            start[: grid.n] = depth[level_mask]
+            result = minimize(
+                grid.energy,
+                start,
+                args=(1.0 / estimate,),
+                jac=True,
+                method="L-BFGS-B",
+                options={
+                    "maxiter": iterations,
+                    "maxfun": 2 * iterations,
+                    "maxcor": 10,
+                    "ftol": 1e-14,
+                    "gtol": 1e-14,
+                },
+            )
+            total += int(result.nit)
+            depth = np.zeros(level_mask.shape)
+            depth[level_mask] = grid.depth(result.x)
+        previous = level_mask
+    normals = np.full(mask.shape + (3,), np.nan)
+    normals[mask] = grid.normals(depth[mask])
+    depth = np.where(mask, depth, np.nan)
+    return PhotoResult(depth, normals, float(estimate), len(pyramid), total)
+
+
+def solve(problem: Problem) -> Solution:
+    """The registry's entry (:mod:`shadeform.solvers`): depth with ``z = 0`` at the main reference."""
+    given = problem.references[0].normal is not None
+    result = photo_depth(problem.image, problem.mask, problem.light, albedo=problem.albedo if given else None)
+    problem.lap("solve")
+    depth = result.depth - result.depth[problem.main]
+    info = {
+        "photo": {"albedo": result.albedo, "levels": result.levels, "iterations": result.iterations},
+        "albedo": result.albedo,
+    }
+    return Solution(result.normals, depth, info)
+
+
+class _Level:
+    """One pyramid level: the object's pixels, its difference operators and hierarchical basis."""
+
+    def __init__(self, image, mask, light):
+        from shadeform.light.contour import find_boundary
+
+        self.mask = mask
+        index, rows, cols = _index(mask)
+        self.n = rows.size
+        self.values = image[mask]
+        self.light = light
+        self.d_col, self.d_row = (_slope_matrix(index, rows, cols, step) for step in ((0, 1), (1, 0)))
+        self.d_col_t, self.d_row_t = self.d_col.T.tocsr(), self.d_row.T.tocsr()
+        self.pairs = _pair_matrix(index, mask)
+        self.pairs_t = self.pairs.T.tocsr()
+        boundary = find_boundary(mask)
+        self.outline = index[boundary.rows, boundary.cols]
+        self.outward = boundary.normals
+        # a clipped plateau (two or more pixels at the object's top value) carries no shading
+        top = self.values.max()
+        at_top = self.values >= top * (1.0 - 1e-3)
+        self.data = ~at_top if np.count_nonzero(at_top) > 1 else np.ones(self.n, dtype=bool)
+        self.basis = [sp.identity(self.n, format="csr")]
+        factor = 2
+        while min(mask.shape) // factor >= 4:
+            self.basis.append(_upsampling_matrix(rows, cols, mask.shape, factor))
+            factor *= 2
+        self.basis_t = [b.T.tocsr() for b in self.basis]
+        self.split = np.cumsum([b.shape[1] for b in self.basis])[:-1]
+        self.unknowns = int(sum(b.shape[1] for b in self.basis))
+
+    def depth(self, coefficients):
+        """Depth on the object's pixels from the basis coefficients."""
+        return sum(b @ part for b, part in zip(self.basis, np.split(coefficients, self.split)))
+
+    def normals(self, z):
+        """(n, 3) unit normals of depth ``z`` on the object's pixels."""
+        gx, gy = self.d_col @ z, self.d_row @ z
+        inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
+        return np.column_stack([-gx * inverse, gy * inverse, inverse])
+
+    def energy(self, coefficients, inverse_albedo):
+        """The energy and its gradient with respect to the basis coefficients."""
+        z = self.depth(coefficients)
+        gx, gy = self.d_col @ z, self.d_row @ z
+        inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
+        nx, ny, nz = -gx * inverse, gy * inverse, inverse
+        lx, ly, lz = self.light
+        shading = nx * lx + ny * ly + nz * lz
+        # shading: Cauchy loss on max(0, n . L) - I / a
+        lit = shading > 0
+        residual = np.where(lit, shading, 0.0) - self.values * inverse_albedo
+        ratio = residual * residual / (SCALE * SCALE)
+        energy = 0.5 * SCALE * SCALE * np.sum(np.log1p(ratio)[self.data])
+        d_shading = np.where(self.data & lit, residual / (1.0 + ratio), 0.0)
+        g_x = d_shading * (-lx * inverse - shading * gx * inverse * inverse)
+        g_y = d_shading * (ly * inverse - shading * gy * inverse * inverse)
+        # smoothness: robust in the change of the normal between neighbours
+        steps = [self.pairs @ component for component in (nx, ny, nz)]
+        root = np.sqrt(EPS * EPS + steps[0] ** 2 + steps[1] ** 2 + steps[2] ** 2)
+        energy += MU * np.sum(root - EPS)
+        weight = MU / root
+        g_n = [self.pairs_t @ (weight * step) for step in steps]
+        # contour: the normal on the outline is its outward normal
+        miss = nx[self.outline] * self.outward[:, 0] + ny[self.outline] * self.outward[:, 1] - 1.0
+        energy += NU * np.sum(miss * miss)
+        np.add.at(g_n[0], self.outline, 2.0 * NU * miss * self.outward[:, 0])
+        np.add.at(g_n[1], self.outline, 2.0 * NU * miss * self.outward[:, 1])
+        # back through n(gx, gy) to the slopes, the depth and the basis
+        cube = inverse**3
+        g_x += g_n[0] * (gx * gx * cube - inverse) - g_n[1] * gx * gy * cube - g_n[2] * gx * cube
+        g_y += g_n[0] * gx * gy * cube + g_n[1] * (inverse - gy * gy * cube) - g_n[2] * gy * cube
+        g_z = self.d_col_t @ g_x + self.d_row_t @ g_y
+        return energy, np.concatenate([b_t @ g_z for b_t in self.basis_t])
+
+
+def _brightness(grid: _Level, z: np.ndarray) -> float:
+    """Median of ``I / (n . L)`` over the pixels turned toward the light under depth ``z``."""
+    shading = grid.normals(z) @ grid.light
+    facing = grid.data & (shading > FACING)
+    if np.count_nonzero(facing) < 10:
+        facing = shading > 0
+    return float(np.median(grid.values[facing] / shading[facing]))
+
+
+def _index(mask):
+    """Object pixel numbers (-1 off it) and the pixels' rows and columns."""
+    rows, cols = np.nonzero(mask)
+    index = np.full(mask.shape, -1, dtype=np.int64)
+    index[rows, cols] = np.arange(rows.size)
+    return index, rows, cols
+
+
+def _neighbour(index, rows, cols):
+    """Pixel numbers at (rows, cols) (-1 off the object or the frame) and whether in the frame."""
+    height, width = index.shape
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    other = np.full(rows.size, -1, dtype=np.int64)
+    other[inside] = index[rows[inside], cols[inside]]
+    return other, inside
+
+
+def _slope_matrix(index, rows, cols, step):
+    """d/dcol (step (0, 1)) or d/drow (step (1, 0)) on the object's pixels: central differences
+    where both neighbours are on it, one-sided where one is, zero where none is. Rows point
+    down (``y = -row``), so a normal is ``(-dz/dcol, +dz/drow, 1)`` normalised."""
+    forward, _ = _neighbour(index, rows + step[0], cols + step[1])
+    backward, _ = _neighbour(index, rows - step[0], cols - step[1])
+    me = np.arange(rows.size)
+    has_f, has_b = forward >= 0, backward >= 0
+    half = np.where(has_f & has_b, 0.5, 1.0)
+    right = np.where(has_f, forward, me)
+    left = np.where(has_b, backward, me)
+    some = has_f | has_b
+    i = np.r_[me[some], me[some]]
+    j = np.r_[right[some], left[some]]
+    v = np.r_[half[some], -half[some]]
+    return sp.csr_matrix((v, (i, j)), shape=(rows.size, rows.size))
+
+
+def _pair_matrix(index, mask):
+    """(pairs, n) differences ``x_q - x_p`` over 4-neighbouring object pixels."""
+    across = mask[:, :-1] & mask[:, 1:]
+    down = mask[:-1, :] & mask[1:, :]
+    p = np.r_[index[:, :-1][across], index[:-1, :][down]]
+    q = np.r_[index[:, 1:][across], index[1:, :][down]]
+    k = np.arange(p.size)
+    return sp.csr_matrix(
+        (np.r_[np.ones(k.size), -np.ones(k.size)], (np.r_[k, k], np.r_[q, p])),
+        shape=(p.size, index.max() + 1),
+    )
+
+
+def _upsampling_matrix(rows, cols, shape, factor):
+    """Bilinear interpolation from a grid ``factor`` times coarser to the object's pixels (only
+    the coarse nodes that reach the object are kept)."""
+    height, width = -(-shape[0] // factor), -(-shape[1] // factor)
+    at_row = np.clip((rows + 0.5) / factor - 0.5, 0, height - 1)
+    at_col = np.clip((cols + 0.5) / factor - 0.5, 0, width - 1)
+    row0 = np.minimum(np.floor(at_row).astype(np.int64), max(height - 2, 0))
+    col0 = np.minimum(np.floor(at_col).astype(np.int64), max(width - 2, 0))
+    t_row, t_col = at_row - row0, at_col - col0
+    n = rows.size
+    i, j, v = [], [], []
+    for d_row, w_row in ((0, 1.0 - t_row), (1, t_row)):
+        for d_col, w_col in ((0, 1.0 - t_col), (1, t_col)):
+            node = np.minimum(row0 + d_row, height - 1) * width + np.minimum(col0 + d_col, width - 1)
+            i.append(np.arange(n))
+            j.append(node)
+            v.append(w_row * w_col)
+    matrix = sp.csr_matrix(
+        (np.concatenate(v), (np.concatenate(i), np.concatenate(j))), shape=(n, height * width)
+    )
+    used = np.flatnonzero(matrix.getnnz(axis=0))
+    return matrix[:, used].tocsr()
+
+
+def _half(image, mask):
+    """The next pyramid level: 2x2 blocks, the image averaged over their object pixels, a block
+    on the object when at least two of its pixels are."""
+    height, width = (mask.shape[0] // 2) * 2, (mask.shape[1] // 2) * 2
+    blocks = mask[:height, :width].reshape(height // 2, 2, width // 2, 2)
+    count = blocks.sum(axis=(1, 3))
+    total = (
+        np.where(mask, image, 0.0)[:height, :width].reshape(height // 2, 2, width // 2, 2).sum(axis=(1, 3))
+    )
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0), count >= 2
+
+
+def _double(depth, coarse_mask, mask):
+    """A coarse level's depth on the next finer level's grid (heights doubled: pixel units)."""
+    nearest = ndi.distance_transform_edt(~coarse_mask, return_distances=False, return_indices=True)
+    filled = depth[tuple(nearest)]
+    rows = (np.arange(mask.shape[0]) + 0.5) / 2 - 0.5
+    cols = (np.arange(mask.shape[1]) + 0.5) / 2 - 0.5
+    grid = np.meshgrid(rows, cols, indexing="ij")
+    return 2.0 * ndi.map_coordinates(filled, grid, order=1, mode="nearest")
