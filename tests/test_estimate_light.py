@@ -3,7 +3,11 @@
 The bars of issue 3 (slant within 3 degrees, tilt within 5 degrees where the slant is at least 10,
 noise-free synthetic scenes, slants 0-60) are the first class and the relief class. Where one image
 cannot tell the light (a cylinder lit along its axis, a bowl, a saddle) the tests pin down the
-documented answer instead.
+documented answer instead. The bars of issue 11 follow: the automatic mask (slant within 3 degrees
+at slants 0, 20, 40 and 60 on the sphere, the ellipsoid and the bumps), highlights and clipping,
+the confidence, degenerate masks refused, and the real photos of ``../shared/data/real`` (light
+error median <= 8 degrees and worst <= 30 over the frontal photo of each object, and a few objects
+with bars of their own).
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ TILT_BAR = 5.0
 SLANTS = (10, 20, 30, 45, 60)
 TILTS = (0, 135, 270)
 DILIGENT_BALL = Path(__file__).resolve().parents[2] / "shared" / "data" / "diligent-ball"
+AUTO_SLANTS = (0, 20, 40, 60)
+ALL_TILTS = tuple(range(0, 360, 45))
 
 
 def _tilt_error(estimated: float, true: float) -> float:
@@ -261,3 +267,207 @@ def test_diligent_ball_round_method(ball_errors):
     contour), the round one is not."""
     assert ball_errors.mean() <= 2.0
     assert ball_errors.max() <= 4.0
+
+
+def _angle(a, b) -> float:
+    return math.degrees(math.acos(min(1.0, max(-1.0, float(np.dot(a, b))))))
+
+
+class TestAutomaticMask:
+    """The bar of issue 11: with the automatic mask (``mask=None``), which stops where the shading
+    fades out, the slant within 3 degrees on the sphere, the ellipsoid and the bumps at slants 0,
+    20, 40 and 60 (all eight tilts on the round scenes; four on the slower bumps, at 128)."""
+
+    @pytest.mark.parametrize("slant", AUTO_SLANTS)
+    @pytest.mark.parametrize("name", ["sphere", "ellipsoid"])
+    def test_bar(self, name, slant):
+        errors = []
+        for tilt in (0,) if slant == 0 else ALL_TILTS:
+            scene = synth.scene(name, size=256, light=light_from_slant_tilt(slant, tilt))
+            est = estimate_light(scene.image)
+            errors.append(abs(est.slant - slant))
+            if slant >= 20:
+                assert _tilt_error(est.tilt, tilt) <= TILT_BAR
+        assert max(errors) <= SLANT_BAR
+
+    @pytest.mark.parametrize("slant", AUTO_SLANTS)
+    def test_bumps(self, slant):
+        for tilt in (0,) if slant == 0 else (0, 90, 135, 270):
+            scene = synth.scene("bumps", size=128, light=light_from_slant_tilt(slant, tilt))
+            est = estimate_light(scene.image)
+            assert abs(est.slant - slant) <= SLANT_BAR
+
+    @pytest.mark.parametrize("slant", [40, 60])
+    def test_the_shadow_edge_is_not_the_outline(self, slant):
+        """The mask stops at the attached shadow's edge: the top of the mask is then off the top
+        of the object, and the brightest point fixes k instead."""
+        scene = synth.scene("sphere", size=256, light=light_from_slant_tilt(slant, 135))
+        auto = estimate_light(scene.image)
+        drawn = estimate_light(scene.image, scene.mask)
+        assert auto.evidence == "limb-brightest"
+        assert auto.info["shadow_edge"] > 0 and auto.info["shadowed_outline"] == 0
+        assert drawn.evidence == "limb"
+        assert drawn.info["shadowed_outline"] > 0 and drawn.info["shadow_edge"] == 0
+
+
+class TestHighlightsAndClipping:
+    """A Blinn-Phong highlight (clipped by the camera, as photos clip it) and a top clipped by
+    over-exposure: the top and the brightest level are read past them."""
+
+    @staticmethod
+    def _errors(slants, mask_given, **render):
+        found = []
+        for slant in slants:
+            for tilt in (0, 135, 270):
+                scene = synth.scene("sphere", size=256, light=light_from_slant_tilt(slant, tilt))
+                image = synth.render(scene.normals, scene.mask, light=scene.light, **render)
+                est = estimate_light(image, scene.mask if mask_given else None)
+                found.append((_angle(est.light, scene.light), est.confidence))
+        return np.array(found)
+
+    @pytest.mark.parametrize("mask_given", [True, False])
+    def test_narrow_highlight(self, mask_given):
+        errors = self._errors((20, 40, 60), mask_given, albedo=0.6, specular=0.3, shininess=300)
+        assert errors[:, 0].max() <= SLANT_BAR
+
+    def test_clipped_highlight(self):
+        # the highlight clipped at 1 (a plateau) and its flanks: measured 1.8 with the mask drawn
+        # on the outline, 6.4 with the automatic mask (where the brightest level fixes k)
+        drawn = self._errors((20, 40, 60), True, albedo=0.6, specular=1.0, shininess=200)
+        auto = self._errors((20, 40, 60), False, albedo=0.6, specular=1.0, shininess=200)
+        assert drawn[:, 0].max() <= SLANT_BAR
+        assert auto[:, 0].max() <= 8.0
+
+    def test_clipped_top(self):
+        drawn = self._errors((20, 40, 60), True, albedo=1.15)
+        auto = self._errors((20, 40), False, albedo=1.15)
+        assert drawn[:, 0].max() <= SLANT_BAR
+        assert auto[:, 0].max() <= SLANT_BAR
+
+    def test_clipped_top_lowers_the_confidence_where_it_misleads(self):
+        # at slant 60 the automatic mask leaves the brightest level alone to fix k, and it is
+        # clipped: 8 degrees off, and the confidence says so
+        errors = self._errors((60,), False, albedo=1.15)
+        assert errors[errors[:, 0] > 5.0, 1].max() < 0.5
+
+
+class TestConfidence:
+    def test_range_and_spread(self):
+        scene = synth.scene("sphere", size=128, light=light_from_slant_tilt(30, 45))
+        est = estimate_light(scene.image, scene.mask)
+        assert isinstance(est.confidence, float) and 0.0 <= est.confidence <= 1.0
+        assert est.confidence >= 0.9
+        assert est.info["spread"] >= 0.0
+
+    def test_matches_its_definition(self):
+        from shadeform.light import CONFIDENCE_ANGLE
+
+        scene = synth.scene("ellipsoid", size=128, light=light_from_slant_tilt(45, 200), noise=0.02)
+        est = estimate_light(scene.image, scene.mask)
+        expected = 1.0 - math.exp(-((CONFIDENCE_ANGLE / est.info["spread"]) ** 2))
+        assert est.confidence == pytest.approx(expected)
+
+    @pytest.mark.parametrize(("slant", "tilt"), [(30, 90), (45, 270)])
+    def test_low_where_the_image_cannot_tell(self, slant, tilt):
+        """A cylinder lit along its axis: the slant is only bounded by the brightest point."""
+        est = _estimate("cylinder", slant, tilt)
+        assert est.evidence == "limb-peak"
+        assert est.confidence <= 0.2
+
+    @pytest.mark.parametrize("name", ["sphere", "bumps"])
+    def test_high_on_clean_scenes(self, name):
+        est = _estimate(name, 40, 135, size=128)
+        assert est.confidence >= 0.9
+
+    def test_recorded_by_the_pipeline(self):
+        from shadeform import reconstruct
+
+        scene = synth.scene("sphere", size=64, light=light_from_slant_tilt(20, 60))
+        rec = reconstruct(scene.image, mask=scene.mask, light="estimate")
+        recorded = rec.info["light_estimate"]["confidence"]
+        assert recorded == pytest.approx(estimate_light(scene.image, scene.mask).confidence)
+
+
+class TestDegenerateMasks:
+    """Masks that hold no outline or no inside are refused with one line saying what to do."""
+
+    @pytest.fixture()
+    def scene(self):
+        return synth.scene("sphere", size=128, light=light_from_slant_tilt(30, 45))
+
+    @pytest.mark.parametrize("width", [1, 2, 4])
+    def test_strip(self, scene, width):
+        mask = np.zeros_like(scene.mask)
+        mask[60 : 60 + width, 10:120] = True
+        with pytest.raises(InputError, match="pixels across") as info:
+            estimate_light(scene.image, mask)
+        assert "\n" not in str(info.value)
+
+    def test_a_five_pixel_band_is_read(self, scene):
+        mask = scene.mask.copy()
+        mask[:, :] = False
+        mask[40:45, 10:120] = True
+        assert 0.0 <= estimate_light(scene.image, mask).confidence <= 1.0
+
+    def test_outline_only(self, scene):
+        from scipy import ndimage as ndi
+
+        ring = scene.mask & ~ndi.binary_erosion(scene.mask, iterations=2)
+        with pytest.raises(InputError, match="filled mask"):
+            estimate_light(scene.image, ring)
+
+    def test_background_mask(self, scene):
+        """The mask is the background round the object: it touches the frame all round."""
+        image = scene.image + 0.3 * ~scene.mask
+        with pytest.raises(InputError, match="all four sides") as info:
+            estimate_light(image, ~scene.mask)
+        assert "\n" not in str(info.value)
+
+    def test_frame_filled_by_an_object_that_is_no_relief(self, scene):
+        with pytest.raises(InputError, match="all four sides"):
+            estimate_light(scene.image, np.ones_like(scene.mask))
+
+
+@pytest.fixture(scope="module")
+def real_cases(real_data):
+    """The frontal photo of each real object, with the estimate from its mask and from the
+    automatic one: ``[(case, given, automatic)]``."""
+    found = []
+    for case in real_data.cases():
+        found.append((case, estimate_light(case.image, case.mask), estimate_light(case.image)))
+    return found
+
+
+class TestRealPhotos:
+    """The frontal photo of the six DiLiGenT and twelve MIT-Berkeley objects (``real_data``)."""
+
+    def test_bar(self, real_cases, real_data):
+        errors = np.array([real_data.light_error(given.light, case) for case, given, _ in real_cases])
+        assert len(errors) == 18
+        assert np.median(errors) <= 8.0
+        assert errors.max() <= 30.0
+
+    def test_bar_with_the_automatic_mask(self, real_cases, real_data):
+        errors = np.array([real_data.light_error(auto.light, case) for case, _, auto in real_cases])
+        assert np.median(errors) <= 8.0
+        assert errors.max() <= 30.0
+
+    @pytest.mark.parametrize(
+        ("name", "bar"),
+        # measured: cat 0.9, bear 3.1, reading 4.0 (slant 89 before issue 11), deer 0.6, pear 2.6
+        [("cat", 3.0), ("bear", 5.0), ("reading", 8.0), ("deer", 3.0), ("pear", 5.0)],
+    )
+    def test_objects(self, real_cases, real_data, name, bar):
+        case, given, _ = next(found for found in real_cases if found[0].name == name)
+        assert real_data.light_error(given.light, case) <= bar
+
+    def test_no_grazing_light_on_a_frontal_photo(self, real_cases):
+        """Every light of these photos is within 17 degrees of the viewer; dark paint at the top
+        (``reading``) or highlights must not send the estimate to the horizon."""
+        for _, given, auto in real_cases:
+            assert given.slant < 45.0 and auto.slant < 45.0
+
+    def test_confidence_is_lowest_where_the_error_is_largest(self, real_cases, real_data):
+        errors = np.array([real_data.light_error(given.light, case) for case, given, _ in real_cases])
+        confidence = np.array([given.confidence for _, given, _ in real_cases])
+        assert confidence[errors > 15.0].max() < np.median(confidence)

@@ -136,6 +136,7 @@ def reconstruct(
             "tilt": float(estimate.tilt),
             "albedo": float(estimate.albedo),
             "evidence": estimate.evidence,
+            "confidence": float(estimate.confidence),
         }
         lap("light")
     noise = inside = None

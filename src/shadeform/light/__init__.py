@@ -17,7 +17,10 @@ imported on first use.
 The estimators' constants were set on the synthetic scenes of ``benchmarks/bench_light.py`` and
 (the ring span of :mod:`~shadeform.light.rings`) on the DiLiGenT ball: the very data that
 benchmark reports, so its table is not a held-out measure. Which constant came from which scene is
-inferred from when it was added; the history records no per-constant sweep.
+inferred from when it was added; the history records no per-constant sweep. The constants added
+for real photographs (the shadow-edge test of :mod:`~shadeform.light.contour`, the clipped plateau
+of :mod:`~shadeform.light._evidence`, the thinnest mask of :mod:`~shadeform.light.estimate`) were
+chosen on synthetic scenes or from the pixel grid, not on the real photos the benchmark reports.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ _LAZY = {
     "estimate_light": "shadeform.light.estimate",
     "ESTIMATION_METHODS": "shadeform.light.estimate",
     "MIN_OBJECT_PIXELS": "shadeform.light.estimate",
+    "CONFIDENCE_ANGLE": "shadeform.light.estimate",
 }
 
 __all__ = [
@@ -41,6 +45,7 @@ __all__ = [
     "parse_light",
     "LightEstimate",
     "estimate_light",
+    "CONFIDENCE_ANGLE",
 ]
 
 

@@ -36,7 +36,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shadeform.light._evidence import MIN_OBJECT_PIXELS, Levels, Reading, from_components, slant_from_peak
+from shadeform.light._evidence import (
+    MIN_OBJECT_PIXELS,
+    Levels,
+    Reading,
+    bound_spread,
+    from_components,
+    slant_from_peak,
+)
 from shadeform.light.features import (
     FEATURE_REACH,
     PROFILE_KNOTS,
@@ -92,6 +99,8 @@ def base_level(image, mask, levels: Levels, edge_values) -> float | None:
     """
     noise, peak = levels.noise, levels.peak
     level = float(np.median(edge_values))
+    if level <= levels.lit:
+        return None  # a base in shadow (or the black background) faces no light
     spread = 1.4826 * float(np.median(np.abs(edge_values - level)))
     if spread > max(2.0 * noise, 0.01 * peak):
         return None
@@ -125,9 +134,11 @@ def read_relief(image, mask, levels: Levels, edge_values) -> Reading | None:
         fit = round_features(image, mask, level, levels.noise)
     if fit is not None:
         info.update(relief_features=fit.features, relief_residual=fit.residual)
-        return Reading(*from_components(fit.across * fit.level, fit.level), "relief", info)
+        return Reading(*from_components(fit.across * fit.level, fit.level), "relief", info, spread=fit.spread)
     slant = slant_from_peak(level, levels.peak)
-    return Reading(slant, _relief_tilt(image, mask, level), max(levels.peak, level), "relief-spectrum", info)
+    tilt = _relief_tilt(image, mask, level)
+    # the brightest point only bounds the slant from below
+    return Reading(slant, tilt, max(levels.peak, level), "relief-spectrum", info, spread=bound_spread(slant))
 
 
 def _relief_tilt(image, mask, level) -> float:
@@ -181,12 +192,15 @@ class ReliefFit:
         Number of features.
     residual : float
         Root-mean-square misfit over ``level``.
+    spread : float
+        Root-mean-square angle (degrees) of the light, from the fit's covariance.
     """
 
     across: np.ndarray
     level: float
     features: int
     residual: float
+    spread: float
 
 
 def round_features(image, mask, level, noise) -> ReliefFit | None:
@@ -241,16 +255,17 @@ def round_features(image, mask, level, noise) -> ReliefFit | None:
         fit = fit_features(x, y, values, found.level, found.across, features, window * scale, robust=False)
         floor = _FIT_ACCEPT[0] * (noise / fine) ** 2
         if fit.mse <= floor + _FIT_ACCEPT[1] * variance:
-            return _relief_fit(fit)
-        if fit.mse <= floor + _FIT_FALLBACK * variance and (best is None or fit.mse < best.mse):
-            best = fit
+            return _relief_fit(fit, x, y, window * scale)
+        if fit.mse <= floor + _FIT_FALLBACK * variance and (best is None or fit.mse < best[0].mse):
+            best = (fit, window * scale)
     # no search explained the image to near the noise: the best one, if it explains most of it
-    return None if best is None else _relief_fit(best)
+    return None if best is None else _relief_fit(best[0], x, y, best[1])
 
 
-def _relief_fit(fit: Fit) -> ReliefFit:
-    """The light of a joint fit: of the two opposite lights a relief allows, the one that makes
-    the features' total volume positive (pi * integral of r^2 s(r) dr, from the coefficients)."""
+def _relief_fit(fit: Fit, x, y, window) -> ReliefFit:
+    """The light of a joint fit of the pixels at ``x``, ``y`` (features found with ring windows
+    of ``window`` pixels): of the two opposite lights a relief allows, the one that makes the
+    features' total volume positive (pi * integral of r^2 s(r) dr, from the coefficients)."""
     knots = np.arange(1, PROFILE_KNOTS + 1, dtype=np.float64)
     raised = sum(float(knots**2 @ s) for _, s in fit.features) >= 0
     return ReliefFit(
@@ -258,7 +273,34 @@ def _relief_fit(fit: Fit) -> ReliefFit:
         level=fit.level,
         features=len(fit.features),
         residual=math.sqrt(fit.mse) / fit.level,
+        spread=_fit_spread(fit, x, y, window),
     )
+
+
+def _fit_spread(fit: Fit, x, y, window) -> float:
+    """Root-mean-square angle (degrees) of the light of a joint fit, from the fit's covariance.
+
+    The covariance of ``tau`` is ``mse`` times its block of ``(J^T J)^-1`` (J the image's Jacobian
+    in all the parameters at the fit); the light ``(tau, 1) / |(tau, 1)|`` turns by
+    ``d tau_parallel / (1 + |tau|^2)`` along the tilt and ``d tau_perpendicular / sqrt(1 + |tau|^2)``
+    across it.
+    """
+    reaches = [FEATURE_REACH * window] * len(fit.features)
+    _, jac = render_features(
+        feature_params(fit.level, fit.across, fit.features), x, y, reaches, jacobian=True
+    )
+    normal = jac.T @ jac
+    try:
+        inverse = np.linalg.pinv(normal, hermitian=True)
+    except np.linalg.LinAlgError:
+        return math.inf
+    covariance = fit.mse * inverse[1:3, 1:3]
+    size = float(np.hypot(*fit.across))
+    along = fit.across / size if size > 0 else np.array([1.0, 0.0])
+    across = np.array([-along[1], along[0]])
+    stretch = 1.0 + size * size
+    variance = float(along @ covariance @ along) / stretch**2 + float(across @ covariance @ across) / stretch
+    return math.degrees(math.sqrt(max(variance, 0.0)))
 
 
 def _search_features(image, mask, level, noise, window) -> Fit | None:

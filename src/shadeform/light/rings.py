@@ -15,7 +15,14 @@ import math
 
 import numpy as np
 
-from shadeform.light._evidence import Levels, Reading, fit_below_highlights, from_components
+from shadeform.light._evidence import (
+    Levels,
+    Reading,
+    fit_below_highlights,
+    from_components,
+    jackknife_spread,
+    unit_light,
+)
 
 # Rings are read between these fractions of the way from the silhouette to the deepest point
 # (chosen on the DiLiGenT ball photos: nearer the contour the paint darkens, nearer the top the
@@ -62,10 +69,23 @@ def read_rings(image, mask, levels: Levels) -> Reading | None:
     if len(estimates) < _FEWEST_RINGS:
         return None
     estimates, weights = np.array(estimates), np.array(weights)
-    across = np.array(
-        [_weighted_median(estimates[:, 0], weights), _weighted_median(estimates[:, 1], weights)]
+    across = _combine(estimates, weights)
+    # the spread: a jackknife over the rings, each left out of the weighted median in turn
+    lights = []
+    for i in range(len(estimates)):
+        rest = np.arange(len(estimates)) != i
+        lights.append(unit_light(*from_components(_combine(estimates[rest], weights[rest]), levels.top)[:2]))
+    return Reading(
+        *from_components(across, levels.top),
+        "round",
+        {"rings": len(estimates)},
+        spread=jackknife_spread(lights),
     )
-    return Reading(*from_components(across, levels.top), "round", {"rings": len(estimates)})
+
+
+def _combine(estimates, weights) -> np.ndarray:
+    """``k L_xy`` (2,) from the rings' ``estimates`` (m, 2): each component's weighted median."""
+    return np.array([_weighted_median(estimates[:, 0], weights), _weighted_median(estimates[:, 1], weights)])
 
 
 def _weighted_median(values, weights) -> float:
