@@ -19,6 +19,7 @@ Run: ``python benchmarks/bench_real.py [--objects cat,apple]``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import sys
@@ -35,6 +36,8 @@ from shadeform.solvers import get_solver, solver_names
 from shadeform.solvers.photo import silhouette_depth
 
 RESULTS = Path(__file__).resolve().parent / "results" / "real.md"
+#: Every measured row, one JSON object per line, written as the run goes.
+ROWS = RESULTS.with_suffix(".jsonl")
 
 
 def normals_of_depth(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -108,6 +111,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", help="comma-separated object names (default: all)")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help=f"keep the objects already measured in {ROWS.name} (one JSON row per object) and measure the rest",
+    )
     args = parser.parse_args(argv)
     if not real_data.available():
         print(f"no real data at {real_data.DATA}: nothing to measure")
@@ -115,11 +123,23 @@ def main(argv=None):
     wanted = set(args.objects.split(",")) if args.objects else None
     methods = ["auto", *solver_names()]
     rows = {}
+    done = {}
+    if args.resume and ROWS.exists():
+        for line in ROWS.read_text().splitlines():
+            item = json.loads(line)
+            done[(item.pop("object"), item.pop("set"))] = item
+    else:
+        ROWS.write_text("")
     cases = [real_data.diligent(n) for n in real_data.DILIGENT] + [real_data.mit(n) for n in real_data.MIT]
     for case in cases:
         if wanted and case.name not in wanted:
             continue
+        if (case.name, case.set) in done:
+            rows[(case.name, case.set)] = done[(case.name, case.set)]
+            continue
         rows[(case.name, case.set)] = row = run_case(case, methods)
+        with ROWS.open("a") as stream:
+            stream.write(json.dumps({"object": case.name, "set": case.set, **row}) + "\n")
         print(
             case.set,
             case.name,
