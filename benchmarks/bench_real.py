@@ -36,15 +36,6 @@ from shadeform.solvers import get_solver, solver_names
 from shadeform.solvers.photo import silhouette_depth
 
 RESULTS = Path(__file__).resolve().parent / "results" / "real.md"
-#: Every measured row, one JSON object per line, written as the run goes.
-ROWS = RESULTS.with_suffix(".jsonl")
-
-
-def normals_of_depth(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Unit normals ``(-dz/dcol, +dz/drow, 1)`` of a height map (np.gradient, as the MIT truth)."""
-    d_row, d_col = np.gradient(np.where(mask, depth, 0.0))
-    normals = np.dstack([-d_col, d_row, np.ones_like(depth)])
-    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
 
 
 def run_case(case, methods):
@@ -54,7 +45,7 @@ def run_case(case, methods):
     constant[..., 2] = 1.0
     row["constant"] = real_data.angular_error(constant, case)
     row["silhouette"] = real_data.angular_error(
-        normals_of_depth(silhouette_depth(case.mask), case.mask), case
+        real_data.normals_of_height(silhouette_depth(case.mask)), case
     )
     for light_name, light in (("known", case.light), ("estimate", "estimate")):
         for method in methods:
@@ -114,7 +105,7 @@ def main(argv=None):
     parser.add_argument(
         "--resume",
         action="store_true",
-        help=f"keep the objects already measured in {ROWS.name} (one JSON row per object) and measure the rest",
+        help="keep the objects already measured in the rows file beside --out (.jsonl, one JSON row per object)",
     )
     args = parser.parse_args(argv)
     if not real_data.available():
@@ -124,12 +115,13 @@ def main(argv=None):
     methods = ["auto", *solver_names()]
     rows = {}
     done = {}
-    if args.resume and ROWS.exists():
-        for line in ROWS.read_text().splitlines():
+    rows_file = args.out.with_suffix(".jsonl")
+    if args.resume and rows_file.exists():
+        for line in rows_file.read_text().splitlines():
             item = json.loads(line)
             done[(item.pop("object"), item.pop("set"))] = item
     else:
-        ROWS.write_text("")
+        rows_file.write_text("")
     cases = [real_data.diligent(n) for n in real_data.DILIGENT] + [real_data.mit(n) for n in real_data.MIT]
     for case in cases:
         if wanted and case.name not in wanted:
@@ -138,7 +130,7 @@ def main(argv=None):
             rows[(case.name, case.set)] = done[(case.name, case.set)]
             continue
         rows[(case.name, case.set)] = row = run_case(case, methods)
-        with ROWS.open("a") as stream:
+        with rows_file.open("a") as stream:
             stream.write(json.dumps({"object": case.name, "set": case.set, **row}) + "\n")
         print(
             case.set,

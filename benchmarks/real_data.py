@@ -104,13 +104,17 @@ def mit(name: str, *, raw: bool = False) -> Case:
         albedo = load_pixels(folder / "reflectance.png").astype(np.float64) @ LUMA
         mask = mask & (albedo > 0)
         image = np.where(mask, image / np.where(albedo > 0, albedo, 1.0), 0.0)
-    z = scipy.io.loadmat(folder / "Z.mat")["depth"].astype(np.float64)
-    d_row, d_col = np.gradient(z)
-    normals = np.dstack([-d_col, d_row, np.ones_like(z)])
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = normals_of_height(scipy.io.loadmat(folder / "Z.mat")["depth"].astype(np.float64))
     valid = _valid(normals, mask)
     normals[~valid] = np.nan
     return Case(name + ("-raw" if raw else ""), "mit", image, mask, light, normals, valid)
+
+
+def normals_of_height(z: np.ndarray) -> np.ndarray:
+    """Unit normals ``(-dz/dcol, +dz/drow, 1)`` of a height map in pixels (``np.gradient``)."""
+    d_row, d_col = np.gradient(z)
+    normals = np.dstack([-d_col, d_row, np.ones_like(z)])
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
 
 
 def cases(*, raw_mit: bool = False) -> list[Case]:

@@ -51,6 +51,7 @@ import scipy.sparse.linalg as spla
 from scipy import ndimage as ndi
 from scipy.optimize import minimize
 
+from shadeform.integration.poisson import _difference_system
 from shadeform.solvers.problem import Problem, Solution
 
 __all__ = ["COARSEST", "EPS", "MU", "NU", "SCALE", "PhotoResult", "photo_depth", "silhouette_depth", "solve"]
@@ -224,7 +225,8 @@ class _Level:
         self.light = light
         self.d_col, self.d_row = (_slope_matrix(index, rows, cols, step) for step in ((0, 1), (1, 0)))
         self.d_col_t, self.d_row_t = self.d_col.T.tocsr(), self.d_row.T.tocsr()
-        self.pairs = _pair_matrix(index, mask)
+        # (pairs, n) differences z_q - z_p over 4-neighbouring object pixels: Poisson's operator
+        _, self.pairs, _ = _difference_system(mask, np.ones(mask.shape))
         self.pairs_t = self.pairs.T.tocsr()
         boundary = find_boundary(mask)
         self.outline = index[boundary.rows, boundary.cols]
@@ -277,8 +279,8 @@ class _Level:
         # contour: the normal on the outline is its outward normal
         miss = nx[self.outline] * self.outward[:, 0] + ny[self.outline] * self.outward[:, 1] - 1.0
         energy += NU * np.sum(miss * miss)
-        np.add.at(g_n[0], self.outline, 2.0 * NU * miss * self.outward[:, 0])
-        np.add.at(g_n[1], self.outline, 2.0 * NU * miss * self.outward[:, 1])
+        g_n[0][self.outline] += 2.0 * NU * miss * self.outward[:, 0]  # outline pixels are distinct
+        g_n[1][self.outline] += 2.0 * NU * miss * self.outward[:, 1]
         # back through n(gx, gy) to the slopes, the depth and the basis
         cube = inverse**3
         g_x += g_n[0] * (gx * gx * cube - inverse) - g_n[1] * gx * gy * cube - g_n[2] * gx * cube
@@ -329,19 +331,6 @@ def _slope_matrix(index, rows, cols, step):
     j = np.r_[right[some], left[some]]
     v = np.r_[half[some], -half[some]]
     return sp.csr_matrix((v, (i, j)), shape=(rows.size, rows.size))
-
-
-def _pair_matrix(index, mask):
-    """(pairs, n) differences ``x_q - x_p`` over 4-neighbouring object pixels."""
-    across = mask[:, :-1] & mask[:, 1:]
-    down = mask[:-1, :] & mask[1:, :]
-    p = np.r_[index[:, :-1][across], index[:-1, :][down]]
-    q = np.r_[index[:, 1:][across], index[1:, :][down]]
-    k = np.arange(p.size)
-    return sp.csr_matrix(
-        (np.r_[np.ones(k.size), -np.ones(k.size)], (np.r_[k, k], np.r_[q, p])),
-        shape=(p.size, index.max() + 1),
-    )
 
 
 def _upsampling_matrix(rows, cols, shape, factor):
