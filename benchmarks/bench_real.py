@@ -66,6 +66,16 @@ def run_case(case, methods):
     return row
 
 
+def _write_rows(path, rows):
+    """The rows file: one JSON object per measured object (written whole, then moved in place)."""
+    text = "".join(
+        json.dumps({"object": name, "set": kind, **row}) + "\n" for (name, kind), row in rows.items()
+    )
+    part = path.with_suffix(".part")
+    part.write_text(text)
+    part.replace(path)
+
+
 def table(rows, columns, sets, *, compare=False):
     """Markdown: one line per object, then the medians and the count worse than the constant."""
     lines = ["| set | object | " + " | ".join(columns) + " |", "|---|---|" + "---:|" * len(columns)]
@@ -107,6 +117,11 @@ def main(argv=None):
         action="store_true",
         help="keep the objects already measured in the rows file beside --out (.jsonl, one JSON row per object)",
     )
+    parser.add_argument(
+        "--methods",
+        help="comma-separated methods to measure again on every object, the other columns kept from "
+        "the rows file (default: measure every method)",
+    )
     args = parser.parse_args(argv)
     if not real_data.available():
         print(f"no real data at {real_data.DATA}: nothing to measure")
@@ -116,22 +131,22 @@ def main(argv=None):
     rows = {}
     done = {}
     rows_file = args.out.with_suffix(".jsonl")
-    if args.resume and rows_file.exists():
+    again = args.methods.split(",") if args.methods else None
+    if (args.resume or again) and rows_file.exists():
         for line in rows_file.read_text().splitlines():
             item = json.loads(line)
             done[(item.pop("object"), item.pop("set"))] = item
-    else:
-        rows_file.write_text("")
     cases = [real_data.diligent(n) for n in real_data.DILIGENT] + [real_data.mit(n) for n in real_data.MIT]
     for case in cases:
         if wanted and case.name not in wanted:
             continue
-        if (case.name, case.set) in done:
-            rows[(case.name, case.set)] = done[(case.name, case.set)]
+        key = (case.name, case.set)
+        if key in done and not again:
+            rows[key] = done[key]
             continue
-        rows[(case.name, case.set)] = row = run_case(case, methods)
-        with rows_file.open("a") as stream:
-            stream.write(json.dumps({"object": case.name, "set": case.set, **row}) + "\n")
+        row = run_case(case, methods) if not again else {**done.get(key, {}), **run_case(case, again)}
+        rows[key] = done[key] = row
+        _write_rows(rows_file, done)
         print(
             case.set,
             case.name,

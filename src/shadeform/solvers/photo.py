@@ -4,7 +4,7 @@ Real photos break the uniform-Lambertian model pixel by pixel (highlights, cast 
 albedo, noise), so this solver does not march or propagate from single pixels. It finds the depth
 ``z`` (H, W) itself, integrable by construction, as the minimum of one energy over the object:
 
-    E(z) = sum_p rho(max(0, n_p . L) - I_p / a)                          shading, robust
+    E(z) = sum_p rho((f(n_p . L) - I_p) / a)                              shading, robust
          + MU  * sum_(p,q) (sqrt(EPS^2 + |n_p - n_q|^2) - EPS)            smooth, creases allowed
          + NU  * sum_(b on the outline) (n_b . m_b - 1)^2                 occluding contour
 
@@ -12,9 +12,18 @@ with ``n = (-dz/dx, -dz/dy, 1) / |.|`` (``docs/conventions.md``), ``rho`` Cauchy
 :data:`SCALE` (a highlight, a shadow cast on a lit surface or a patch of other paint costs a
 bounded amount, so they cannot drag the shape), ``(p, q)`` neighbouring object pixels and ``m_b``
 the outline's outward normal: on an occluding contour the surface normal lies in the image plane,
-perpendicular to the outline. ``a`` is the brightness of a pixel facing the light, estimated
-robustly as the median of ``I / (n . L)`` over pixels turned toward the light (``n . L > 0.3``)
-under the current shape, twice per level: a single bright highlight does not set it.
+perpendicular to the outline.
+
+``f`` is the object's reflectance curve: the brightness of a pixel as a function of ``n . L``,
+and ``a = f(1)`` the brightness of a pixel facing the light. Lambert's law makes it the straight
+line ``a * max(0, n . L)``; real materials and cameras bend it (gloss brightens the pixels facing
+the light, a rough or dusty surface flattens the falloff, interreflections lift the dark side),
+and a straight line then reads the bend as shape. So ``f`` is estimated from the photo itself:
+any non-decreasing curve, fitted to the current shape by isotonic regression of the median
+brightness in ten bins of ``n . L`` (medians, so highlights and shadows do not set it), and
+re-estimated :data:`ROUNDS` times per level, the shape solved again after each. On a Lambertian
+render the fit is the straight line. When the caller gives the albedo (a reference normal with
+its brightness), the straight line ``albedo * max(0, n . L)`` is used as given.
 
 The start is the shape of the silhouette alone: ``z = 2 sqrt(u)`` with ``laplacian(u) = -1``
 inside the mask and ``u = 0`` just outside it (exact for a sphere; the image frame is not an
@@ -23,7 +32,8 @@ levels down to about :data:`COARSEST` object pixels) by L-BFGS over a hierarchic
 depth is the sum of bilinearly upsampled grids of every coarser scale, Szeliski 1990), which
 is what lets a descent move a whole region at once rather than a pixel at a time.
 
-Limits. One light, orthographic camera, albedo uniform up to what the robust loss absorbs; the
+Limits. One light, orthographic camera, one reflectance curve for the whole object (painted
+patches of other albedo are left to the robust loss); the
 shape is biased toward the silhouette's (a balloon) where the shading is ambiguous, as under a
 light at the camera, where a surface and its mirror image give the same picture. Concave
 regions and references are not used beyond ``z = 0`` at the main reference. Accuracy on real
@@ -49,12 +59,23 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy import ndimage as ndi
-from scipy.optimize import minimize
+from scipy.optimize import isotonic_regression, minimize
 
 from shadeform.integration.poisson import _difference_system
 from shadeform.solvers.problem import Problem, Solution
 
-__all__ = ["COARSEST", "EPS", "MU", "NU", "SCALE", "PhotoResult", "photo_depth", "silhouette_depth", "solve"]
+__all__ = [
+    "COARSEST",
+    "EPS",
+    "MU",
+    "NU",
+    "SCALE",
+    "PhotoResult",
+    "photo_depth",
+    "response_curve",
+    "silhouette_depth",
+    "solve",
+]
 
 #: Smoothness weight per pair of neighbouring pixels.
 MU = 1e-2
@@ -71,8 +92,9 @@ COARSEST = 4000
 ITERATIONS = (300, 100, 50)
 #: Times per level the brightness ``a`` is re-estimated and the level solved again.
 ROUNDS = 2
-#: Pixels with ``n . L`` above this vote on the brightness ``a``.
-FACING = 0.3
+#: Bins of ``n . L`` over [0, 1] for the reflectance curve, and the fewest pixels a bin needs.
+BINS = 10
+BIN_PIXELS = 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,7 +108,10 @@ class PhotoResult:
     normals : (H, W, 3) float64
         Unit normals of ``depth``, NaN off the mask.
     albedo : float
-        The brightness of a pixel facing the light, as estimated.
+        The brightness of a pixel facing the light, ``f(1)``, as estimated (or given).
+    response : (K, 2) float64
+        The reflectance curve ``f``: rows ``(n . L, brightness)``, piecewise linear between them,
+        non-decreasing (constant below the first row and above the last).
     levels : int
         Pyramid levels solved.
     iterations : int
@@ -96,6 +121,7 @@ class PhotoResult:
     depth: np.ndarray
     normals: np.ndarray
     albedo: float
+    response: np.ndarray
     levels: int
     iterations: int
 
@@ -152,7 +178,8 @@ def photo_depth(
     light : (3,) float
         Unit direction toward the light.
     albedo : float, optional
-        The brightness of a pixel facing the light; estimated when not given.
+        The brightness of a pixel facing the light; when given, the reflectance curve is Lambert's
+        straight line through it; otherwise the curve is estimated (module description).
 
     Returns
     -------
@@ -164,7 +191,7 @@ def photo_depth(
     while np.count_nonzero(pyramid[-1][1]) > 4 * COARSEST and min(pyramid[-1][1].shape) >= 16:
         pyramid.append(_half(*pyramid[-1]))
     depth = previous = None
-    estimate = albedo
+    curve = None if albedo is None else _lambert(float(albedo))
     total = 0
     for level, (values, level_mask) in enumerate(reversed(pyramid)):
         grid = _Level(values, level_mask, light)
@@ -172,13 +199,14 @@ def photo_depth(
         iterations = ITERATIONS[min(level, len(ITERATIONS) - 1)]
         for _ in range(1 if albedo is not None else ROUNDS):
             if albedo is None:
-                estimate = _brightness(grid, depth[level_mask])
+                shading = grid.normals(depth[level_mask]) @ light
+                curve = response_curve(shading[grid.data], grid.values[grid.data])
             start = np.zeros(grid.unknowns)
             start[: grid.n] = depth[level_mask]
             result = minimize(
                 grid.energy,
                 start,
-                args=(1.0 / estimate,),
+                args=(curve,),
                 jac=True,
                 method="L-BFGS-B",
                 options={
@@ -196,7 +224,7 @@ def photo_depth(
     normals = np.full(mask.shape + (3,), np.nan)
     normals[mask] = grid.normals(depth[mask])
     depth = np.where(mask, depth, np.nan)
-    return PhotoResult(depth, normals, float(estimate), len(pyramid), total)
+    return PhotoResult(depth, normals, float(curve[-1, 1]), curve, len(pyramid), total)
 
 
 def solve(problem: Problem) -> Solution:
@@ -206,8 +234,10 @@ def solve(problem: Problem) -> Solution:
     problem.lap("solve")
     depth = result.depth - result.depth[problem.main]
     info = {
-        "photo": {"albedo": result.albedo, "levels": result.levels, "iterations": result.iterations},
         "albedo": result.albedo,
+        "response": np.round(result.response, 4).tolist(),
+        "levels": result.levels,
+        "iterations": result.iterations,
     }
     return Solution(result.normals, depth, info)
 
@@ -254,20 +284,27 @@ class _Level:
         inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
         return np.column_stack([-gx * inverse, gy * inverse, inverse])
 
-    def energy(self, coefficients, inverse_albedo):
-        """The energy and its gradient with respect to the basis coefficients."""
+    def energy(self, coefficients, curve):
+        """The energy and its gradient with respect to the basis coefficients, under the
+        reflectance curve ``curve`` ((K, 2) rows ``(n . L, brightness)``)."""
         z = self.depth(coefficients)
         gx, gy = self.d_col @ z, self.d_row @ z
         inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
         nx, ny, nz = -gx * inverse, gy * inverse, inverse
         lx, ly, lz = self.light
         shading = nx * lx + ny * ly + nz * lz
-        # shading: Cauchy loss on max(0, n . L) - I / a
-        lit = shading > 0
-        residual = np.where(lit, shading, 0.0) - self.values * inverse_albedo
+        # shading: Cauchy loss on (f(n . L) - I) / a, f piecewise linear
+        knots, levels = curve[:, 0], curve[:, 1]
+        inverse_albedo = 1.0 / levels[-1]
+        segment = np.clip(np.searchsorted(knots, shading) - 1, 0, knots.size - 2)
+        slope = np.diff(levels) / np.diff(knots)
+        inside = (shading > knots[0]) & (shading < knots[-1])  # f is flat beyond its ends
+        residual = (np.interp(shading, knots, levels) - self.values) * inverse_albedo
         ratio = residual * residual / (SCALE * SCALE)
         energy = 0.5 * SCALE * SCALE * np.sum(np.log1p(ratio)[self.data])
-        d_shading = np.where(self.data & lit, residual / (1.0 + ratio), 0.0)
+        d_shading = np.where(
+            self.data & inside, residual / (1.0 + ratio) * slope[segment] * inverse_albedo, 0.0
+        )
         g_x = d_shading * (-lx * inverse - shading * gx * inverse * inverse)
         g_y = d_shading * (ly * inverse - shading * gy * inverse * inverse)
         # smoothness: robust in the change of the normal between neighbours
@@ -289,13 +326,54 @@ class _Level:
         return energy, np.concatenate([b_t @ g_z for b_t in self.basis_t])
 
 
-def _brightness(grid: _Level, z: np.ndarray) -> float:
-    """Median of ``I / (n . L)`` over the pixels turned toward the light under depth ``z``."""
-    shading = grid.normals(z) @ grid.light
-    facing = grid.data & (shading > FACING)
-    if np.count_nonzero(facing) < 10:
-        facing = shading > 0
-    return float(np.median(grid.values[facing] / shading[facing]))
+def response_curve(shading: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The reflectance curve: brightness as a non-decreasing function of ``n . L``.
+
+    The median brightness in each of :data:`BINS` equal bins of ``n . L`` over [0, 1] holding at
+    least :data:`BIN_PIXELS` pixels, made non-decreasing by isotonic regression weighted by the
+    bins' pixel counts, then carried on straight to ``n . L = 0`` (not below 0) and to 1 (not
+    downward) from the two end bins.
+
+    Parameters
+    ----------
+    shading : (N,) float
+        ``n . L`` of the current shape's pixels.
+    values : (N,) float
+        Their brightness.
+
+    Returns
+    -------
+    (K, 2) float64
+        Rows ``(n . L, brightness)`` with increasing ``n . L`` from 0 to 1; the last brightness,
+        ``f(1)``, is positive.
+    """
+    edges = np.linspace(0.0, 1.0, BINS + 1)
+    facing = shading > 0
+    which = np.clip(np.searchsorted(edges, shading[facing], side="right") - 1, 0, BINS - 1)
+    order = np.argsort(which, kind="stable")
+    groups = np.split(order, np.searchsorted(which[order], np.arange(1, BINS)))
+    kept = [g for g in groups if g.size >= BIN_PIXELS]
+    if len(kept) < 2:  # too few pixels facing the light to see a curve: Lambert's line
+        return _lambert(max(float(values.max()), 1e-12))
+    centres = np.array([np.median(shading[facing][g]) for g in kept])
+    fitted = isotonic_regression(
+        np.array([np.median(values[facing][g]) for g in kept]),
+        weights=np.array([g.size for g in kept], dtype=np.float64),
+    ).x
+    start = fitted[0] - (fitted[1] - fitted[0]) / (centres[1] - centres[0]) * centres[0]
+    end = fitted[-1] + max(0.0, (fitted[-1] - fitted[-2]) / (centres[-1] - centres[-2])) * (1.0 - centres[-1])
+    knots = np.r_[0.0, centres, 1.0]
+    levels = np.maximum.accumulate(np.r_[np.clip(start, 0.0, fitted[0]), fitted, end])
+    if levels[-1] <= 0:
+        levels[-1] = max(float(values.max()), 1e-12)
+    # equal centres (a bin of one repeated value) would make a zero-width segment
+    knots = knots + np.arange(knots.size) * 1e-9
+    return np.column_stack([knots, levels])
+
+
+def _lambert(albedo: float) -> np.ndarray:
+    """Lambert's reflectance curve ``albedo * max(0, n . L)`` as a (2, 2) curve."""
+    return np.array([[0.0, 0.0], [1.0, albedo]])
 
 
 def _index(mask):
