@@ -496,6 +496,21 @@ class TestReconstruct:
         assert [p.name for p in out.iterdir()] == ["m.ply"]
 
 
+class TestUnsure:
+    def test_a_guessed_neck_gets_one_warning_line(self, tmp_path):
+        """The vase lit from the upper right: its neck rests on a convex guess the shading cannot
+        settle (``shadeform.confidence``); the run succeeds and says so in one line."""
+        made = invoke("synth", "vase", "-o", tmp_path / "vase.png", "--size", 128, "--light", "5,5,7")
+        assert made.exit_code == 0, made.output
+        args = ["reconstruct", tmp_path / "vase.png", "--mask", tmp_path / "vase_mask.png"]
+        result = invoke(*args, "-o", tmp_path / "m.ply", "--light", "5,5,7", "--json")
+        assert result.exit_code == 0, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("warning: ") and 'axis "y"' in lines[0], result.stderr
+        (area,) = json.loads(result.stdout)["info"]["unsure"]
+        assert area["axis"] == "y" and area["centre"][1] < 64  # the neck, in the upper half
+
+
 class TestSynth:
     def test_writes_image_and_truth(self, sphere):
         scene = synth.scene("sphere", size=SIZE)

@@ -14,6 +14,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from shadeform._checks import StageTimer, check_choice, check_mask, shading_image, whole
+from shadeform.confidence import assess
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.light import as_light, estimate_light
@@ -190,6 +191,8 @@ def reconstruct(
     normals[~mask] = np.nan
     depth[~mask] = np.nan
     lap("combine")
+    assessed = assess(shading, mask, light, normals, albedo=float(solution.info.get("albedo", albedo)))
+    lap("confidence")
     info = {
         "method": solver.name,
         "method_requested": method,
@@ -202,9 +205,24 @@ def reconstruct(
         "timings": timer.timings,
         **solution.info,
         **decided,
+        "unsure": [
+            {
+                "polygon": area.polygon.tolist(),
+                "axis": area.axis,
+                "share": area.share,
+                "centre": list(area.centre),
+            }
+            for area in assessed.unsure
+        ],
     }
     return Reconstruction(
-        normals=normals, depth=depth, mask=mask, light=light, albedo=float(albedo), info=info
+        normals=normals,
+        depth=depth,
+        mask=mask,
+        light=light,
+        albedo=float(albedo),
+        info=info,
+        confidence=assessed.map,
     )
 
 
@@ -353,13 +371,29 @@ def reconstruct_preview(
     grid_depth = depth[::step, ::step]
     grid_normals[coarse_mask] = rec.normals[coarse_mask]
     grid_depth[coarse_mask] = rec.depth[coarse_mask] * step  # heights in input pixels
+    confidence = np.full(image.shape, np.nan)
+    confidence[::step, ::step][coarse_mask] = rec.confidence[coarse_mask]
     info = {
         **rec.info,
         "preview_step": step,
         "references": [(r * step, c * step) for r, c in rec.info["references"]],
+        "unsure": [  # in input pixels, like the references
+            {
+                **area,
+                "polygon": [[x * step, y * step] for x, y in area["polygon"]],
+                "centre": [area["centre"][0] * step, area["centre"][1] * step],
+            }
+            for area in rec.info["unsure"]
+        ],
     }
     return Reconstruction(
-        normals=normals, depth=depth, mask=mask, light=rec.light, albedo=rec.albedo, info=info
+        normals=normals,
+        depth=depth,
+        mask=mask,
+        light=rec.light,
+        albedo=rec.albedo,
+        info=info,
+        confidence=confidence,
     )
 
 

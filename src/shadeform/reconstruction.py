@@ -26,7 +26,13 @@ class Reconstruction:
     albedo : float or (H, W) float64
         ``k * albedo`` of the image model ``I = k * albedo * max(0, N . L)``.
     info : dict
-        What ran: method, integrator, references, iterations, timings in seconds per stage.
+        What ran: method, integrator, references, iterations, timings in seconds per stage;
+        ``info["unsure"]``: the areas whose convexity the photo cannot settle
+        (:func:`shadeform.confidence.assess`), each ``{"polygon", "axis", "share", "centre"}``.
+    confidence : (H, W) float64 or None
+        How far each pixel's shape can be trusted, in [0, 1] (NaN off the mask): how well the
+        normals explain the photo times how settled its convexity is
+        (:func:`shadeform.confidence.assess`); None where it was not assessed.
     """
 
     normals: np.ndarray
@@ -35,6 +41,7 @@ class Reconstruction:
     light: np.ndarray
     albedo: float | np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
+    confidence: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -203,6 +203,28 @@ def note_channel(console: Console, info: dict) -> None:
     )
 
 
+def note_unsure(console: Console, info: dict) -> None:
+    """One line on stderr when part of the shape rests on a convex/concave guess the photo cannot
+    settle (``info["unsure"]``, largest area first)."""
+    areas = info.get("unsure") or []
+    if not areas:
+        return
+    first = areas[0]
+    x, y = (round(v) for v in first["centre"])
+    more = (
+        f" and {len(areas) - 1} more area(s), {100 * sum(a['share'] for a in areas):.0f} % in all"
+        if len(areas) > 1
+        else ""
+    )
+    console.print(
+        f"warning: the shading cannot tell convex from concave around x={x}, y={y} "
+        f"({100 * first['share']:.0f} % of the object){more}; if it is concave there, draw it as a "
+        f'region with axis "{first["axis"]}" (--concave regions.json; --json lists the areas)',
+        soft_wrap=True,
+        highlight=False,
+    )
+
+
 def print_files(console: Console, rows: list[tuple[Path, str]]) -> None:
     """One line per file, path first; never wrapped or shortened, so it can be copied."""
     width = max(len(str(path)) for path, _ in rows)

@@ -27,6 +27,7 @@ from shadeform.cli._shell import (
     format_seconds,
     format_vector,
     note_channel,
+    note_unsure,
     output_temps,
     parse_reference,
     print_files,
@@ -138,6 +139,7 @@ def reconstruct(
 
     height, width = pixels.shape
     note_channel(err, photo.info)
+    note_unsure(err, rec.info)
     if as_json:
         print_json(
             {
