@@ -750,3 +750,64 @@ def test_mask_save_load_and_reload(page, tmp_path):
     page.wait_for_function(f"window.shadeform.mask().pixels === {int(half.sum())}")
     assert mask_state(page)["user"] is True
     assert (shown_cells(page)[:, 1] >= 128).all()
+
+
+def test_unsure_areas_are_outlined_and_one_click_marks_them_concave(page):
+    # the vase lit from (5, 5, 7): slant 45 deg, tilt 45 deg; its neck could be a bump or a dent
+    open_example(page, "synth:vase")
+    page.click("#light-mode [data-mode=slant_tilt]")
+    for slider in ("#slant", "#tilt"):
+        before = applied(page)
+        page.fill(slider, "45")
+        wait_for_result(page, before)
+    assert page.evaluate("window.shadeform.state().params.light") == {
+        "mode": "slant_tilt",
+        "slant": 45,
+        "tilt": 45,
+    }
+    # (0.5, 0.5, 0.71): (5, 5, 7) normalised to within the sliders' whole degrees
+    np.testing.assert_allclose(
+        page.evaluate("window.shadeform.lastResult().light"), np.array([5, 5, 7]) / math.sqrt(99), atol=5e-3
+    )
+
+    # the result's unsure areas, largest first, are outlined on the image and offered in the panel
+    shown = page.evaluate("window.shadeform.unsure()")
+    assert shown and shown == page.evaluate("window.shadeform.lastResult().info.unsure")
+    neck = shown[0]
+    assert neck["axis"] == "y"
+    assert abs(neck["centre"][0] - 128) < 20 and neck["centre"][1] < 110  # the vase's upper part
+    note = page.locator("#unsure .unsure-note")
+    count = len(shown)
+    assert note.inner_text() == f"Unsure: {count} area{'' if count == 1 else 's'} the shading cannot settle"
+    buttons = page.locator("#unsure li button")
+    assert buttons.count() == count
+    mark = buttons.first
+    assert mark.inner_text() == "Mark concave (y)" and mark.is_enabled()
+    assert page.get_by_role("button", name="Mark concave (y)").first.is_visible()
+    note.scroll_into_view_if_needed()
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "unsure.png"))
+    depth_before = page.evaluate("window.shadeform.lastResult().depth_range")
+    status_before = page.inner_text("#mesh-info")
+
+    # one click: the area becomes a concave region along y, and the model is solved again
+    before = applied(page)
+    mark.click()
+    wait_for_result(page, before)
+    regions = page.evaluate("window.shadeform.state().params.concave.regions")
+    assert len(regions) == 1 and regions[0]["axis"] == "y"
+    np.testing.assert_allclose(regions[0]["polygon"], neck["polygon"])
+    assert page.locator("#regions-list li").count() == 1
+    assert page.inner_text("#regions-list li .meta").startswith("y")
+    # the neck now curves the other way: the depth range and the status bar follow
+    assert page.evaluate("window.shadeform.lastResult().depth_range") != depth_before
+    assert page.inner_text("#mesh-info") != status_before
+    # the outlines are the new result's; an area still reported with that outline cannot be added twice
+    after = page.evaluate("window.shadeform.unsure()")
+    assert after == page.evaluate("window.shadeform.lastResult().info.unsure")
+    assert page.locator("#unsure li").count() == len(after)
+    assert page.locator("#unsure").is_hidden() == (not after)
+    for i, area in enumerate(after):
+        marked = area["axis"] == "y" and area["polygon"] == neck["polygon"]
+        assert page.locator("#unsure li button").nth(i).is_enabled() == (not marked)
+    page.screenshot(path=str(ARTIFACTS / "unsure-marked.png"))

@@ -3,7 +3,7 @@
 // Sliders report while dragging ("drag", debounced by the caller) and once more on release
 // ("now"); selects and buttons report "now".
 import type { Options, ReconstructResult } from './api.gen';
-import { AXIS_COLOURS } from './imagePane';
+import { AXIS_COLOURS, UNSURE_COLOUR, unsureQuestion, type Unsure } from './imagePane';
 import type { Axis, Params, Region } from './state';
 
 export type Urgency = 'now' | 'drag';
@@ -22,6 +22,8 @@ export interface PanelEvents {
   loadRegions(): void;
   saveRegions(): void;
   clearRegions(): void;
+  /** Add the newest result's ``index``-th unsure area as a concave region with its suggested axis. */
+  markUnsure(index: number): void;
 }
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -191,6 +193,58 @@ export class Panel {
       ? 'The first is the main one: depth 0 there, its normal along the light.'
       : 'None set: the brightest pixel is used, its normal along the light.';
     ($('refs-clear') as HTMLButtonElement).disabled = user.length === 0;
+  }
+
+  /**
+   * The areas the shading cannot settle, under the regions list: one line saying how many, and per
+   * area a button that makes it a concave region (disabled once a region has exactly its outline).
+   */
+  showUnsure(areas: Unsure[], regions: Region[]): void {
+    let box = document.getElementById('unsure');
+    if (!box) {
+      box = document.createElement('div');
+      box.id = 'unsure';
+      box.className = 'unsure';
+      box.setAttribute('aria-live', 'polite');
+      $('regions-list').after(box);
+    }
+    box.hidden = areas.length === 0;
+    if (!areas.length) {
+      box.replaceChildren();
+      return;
+    }
+    const note = document.createElement('div');
+    note.className = 'hint-text unsure-note';
+    note.textContent = `Unsure: ${areas.length} area${areas.length === 1 ? '' : 's'} the shading cannot settle`;
+    note.title = 'The photo fits a bump and a dent equally well here; it is solved as convex unless you mark it concave';
+    const same = (a: Array<[number, number]>, b: Array<[number, number]>) => JSON.stringify(a) === JSON.stringify(b);
+    const items = areas.map((area, i) => {
+      const li = document.createElement('li');
+      const swatch = document.createElement('span');
+      swatch.className = 'swatch';
+      swatch.style.border = `1.5px dashed ${UNSURE_COLOUR}`;
+      const what = document.createElement('span');
+      what.className = 'what';
+      what.textContent = unsureQuestion(area.axis).replace(/^c/, 'C');
+      const meta = document.createElement('span');
+      meta.className = 'meta';
+      meta.textContent = `${Math.max(1, Math.round(area.share * 100))}%`;
+      meta.title = 'Share of the object';
+      const mark = document.createElement('button');
+      mark.className = 'btn small';
+      mark.textContent = `Mark concave (${area.axis})`;
+      const marked = regions.some((r) => r.axis === area.axis && same(r.polygon, area.polygon));
+      mark.disabled = marked;
+      mark.title = marked ? 'Already a concave region' : 'Add this area as a concave region with the suggested axis';
+      mark.addEventListener('click', () => this.events.markUnsure(i));
+      li.append(swatch, what, meta, mark);
+      return li;
+    });
+    const list = document.createElement('ul');
+    list.className = 'items unsure-list';
+    list.setAttribute('aria-label', 'Unsure areas');
+    list.append(...items);
+    box.replaceChildren(note, list);
   }
 
   showRegions(regions: Region[], selected: number | null, newAxis: Axis): void {

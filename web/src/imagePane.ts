@@ -13,6 +13,40 @@ export type Tool = 'select' | 'polygon' | 'reference' | 'mask';
 export type Display = 'photo' | 'channel' | 'filtered' | 'split';
 
 export const AXIS_COLOURS: Record<Axis, string> = { x: '#ff9f43', y: '#38bdf8', both: '#c084fc' };
+/** The dashed outline of an area the shading cannot settle (convex or concave). */
+export const UNSURE_COLOUR = '#fbbf24';
+
+/** An area the library reports in ``info.unsure``: its outline, suggested axis, share and centre. */
+export interface Unsure {
+  polygon: Point[];
+  axis: Axis;
+  share: number;
+  centre: Point;
+}
+
+/** The unsure areas of a result's ``info`` (none when absent or malformed). */
+export function readUnsure(info: Record<string, unknown> | undefined): Unsure[] {
+  const list = info?.unsure;
+  if (!Array.isArray(list)) return [];
+  const point = (p: unknown): p is Point => Array.isArray(p) && p.length === 2 && p.every((v) => typeof v === 'number' && Number.isFinite(v));
+  return list.flatMap((entry): Unsure[] => {
+    const { polygon, axis, share, centre } = (entry ?? {}) as Partial<Record<keyof Unsure, unknown>>;
+    if (!Array.isArray(polygon) || polygon.length < 3 || !polygon.every(point)) return [];
+    if (axis !== 'x' && axis !== 'y' && axis !== 'both') return [];
+    const middle = point(centre) ? centre : polygonMean(polygon);
+    return [{ polygon: polygon.map(([x, y]): Point => [x, y]), axis, share: typeof share === 'number' ? share : 0, centre: [middle[0], middle[1]] }];
+  });
+}
+
+function polygonMean(polygon: Point[]): Point {
+  const n = polygon.length;
+  return [polygon.reduce((s, p) => s + p[0], 0) / n, polygon.reduce((s, p) => s + p[1], 0) / n];
+}
+
+/** The label an unsure area carries, on the image and in the panel. */
+export function unsureQuestion(axis: Axis): string {
+  return axis === 'both' ? 'concave along x and y?' : `concave along ${axis}?`;
+}
 
 export interface PaneEvents {
   /** The regions changed; ``final`` is false while a drag is still going on. */
@@ -55,6 +89,7 @@ export class ImagePane {
   private readonly images = new Map<string, HTMLImageElement>();
   private maskLayer: HTMLCanvasElement | null = null;
   private regionList: Region[] = [];
+  private unsureList: Unsure[] = [];
   private selected: number | null = null;
   private draft: Point[] = [];
   private pointer: Point | null = null; // image coordinates of the pointer
@@ -117,6 +152,16 @@ export class ImagePane {
     this.regionList = regions.map((r) => ({ polygon: r.polygon.map(([x, y]): Point => [x, y]), axis: r.axis }));
     if (this.selected !== null && this.selected >= regions.length) this.select(null);
     this.redraw();
+  }
+
+  /** The newest result's unsure areas, outlined dashed (an empty list hides them). */
+  setUnsure(areas: Unsure[]): void {
+    this.unsureList = areas;
+    this.redraw();
+  }
+
+  get unsure(): Unsure[] {
+    return this.unsureList;
   }
 
   get regions(): Region[] {
@@ -451,6 +496,7 @@ export class ImagePane {
     ctx.lineWidth = 1;
     ctx.strokeRect(this.offX - 0.5, this.offY - 0.5, w + 1, h + 1);
     this.regionList.forEach((region, i) => this.drawRegion(region, i === this.selected));
+    this.unsureList.forEach((area) => this.drawUnsure(area));
     this.drawDraft();
     this.drawReferences();
     if (this.tool === 'mask') this.maskEditor?.draw(ctx, (p) => this.toScreen(p), this.scale, this.pointer);
@@ -503,6 +549,21 @@ export class ImagePane {
       ctx.fillRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
       ctx.strokeRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
     }
+  }
+
+  private drawUnsure(area: Unsure): void {
+    const ctx = this.context;
+    this.path(area.polygon, true);
+    ctx.lineWidth = 3.5;
+    ctx.strokeStyle = 'rgba(0,0,0,0.55)';
+    ctx.setLineDash([7, 5]);
+    ctx.stroke();
+    ctx.lineWidth = 1.75;
+    ctx.strokeStyle = UNSURE_COLOUR;
+    ctx.stroke();
+    ctx.setLineDash([]);
+    const [cx, cy] = this.toScreen(area.centre);
+    label(ctx, `unsure: ${unsureQuestion(area.axis)}`, cx, cy, UNSURE_COLOUR);
   }
 
   private drawDraft(): void {

@@ -10,7 +10,7 @@ import './style.css';
 import * as api from './api';
 import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
 import { Panel, type Urgency } from './controls';
-import { ImagePane, type Display, type Tool } from './imagePane';
+import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
 import { MaskTool } from './maskTool';
 import {
   download,
@@ -115,6 +115,7 @@ class App {
       loadRegions: () => $<HTMLInputElement>('file-regions').click(),
       saveRegions: () => this.saveRegions(),
       clearRegions: () => this.regionsEdited([], true),
+      markUnsure: (i) => this.markUnsure(i),
     });
     this.buildMenus();
     this.bindToolbar();
@@ -242,6 +243,7 @@ class App {
     this.viewer.setPhoto(api.photoUrl(info.image_id));
     this.panel.show(this.params);
     this.panel.showResult(null);
+    this.showUnsure([]);
     this.showReferences();
     this.showRegions();
     this.persist();
@@ -283,6 +285,21 @@ class App {
     }
   }
 
+  /** Make the shown result's ``index``-th unsure area a concave region with its suggested axis. */
+  private markUnsure(index: number): void {
+    const area = this.pane.unsure[index];
+    if (!area) return;
+    const region: Region = { polygon: area.polygon.map(([x, y]): [number, number] => [x, y]), axis: area.axis };
+    const regions = [...this.params.concave.regions, region];
+    this.pane.setRegions(regions);
+    this.regionsEdited(regions, true);
+  }
+
+  private showUnsure(areas: Unsure[]): void {
+    this.pane.setUnsure(areas);
+    this.panel.showUnsure(areas, this.params.concave.regions);
+  }
+
   private loadRegions(regions: Region[]): void {
     this.pane.setRegions(regions);
     this.pane.select(null);
@@ -307,6 +324,7 @@ class App {
 
   private showRegions(): void {
     this.panel.showRegions(this.params.concave.regions, this.pane.selection, this.pane.newAxis);
+    this.panel.showUnsure(this.pane.unsure, this.params.concave.regions);
   }
 
   private showReferences(): void {
@@ -413,6 +431,8 @@ class App {
     this.maskTool.solvedWith(result.mask_png);
     this.showReferences();
     this.panel.showResult(result);
+    // a quick look may leave the areas out: keep the last ones until a result says
+    if (!result.preview || 'unsure' in result.info) this.showUnsure(readUnsure(result.info));
     const [low, high] = result.depth_range;
     $('mesh-info').textContent =
       `${mesh.vertexCount.toLocaleString()} vertices · ${mesh.triangleCount.toLocaleString()} triangles · ` +
@@ -756,6 +776,8 @@ class App {
           indices: Array.from(this.mesh.indices),
         },
       pagePoint: (x: number, y: number) => this.pane.pagePoint(x, y),
+      /** The unsure areas outlined on the image (the newest result's). */
+      unsure: () => structuredClone(this.pane.unsure),
       /** The mask tool: whose mask is shown (user or automatic), its pixels, note, error. */
       mask: () => this.maskTool.state(),
       /** Whether pixel (row, col) is object in the mask the pane shows. */
