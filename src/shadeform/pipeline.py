@@ -191,7 +191,8 @@ def reconstruct(
     normals[~mask] = np.nan
     depth[~mask] = np.nan
     lap("combine")
-    assessed = assess(shading, mask, light, normals, albedo=float(solution.info.get("albedo", albedo)))
+    albedo = float(solution.info.get("albedo", albedo))  # a solver that estimates it knows better
+    assessed = assess(shading, mask, light, normals, albedo=albedo)
     lap("confidence")
     info = {
         "method": solver.name,
