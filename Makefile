@@ -38,9 +38,9 @@ $(WEBSTAMP): $(WEBDEPS) $(WEBSRC)
 
 web: $(WEBSTAMP)
 
-# the app on a shipped example: a synthetic bowl (draw a concave region over it to flip it)
+# the app on a shipped example: a real photo of a coin (its light estimated from the photo)
 app: $(STAMP) $(WEBSTAMP)
-	$(VENV)/bin/shadeform app synth:bowl
+	$(VENV)/bin/shadeform app coin
 
 demo: $(STAMP)
 	$(VENV)/bin/shadeform demo --out out/demo

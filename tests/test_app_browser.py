@@ -783,6 +783,8 @@ def test_unsure_areas_are_outlined_and_one_click_marks_them_concave(page):
     assert buttons.count() == count
     mark = buttons.first
     assert mark.inner_text() == "Mark concave (y)" and mark.is_enabled()
+    # numbered as on the image (the tag there is "?1"): the list says what each one asks
+    assert page.locator("#unsure li .what").first.inner_text() == "?1 Concave along y?"
     assert page.get_by_role("button", name="Mark concave (y)").first.is_visible()
     note.scroll_into_view_if_needed()
     ARTIFACTS.mkdir(exist_ok=True)

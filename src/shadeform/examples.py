@@ -6,8 +6,9 @@ on the fly by :mod:`shadeform.synth`.
 
 ========================= ===================================================================
 ``coin``                  One silver coin (a helmeted head in relief), cropped from
-                          :func:`skimage.data.coins`: a matte-ish object under one frontal
-                          light on a dark background, what the 2002 method assumes.
+                          :func:`skimage.data.coins`: a matte-ish object under one light near
+                          the camera on a dark background, what the 2002 method assumes. Its
+                          light is not known: it is estimated from the photo.
 ``synth:<scene>``         A noise-free Lambertian rendering of a :data:`shadeform.synth.SCENES`
                           scene under the light ``(0, 0, 1)``, with its true mask.
 ========================= ===================================================================
@@ -33,7 +34,7 @@ _COIN_CROP = (slice(145, 225), slice(305, 384))
 EXAMPLES: dict[str, str] = {
     "coin": (
         "photograph: one silver coin (a helmeted head in relief), 79x80 pixels cropped from "
-        "scikit-image's coins() sample, frontal light, dark background"
+        "scikit-image's coins() sample, light near the camera (estimated), dark background"
     ),
     **{f"synth:{name}": f"synthetic: Lambertian {name}, light (0, 0, 1), true mask" for name in SCENES},
 }
@@ -58,7 +59,8 @@ def load_example(name: str, *, size: int | None = None) -> tuple[np.ndarray, dic
         Intensities in ``[0, 1]``, row 0 at the top.
     info : dict
         ``name``, ``description``, ``source`` (where the pixels come from) and the suggested
-        settings: ``light`` (3-tuple), ``mask`` ((H, W) bool, or None to find it
+        settings: ``light`` (3-tuple, or ``"estimate"`` for a photo whose light is not known),
+        ``mask`` ((H, W) bool, or None to find it
         automatically), ``filter`` (a :func:`shadeform.preprocess.parse_filter` spec or None)
         ``step`` (mesh step in pixels) and ``method`` (a ``reconstruct`` method).
 
@@ -71,7 +73,7 @@ def load_example(name: str, *, size: int | None = None) -> tuple[np.ndarray, dic
     --------
     >>> image, info = load_example("coin")
     >>> image.shape, image.dtype, info["light"]
-    ((80, 79), dtype('float32'), (0.0, 0.0, 1.0))
+    ((80, 79), dtype('float32'), 'estimate')
     """
     if not isinstance(name, str) or name not in EXAMPLES:
         raise InputError(f"unknown example {name!r}; choose one of: {', '.join(EXAMPLES)}")
@@ -92,12 +94,15 @@ def _coin(info: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
     image = data.coins()[rows, cols].astype(np.float32) / np.float32(255)
     info.update(
         source=f"skimage.data.coins()[{rows.start}:{rows.stop}, {cols.start}:{cols.stop}]",
-        light=(0.0, 0.0, 1.0),
+        # Nobody measured the light of this photo: the rim and the relief's edges place it about
+        # 20 degrees off the camera, to the upper right, which a frontal light would read as shape.
+        light="estimate",
         mask=None,
         filter="gaussian:1",
         step=1,
-        # A low relief lit from roughly, not exactly, the front: the 2002 propagation keeps the
-        # relief readable, where the eikonal solver (for an exact +z light) rounds it into a dome.
+        # A low relief whose outline is a coin's edge, not an occluding contour: the 2002
+        # propagation keeps the relief on a flat disc, where the photo solver (outline normals
+        # in the image plane) rounds it into a dome.
         method="propagation",
     )
     return image, info

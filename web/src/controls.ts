@@ -225,7 +225,7 @@ export class Panel {
       swatch.style.border = `1.5px dashed ${UNSURE_COLOUR}`;
       const what = document.createElement('span');
       what.className = 'what';
-      what.textContent = unsureQuestion(area.axis).replace(/^c/, 'C');
+      what.textContent = `?${i + 1} ${unsureQuestion(area.axis).replace(/^c/, 'C')}`;
       const meta = document.createElement('span');
       meta.className = 'meta';
       meta.textContent = `${Math.max(1, Math.round(area.share * 100))}%`;

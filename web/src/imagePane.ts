@@ -43,7 +43,7 @@ function polygonMean(polygon: Point[]): Point {
   return [polygon.reduce((s, p) => s + p[0], 0) / n, polygon.reduce((s, p) => s + p[1], 0) / n];
 }
 
-/** The label an unsure area carries, on the image and in the panel. */
+/** The question an unsure area asks, in the panel's list (the image shows its number). */
 export function unsureQuestion(axis: Axis): string {
   return axis === 'both' ? 'concave along x and y?' : `concave along ${axis}?`;
 }
@@ -496,7 +496,7 @@ export class ImagePane {
     ctx.lineWidth = 1;
     ctx.strokeRect(this.offX - 0.5, this.offY - 0.5, w + 1, h + 1);
     this.regionList.forEach((region, i) => this.drawRegion(region, i === this.selected));
-    this.unsureList.forEach((area) => this.drawUnsure(area));
+    this.unsureList.forEach((area, i) => this.drawUnsure(area, i));
     this.drawDraft();
     this.drawReferences();
     if (this.tool === 'mask') this.maskEditor?.draw(ctx, (p) => this.toScreen(p), this.scale, this.pointer);
@@ -551,7 +551,9 @@ export class ImagePane {
     }
   }
 
-  private drawUnsure(area: Unsure): void {
+  /** One unsure area: its dashed outline and a short numbered tag (the panel's list says what it
+   * asks: a relief can have many, and full questions would cover the photo). */
+  private drawUnsure(area: Unsure, index: number): void {
     const ctx = this.context;
     this.path(area.polygon, true);
     ctx.lineWidth = 3.5;
@@ -563,7 +565,7 @@ export class ImagePane {
     ctx.stroke();
     ctx.setLineDash([]);
     const [cx, cy] = this.toScreen(area.centre);
-    label(ctx, `unsure: ${unsureQuestion(area.axis)}`, cx, cy, UNSURE_COLOUR);
+    label(ctx, `?${index + 1}`, cx, cy, UNSURE_COLOUR);
   }
 
   private drawDraft(): void {

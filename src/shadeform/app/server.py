@@ -539,8 +539,10 @@ def _suggested(info: dict[str, Any]) -> dict[str, Any]:
     from shadeform.light import slant_tilt
     from shadeform.preprocess import parse_filter
 
-    light = np.asarray(info["light"], dtype=np.float64)
-    if np.allclose(light, (0.0, 0.0, 1.0)):
+    light = None if isinstance(info["light"], str) else np.asarray(info["light"], dtype=np.float64)
+    if light is None:
+        light_params = LightParams(mode=info["light"])
+    elif np.allclose(light, (0.0, 0.0, 1.0)):
         light_params = LightParams()
     else:
         slant, tilt = slant_tilt(light)

@@ -348,6 +348,12 @@ def demo(
         f"  {int(rec.mask.sum()):,} object pixels -> {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles "
         f"(step {mesh_step}) in {format_seconds(timings['total'])}"
     )
+    estimate = rec.info.get("light_estimate")
+    if estimate is not None:
+        console.print(
+            f"  light estimated from the photo: slant {estimate['slant']:.0f}°, tilt {estimate['tilt']:.0f}° "
+            f"(confidence {estimate['confidence']:.2f})"
+        )
     console.print(f"[bold]wrote[/] to {escape(str(out))}/")
     print_files(console, [(out / name, what) for name, what in files])
     console.print(
