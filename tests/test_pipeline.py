@@ -10,7 +10,7 @@ from shadeform import metrics, pipeline, reconstruct, synth, to_mesh
 from shadeform.errors import InputError
 from shadeform.pipeline import preview_step, reconstruct_preview
 from shadeform.reconstruction import Reconstruction
-from shadeform.solvers import choose, get_solver
+from shadeform.solvers import NOISY, OUTLIERS, choose, get_solver
 
 SIZE = 256
 
@@ -81,6 +81,15 @@ class TestAutoMethod:
         scene = synth.scene("sphere", size=32, light=(1, 0, 3))
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
         assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
+
+    def test_picks_the_photo_solver_for_a_painted_noisy_object(self):
+        scene = synth.scene("sphere", size=48, light=(1, 0, 3), noise=0.01)
+        plain = reconstruct(scene.image, mask=scene.mask, light=scene.light)
+        assert plain.info["method"] == "oblique" and plain.info["detail"]["outliers"] < OUTLIERS
+        painted = scene.image * np.where(np.random.default_rng(0).random(scene.image.shape) < 0.05, 0.5, 1.0)
+        rec = reconstruct(painted, mask=scene.mask, light=scene.light)
+        assert rec.info["method"] == "photo" and rec.info["detail"]["outliers"] >= OUTLIERS
+        assert rec.info["detail"]["noise"] > NOISY
 
 
 class TestReconstruct:

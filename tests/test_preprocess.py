@@ -8,7 +8,15 @@ from scipy import ndimage as ndi
 
 from shadeform import synth
 from shadeform.errors import InputError
-from shadeform.preprocess import FILTER_KINDS, Filter, apply_filter, noise_level, object_mask, parse_filter
+from shadeform.preprocess import (
+    FILTER_KINDS,
+    Filter,
+    apply_filter,
+    image_detail,
+    noise_level,
+    object_mask,
+    parse_filter,
+)
 
 N, R = 256, 100
 
@@ -269,6 +277,31 @@ class TestNoiseLevel:
         mask = np.zeros((20, 20), bool)
         mask[5:9, :] = True
         assert noise_level(np.where(mask, 0.5, 0.0), mask) == 0.0
+
+
+class TestImageDetail:
+    @pytest.mark.parametrize("name", ["sphere", "vase", "bumps"])
+    def test_noise_alone_leaves_next_to_no_outliers(self, name):
+        scene = synth.scene(name, size=128, noise=0.01, light=(0.3, 0.2, 0.93))
+        detail = image_detail(scene.image, scene.mask)
+        assert detail.noise == noise_level(scene.image, scene.mask)
+        assert detail.outliers < 0.003  # Gaussian noise: 6e-5; the bumps' sharp edges add a little
+
+    def test_paint_and_highlights_are_outliers(self):
+        scene = synth.scene("sphere", size=128, noise=0.01, light=(0.3, 0.2, 0.93))
+        rng = np.random.default_rng(1)
+        image = scene.image.copy()
+        specks = rng.random(image.shape) < 0.02  # flecks of darker paint, glints
+        image[specks] *= rng.choice([0.6, 1.4], size=int(specks.sum()))
+        detail = image_detail(image, scene.mask)
+        assert detail.outliers > 0.02  # each speck also shows in its 8 neighbours' detail
+        assert detail.noise == pytest.approx(0.01, rel=0.3)  # a robust scale: the specks barely move it
+
+    def test_a_flat_object_has_no_detail(self):
+        mask = np.zeros((32, 32), bool)
+        mask[4:28, 4:28] = True
+        detail = image_detail(np.where(mask, 0.5, 0.0), mask)
+        assert detail.noise == 0.0 and detail.outliers == 0.0
 
 
 class TestSrgbToLinear:

@@ -18,7 +18,7 @@ from shadeform.confidence import assess
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.light import as_light, estimate_light
-from shadeform.preprocess import Filter, apply_filter, noise_level, object_mask, parse_filter
+from shadeform.preprocess import Filter, apply_filter, image_detail, noise_level, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, as_regions, concave_masks
 from shadeform.solvers import AUTO, NOISY, Problem, Reference, choose, get_solver, solver_names
@@ -58,8 +58,10 @@ def reconstruct(
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
     method : str
-        "auto" (the default: the best measured solver for the light and the image's noise,
-        :func:`shadeform.solvers.choose`) or a registered solver: "propagation" (the 2002
+        "auto" (the default: the best measured solver for the light and the image's noise and
+        outlying detail, :func:`shadeform.solvers.choose`, ``info["detail"]``: "photo" for a
+        noisy photograph with highlights, shadows or texture) or a registered solver: "photo"
+        (:mod:`shadeform.solvers.photo`), "propagation" (the 2002
         convexity-guided propagation, any light), "eikonal" (fast marching of the eikonal equation
         from the singular points, light at +z only; concave regions and references become minima,
         saddles and maxima: :mod:`shadeform.solvers.eikonal`), "oblique" (any light, attached
@@ -143,10 +145,12 @@ def reconstruct(
     noise = inside = None
     if solver is None or solver.denoise is not None:
         inside = ndi.distance_transform_edt(mask)  # shared with _references
-        noise = noise_level(shading, mask, inside=inside)
+        detail = image_detail(shading, mask, inside=inside)
+        noise = detail.noise
         brightest = float(shading[mask].max())
         if solver is None:
-            solver = choose(light, noise=noise / brightest)
+            solver = choose(light, noise=noise / brightest, outliers=detail.outliers)
+            decided["detail"] = {"noise": noise / brightest, "outliers": detail.outliers}
         # the solver's noise policy: its own smoothing of a noisy image, unless the user chose a filter
         if solver.denoise is not None and user_filter is None and noise > NOISY * brightest:
             denoise = parse_filter(solver.denoise)

@@ -7,7 +7,7 @@ registry. A new solver is one module with a ``solve(problem) -> Solution`` funct
 recipe.
 
 ``method="auto"`` follows one rule (:func:`choose`): the solver of lowest ``auto`` rank that takes
-the light and the image's noise.
+the light, the image's noise and its share of outlying detail.
 
 This module imports no solver: each is imported the first time it runs, so that listing the
 methods (the CLI's help, the app's options) stays cheap.
@@ -28,6 +28,7 @@ from shadeform.solvers.problem import Problem, Reference, Solution
 __all__ = [
     "AUTO",
     "NOISY",
+    "OUTLIERS",
     "Problem",
     "Reference",
     "Solution",
@@ -48,6 +49,14 @@ AUTO = "auto"
 #: noise under oblique light takes the oblique solver's depth error from ~1 % to 40-140 %, while
 #: 8-bit quantisation alone (0.1 %) stays below this.
 NOISY = 0.003
+
+#: Share of outlying detail (:attr:`shadeform.preprocess.Detail.outliers`) from which a noisy image
+#: counts as a photograph with highlights, shadows, paint or texture rather than smooth shading plus
+#: noise: a solver's ``min_outliers`` rule uses it. Set between the two groups it was measured on
+#: (``benchmarks/results/real.md``): 189 noisy renderings (7 synthetic scenes, 64-512 px, 3 lights,
+#: 1 and 3 % noise, float and 8-bit) reach at most 0.0029, and the 18 real photographs start at
+#: 0.0103 (MIT-Berkeley apple; up to 0.126); independent noise alone gives 6e-5.
+OUTLIERS = 0.005
 
 LIGHTS = ("any", "frontal")
 
@@ -84,6 +93,9 @@ class Solver:
         Its rank for ``method="auto"`` (lower is preferred), or None if "auto" never picks it.
     max_noise : float
         "auto" passes it over on images noisier than this (relative to the brightest value).
+    min_outliers : float or None
+        When given, "auto" takes it only for noisy images (:data:`NOISY`) whose share of outlying
+        detail is at least this (:data:`OUTLIERS`): the solver for real photographs.
     """
 
     name: str
@@ -96,6 +108,7 @@ class Solver:
     denoise: str | None = None
     auto: int | None = None
     max_noise: float = math.inf
+    min_outliers: float | None = None
 
     def __post_init__(self):
         if not self.name.isidentifier() or self.name == AUTO:
@@ -155,8 +168,9 @@ def get_solver(method: str) -> Solver:
     return _SOLVERS[check_choice(method, tuple(_SOLVERS), "method")]
 
 
-def choose(light, *, noise: float = 0.0) -> Solver:
-    """The solver ``method="auto"`` uses: the lowest ``auto`` rank that takes the light and the noise.
+def choose(light, *, noise: float = 0.0, outliers: float = 0.0) -> Solver:
+    """The solver ``method="auto"`` uses: the lowest ``auto`` rank that takes the light, the noise
+    and the outlying detail.
 
     Parameters
     ----------
@@ -165,12 +179,17 @@ def choose(light, *, noise: float = 0.0) -> Solver:
         any light qualify).
     noise : float, keyword-only
         The image's noise over its brightest object pixel (:func:`shadeform.preprocess.noise_level`).
+    outliers : float, keyword-only
+        The image's share of outlying detail (:attr:`shadeform.preprocess.Detail.outliers`).
 
     Returns
     -------
     Solver
     """
     for solver in _ranked():
+        photos_only = solver.min_outliers is not None
+        if photos_only and not (noise > NOISY and outliers >= solver.min_outliers):
+            continue
         if solver.takes(light) and noise <= solver.max_noise:
             return solver
     raise LookupError("no registered solver takes this light for method='auto'")
@@ -183,8 +202,14 @@ def _ranked() -> list[Solver]:
 
 def _conditions(solver: Solver) -> str:
     """When "auto" takes ``solver``, in words: `` (light at the camera, clean image)``."""
-    words = (["light at the camera"] if solver.lights == "frontal" else []) + (
-        ["clean image"] if solver.max_noise < math.inf else []
+    words = (
+        (["light at the camera"] if solver.lights == "frontal" else [])
+        + (["clean image"] if solver.max_noise < math.inf else [])
+        + (
+            ["photographs: noise with highlights, shadows or texture"]
+            if solver.min_outliers is not None
+            else []
+        )
     )
     return f" ({', '.join(words)})" if words else ""
 
@@ -195,9 +220,10 @@ def is_frontal(light) -> bool:
 
 
 # The built-in solvers. "auto" ranks and noise limits: the best measured on the synthetic scenes of
-# benchmarks/results/methods.md. "photo" is far ahead on real photographs (benchmarks/results/real.md)
-# but behind "oblique" on noisy renders (ellipsoid at +z, 1 % noise: 10.4 against 1.5 degrees), and
-# noise alone cannot tell the two apart, so "auto" does not pick it yet. Preview budgets: about
+# benchmarks/results/methods.md and, for "photo", on the real photographs of
+# benchmarks/results/real.md, where it is far ahead; it is behind "oblique" on noisy renders
+# (ellipsoid at +z, 1 % noise: 7.3 against 1.5 degrees), which their Gaussian detail tells apart
+# (OUTLIERS). Preview budgets: about
 # 0.1 s of solver time on one core of the 2-core machine of benchmarks/results/app.md (the oblique descent costs ~50x more per pixel than
 # fast marching on grids this small).
 register(
@@ -216,7 +242,7 @@ register(
         "shadeform.solvers.eikonal:solve",
         lights="frontal",
         depth="eikonal (fast-marching depth)",
-        auto=0,
+        auto=1,
         max_noise=NOISY,
         description="fast marching from the bright caps and marked dents (light at the camera only); "
         "the most accurate on clean images",
@@ -230,7 +256,7 @@ register(
         depth="oblique (chord-equation descent depth)",
         preview_pixels=2_500,
         denoise="gaussian:2",
-        auto=1,
+        auto=2,
         description="any light, with attached shadows: marching from the brightest pixels, then descent",
     )
 )
@@ -241,6 +267,8 @@ register(
         lights="any",
         depth="photo (robust energy over depth, coarse to fine)",
         preview_pixels=20_000,
+        auto=0,
+        min_outliers=OUTLIERS,
         description="for real photographs (highlights, shadows, noise): the outline's shape refined "
         "by the shading it can trust",
     )
