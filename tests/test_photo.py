@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from shadeform import available_methods, metrics, reconstruct, synth
-from shadeform.solvers.photo import photo_depth, response_curve, silhouette_depth
+from shadeform.solvers.photo import _Level, photo_depth, response_curve, silhouette_depth
 
 
 def test_silhouette_depth_is_a_sphere_for_a_disc():
@@ -20,6 +20,34 @@ def test_silhouette_depth_is_a_sphere_for_a_disc():
     # the discrete outline sits about half a pixel off the disc's: under 2 % of the height
     assert np.max(np.abs(depth - truth)[inner]) < 0.02 * radius
     assert depth[~mask].max() == 0.0
+
+
+@pytest.mark.parametrize("light", [(0.0, 0.0, 1.0), (0.5, 0.3, 0.81)])
+def test_compiled_energy_is_the_reference(light):
+    # a rough state (every term active: shadows, both ends of the curve, creases, the outline)
+    scene = synth.scene("vase", size=48, light=light, noise=0.02)
+    light = np.asarray(scene.light)
+    level = _Level(np.where(scene.mask, scene.image, 0.0), scene.mask, light)
+    rng = np.random.default_rng(3)
+    state = rng.normal(0.0, 0.5, level.unknowns)
+    state[: level.n] += silhouette_depth(scene.mask)[scene.mask]
+    shading = level.normals(level.depth(state)) @ light
+    for curve in (response_curve(shading, level.values), np.array([[0.0, 0.0], [1.0, 0.9]])):
+        energy, gradient = level.energy(state, curve)
+        expected, expected_gradient = level.energy_reference(state, curve)
+        assert energy == pytest.approx(expected, rel=1e-12)
+        np.testing.assert_allclose(
+            gradient, expected_gradient, rtol=1e-9, atol=1e-12 * np.abs(expected_gradient).max()
+        )
+    # and the reference is the energy's gradient (central differences on a few coefficients)
+    step = 1e-6
+    for i in rng.choice(level.unknowns, 5, replace=False):
+        bump = np.zeros(level.unknowns)
+        bump[i] = step
+        numeric = (
+            level.energy_reference(state + bump, curve)[0] - level.energy_reference(state - bump, curve)[0]
+        ) / (2 * step)
+        assert numeric == pytest.approx(expected_gradient[i], rel=1e-4, abs=1e-9)
 
 
 def test_silhouette_depth_has_no_outline_on_the_frame():

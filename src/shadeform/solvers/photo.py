@@ -57,6 +57,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -257,11 +258,18 @@ class _Level:
         self.n = rows.size
         self.values = image[mask]
         self.light = light
-        self.d_col, self.d_row = (_slope_matrix(index, rows, cols, step) for step in ((0, 1), (1, 0)))
+        self.col_stencil, self.row_stencil = (
+            _slope_stencil(index, rows, cols, step) for step in ((0, 1), (1, 0))
+        )
+        self.d_col, self.d_row = (_slope_matrix(*stencil) for stencil in (self.col_stencil, self.row_stencil))
         self.d_col_t, self.d_row_t = self.d_col.T.tocsr(), self.d_row.T.tocsr()
         # (pairs, n) differences z_q - z_p over 4-neighbouring object pixels: Poisson's operator
         _, self.pairs, _ = _difference_system(mask, np.ones(mask.shape))
         self.pairs_t = self.pairs.T.tocsr()
+        ends = self.pairs.tocoo()
+        self.first, self.second = np.empty((2, self.pairs.shape[0]), dtype=np.int64)
+        self.first[ends.row[ends.data < 0]] = ends.col[ends.data < 0]  # p of z_q - z_p
+        self.second[ends.row[ends.data > 0]] = ends.col[ends.data > 0]  # q
         boundary = find_boundary(mask)
         self.outline = index[boundary.rows, boundary.cols]
         self.outward = boundary.normals
@@ -290,7 +298,31 @@ class _Level:
 
     def energy(self, coefficients, curve):
         """The energy and its gradient with respect to the basis coefficients, under the
-        reflectance curve ``curve`` ((K, 2) rows ``(n . L, brightness)``)."""
+        reflectance curve ``curve`` ((K, 2) rows ``(n . L, brightness)``): one compiled pass
+        (:func:`_energy_kernel`) between the basis and its transpose."""
+        z = self.depth(coefficients)
+        g_z = np.empty(self.n)
+        energy = _energy_kernel(
+            z,
+            self.values,
+            self.data,
+            self.light,
+            np.ascontiguousarray(curve[:, 0]),
+            np.ascontiguousarray(curve[:, 1]),
+            *self.col_stencil,
+            *self.row_stencil,
+            self.first,
+            self.second,
+            self.outline,
+            np.ascontiguousarray(self.outward, dtype=np.float64),
+            np.array([MU, EPS, NU, SCALE]),
+            g_z,
+        )
+        return energy, np.concatenate([b_t @ g_z for b_t in self.basis_t])
+
+    def energy_reference(self, coefficients, curve):
+        """:meth:`energy` in plain numpy and sparse products (slow, obviously correct: the
+        compiled kernel is tested against it)."""
         z = self.depth(coefficients)
         gx, gy = self.d_col @ z, self.d_row @ z
         inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
@@ -398,22 +430,112 @@ def _neighbour(index, rows, cols):
     return other, inside
 
 
-def _slope_matrix(index, rows, cols, step):
-    """d/dcol (step (0, 1)) or d/drow (step (1, 0)) on the object's pixels: central differences
-    where both neighbours are on it, one-sided where one is, zero where none is. Rows point
-    down (``y = -row``), so a normal is ``(-dz/dcol, +dz/drow, 1)`` normalised."""
+def _slope_stencil(index, rows, cols, step):
+    """d/dcol (step (0, 1)) or d/drow (step (1, 0)) on the object's pixels as
+    ``half * (z[ahead] - z[behind])``: central differences where both neighbours are on it,
+    one-sided where one is, zero where none is (both are the pixel itself). Rows point down
+    (``y = -row``), so a normal is ``(-dz/dcol, +dz/drow, 1)`` normalised.
+
+    Returns
+    -------
+    ahead, behind : (n,) int64
+    half : (n,) float64
+    """
     forward, _ = _neighbour(index, rows + step[0], cols + step[1])
     backward, _ = _neighbour(index, rows - step[0], cols - step[1])
     me = np.arange(rows.size)
     has_f, has_b = forward >= 0, backward >= 0
     half = np.where(has_f & has_b, 0.5, 1.0)
-    right = np.where(has_f, forward, me)
-    left = np.where(has_b, backward, me)
-    some = has_f | has_b
+    return np.where(has_f, forward, me), np.where(has_b, backward, me), half
+
+
+def _slope_matrix(ahead, behind, half):
+    """A slope stencil (:func:`_slope_stencil`) as an (n, n) sparse matrix."""
+    n = ahead.size
+    me = np.arange(n)
+    some = ahead != behind
     i = np.r_[me[some], me[some]]
-    j = np.r_[right[some], left[some]]
+    j = np.r_[ahead[some], behind[some]]
     v = np.r_[half[some], -half[some]]
-    return sp.csr_matrix((v, (i, j)), shape=(rows.size, rows.size))
+    return sp.csr_matrix((v, (i, j)), shape=(n, n))
+
+
+@numba.njit(cache=True)
+def _energy_kernel(
+    z, values, data, light, knots, levels,
+    col_ahead, col_behind, col_half, row_ahead, row_behind, row_half,
+    first, second, outline, outward, weights, g_z,
+):  # fmt: skip
+    """The energy of the module's description at depth ``z`` (n,) and its gradient, written into
+    ``g_z`` (n,); ``weights`` is ``(MU, EPS, NU, SCALE)``. Same terms, in the same order, as
+    :meth:`_Level.energy_reference`."""
+    mu, eps, nu, scale = weights[0], weights[1], weights[2], weights[3]
+    n = z.size
+    lx, ly, lz = light[0], light[1], light[2]
+    k = knots.size
+    inverse_albedo = 1.0 / levels[k - 1]
+    gx, gy, inv = np.empty(n), np.empty(n), np.empty(n)
+    nx, ny, nz = np.empty(n), np.empty(n), np.empty(n)
+    g_x, g_y = np.zeros(n), np.zeros(n)
+    energy = 0.0
+    for p in range(n):  # shading: Cauchy loss on (f(n . L) - I) / a
+        a = col_half[p] * (z[col_ahead[p]] - z[col_behind[p]])
+        b = row_half[p] * (z[row_ahead[p]] - z[row_behind[p]])
+        c = 1.0 / np.sqrt(1.0 + a * a + b * b)
+        gx[p], gy[p], inv[p] = a, b, c
+        nx[p], ny[p], nz[p] = -a * c, b * c, c
+        if not data[p]:
+            continue
+        shading = nx[p] * lx + ny[p] * ly + nz[p] * lz
+        below = 0  # knots below shading: np.searchsorted(knots, shading)
+        while below < k and knots[below] < shading:
+            below += 1
+        segment = min(max(below - 1, 0), k - 2)
+        slope = (levels[segment + 1] - levels[segment]) / (knots[segment + 1] - knots[segment])
+        if shading <= knots[0]:
+            value = levels[0]
+        elif shading >= knots[k - 1]:
+            value = levels[k - 1]
+        else:
+            value = levels[segment] + slope * (shading - knots[segment])
+        residual = (value - values[p]) * inverse_albedo
+        ratio = residual * residual / (scale * scale)
+        energy += 0.5 * scale * scale * np.log1p(ratio)
+        if knots[0] < shading < knots[k - 1]:  # f is flat beyond its ends
+            d = residual / (1.0 + ratio) * slope * inverse_albedo
+            g_x[p] = d * (-lx * c - shading * a * c * c)
+            g_y[p] = d * (ly * c - shading * b * c * c)
+    g_nx, g_ny, g_nz = np.zeros(n), np.zeros(n), np.zeros(n)
+    for e in range(first.size):  # smoothness: robust in the change of the normal
+        p, q = first[e], second[e]
+        sx, sy, sz = nx[q] - nx[p], ny[q] - ny[p], nz[q] - nz[p]
+        root = np.sqrt(eps * eps + sx * sx + sy * sy + sz * sz)
+        energy += mu * (root - eps)
+        w = mu / root
+        g_nx[q] += w * sx
+        g_nx[p] -= w * sx
+        g_ny[q] += w * sy
+        g_ny[p] -= w * sy
+        g_nz[q] += w * sz
+        g_nz[p] -= w * sz
+    for i in range(outline.size):  # contour: the normal on the outline is its outward normal
+        o = outline[i]
+        miss = nx[o] * outward[i, 0] + ny[o] * outward[i, 1] - 1.0
+        energy += nu * miss * miss
+        g_nx[o] += 2.0 * nu * miss * outward[i, 0]
+        g_ny[o] += 2.0 * nu * miss * outward[i, 1]
+    for p in range(n):  # back through n(gx, gy) to the slopes and the depth
+        a, b, c = gx[p], gy[p], inv[p]
+        cube = c * c * c
+        g_x[p] += g_nx[p] * (a * a * cube - c) - g_ny[p] * a * b * cube - g_nz[p] * a * cube
+        g_y[p] += g_nx[p] * a * b * cube + g_ny[p] * (c - b * b * cube) - g_nz[p] * b * cube
+    g_z[:] = 0.0
+    for p in range(n):
+        g_z[col_ahead[p]] += col_half[p] * g_x[p]
+        g_z[col_behind[p]] -= col_half[p] * g_x[p]
+        g_z[row_ahead[p]] += row_half[p] * g_y[p]
+        g_z[row_behind[p]] -= row_half[p] * g_y[p]
+    return energy
 
 
 def _upsampling_matrix(rows, cols, shape, factor):
