@@ -309,12 +309,8 @@ def noise_level(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | Non
 
     Parameters
     ----------
-    image : (H, W) float array
-        Intensities.
-    mask : (H, W) bool array
-        Object pixels.
-    inside : (H, W) float array, optional
-        ``scipy.ndimage.distance_transform_edt(mask)`` if the caller has it.
+    image, mask, inside
+        As for :func:`image_detail`.
 
     Returns
     -------
