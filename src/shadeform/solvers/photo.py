@@ -349,13 +349,10 @@ class _Level:
         self.col_stencil, self.row_stencil = (
             _slope_stencil(index, rows, cols, step) for step in ((0, 1), (1, 0))
         )
-        self.d_col, self.d_row = (_slope_matrix(*stencil) for stencil in (self.col_stencil, self.row_stencil))
-        self.d_col_t, self.d_row_t = self.d_col.T.tocsr(), self.d_row.T.tocsr()
-        # (pairs, n) differences z_q - z_p over 4-neighbouring object pixels: Poisson's operator
-        _, self.pairs, _ = _difference_system(mask, np.ones(mask.shape))
-        self.pairs_t = self.pairs.T.tocsr()
-        ends = self.pairs.tocoo()
-        self.first, self.second = np.empty((2, self.pairs.shape[0]), dtype=np.int64)
+        # the 4-neighbouring object pixels p, q of each difference z_q - z_p of Poisson's operator
+        _, pairs, _ = _difference_system(mask, np.ones(mask.shape))
+        ends = pairs.tocoo()
+        self.first, self.second = np.empty((2, pairs.shape[0]), dtype=np.int64)
         self.first[ends.row[ends.data < 0]] = ends.col[ends.data < 0]  # p of z_q - z_p
         self.second[ends.row[ends.data > 0]] = ends.col[ends.data > 0]  # q
         boundary = find_boundary(mask)
@@ -378,7 +375,6 @@ class _Level:
         while min(mask.shape) // factor >= 4:
             self.basis.append(_upsampling_matrix(rows, cols, mask.shape, factor))
             factor *= 2
-        self.basis_t = [b.T.tocsr() for b in self.basis]
         self.split = np.cumsum([b.shape[1] for b in self.basis])[:-1]
         self.unknowns = int(sum(b.shape[1] for b in self.basis))
 
@@ -388,7 +384,9 @@ class _Level:
 
     def normals(self, z):
         """(n, 3) unit normals of depth ``z`` on the object's pixels."""
-        gx, gy = self.d_col @ z, self.d_row @ z
+        gx, gy = (
+            half * (z[ahead] - z[behind]) for ahead, behind, half in (self.col_stencil, self.row_stencil)
+        )
         inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
         return np.column_stack([-gx * inverse, gy * inverse, inverse])
 
@@ -414,13 +412,15 @@ class _Level:
             np.array([MU, EPS, NU, SCALE]),
             g_z,
         )
-        return energy, np.concatenate([b_t @ g_z for b_t in self.basis_t])
+        return energy, np.concatenate([b.T @ g_z for b in self.basis])
 
     def energy_reference(self, coefficients, curve):
         """:meth:`energy` in plain numpy and sparse products (slow, obviously correct: the
         compiled kernel is tested against it)."""
+        d_col, d_row = (_slope_matrix(*stencil) for stencil in (self.col_stencil, self.row_stencil))
+        _, pairs, _ = _difference_system(self.mask, np.ones(self.mask.shape))
         z = self.depth(coefficients)
-        gx, gy = self.d_col @ z, self.d_row @ z
+        gx, gy = d_col @ z, d_row @ z
         inverse = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
         nx, ny, nz = -gx * inverse, gy * inverse, inverse
         lx, ly, lz = self.light
@@ -440,11 +440,11 @@ class _Level:
         g_x = d_shading * (-lx * inverse - shading * gx * inverse * inverse)
         g_y = d_shading * (ly * inverse - shading * gy * inverse * inverse)
         # smoothness: robust in the change of the normal between neighbours
-        steps = [self.pairs @ component for component in (nx, ny, nz)]
+        steps = [pairs @ component for component in (nx, ny, nz)]
         root = np.sqrt(EPS * EPS + steps[0] ** 2 + steps[1] ** 2 + steps[2] ** 2)
         energy += MU * np.sum(root - EPS)
         weight = MU / root
-        g_n = [self.pairs_t @ (weight * step) for step in steps]
+        g_n = [pairs.T @ (weight * step) for step in steps]
         # contour: the normal on the outline is its outward normal
         miss = nx[self.outline] * self.outward[:, 0] + ny[self.outline] * self.outward[:, 1] - 1.0
         energy += NU * np.sum(miss * miss)
@@ -454,8 +454,8 @@ class _Level:
         cube = inverse**3
         g_x += g_n[0] * (gx * gx * cube - inverse) - g_n[1] * gx * gy * cube - g_n[2] * gx * cube
         g_y += g_n[0] * gx * gy * cube + g_n[1] * (inverse - gy * gy * cube) - g_n[2] * gy * cube
-        g_z = self.d_col_t @ g_x + self.d_row_t @ g_y
-        return energy, np.concatenate([b_t @ g_z for b_t in self.basis_t])
+        g_z = d_col.T @ g_x + d_row.T @ g_y
+        return energy, np.concatenate([b.T @ g_z for b in self.basis])
 
 
 def response_curve(shading: np.ndarray, values: np.ndarray) -> np.ndarray:
