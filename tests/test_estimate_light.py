@@ -471,3 +471,16 @@ class TestRealPhotos:
         errors = np.array([real_data.light_error(given.light, case) for case, given, _ in real_cases])
         confidence = np.array([given.confidence for _, given, _ in real_cases])
         assert confidence[errors > 15.0].max() < np.median(confidence)
+
+    @pytest.mark.parametrize("name", ["frog1", "deer", "panther"])
+    def test_painted_raw_photo_says_when_it_is_lost(self, real_data, name):
+        """The raw MIT-Berkeley photos keep their paint: a dark-painted top under a white foot
+        reads as a grazing light (frog1 83 degrees, deer 80, against about 10). The answer is
+        wrong, but the outline's own looser light disagrees, and the confidence says so (it said
+        1.0 and 0.94 before); where paint does not mislead (panther) it stays high."""
+        case = real_data.mit(name, raw=True)
+        estimate = estimate_light(case.image, case.mask)
+        if real_data.light_error(estimate.light, case) > 30.0:
+            assert estimate.evidence == "limb-peak" and estimate.confidence < 0.1
+        else:
+            assert estimate.confidence > 0.9

@@ -285,7 +285,10 @@ def _limb_or_rim(image, ring: _Ring, levels: Levels, info: dict) -> Reading | No
         )
     info["slant_error"] = _slant_error(across, along_view, covariance)
     if info["slant_error"] > _DEGENERATE_SLANT and evidence == "limb":
-        return None  # the brightest point and the top may read the slant (when the top can be)
+        # the brightest point and the top may read the slant (when the top can be); the limb's
+        # own light, too loose to answer, still says how far that answer may be trusted
+        info["loose_limb"] = from_components(across, along_view)[:2]
+        return None
     return Reading(*from_components(across, along_view), evidence, info)
 
 
@@ -345,12 +348,20 @@ def _brightest_point(normals, values, levels: Levels, info: dict) -> Reading:
     """The light when the contour cannot fix the slant: the brightest point faces the light, and
     the tilt is the lit contour's mean normal (``normals`` (n, 2)) weighted by intensity. The
     slant is only bounded from below (:func:`bound_spread`), and left unknown (an infinite spread)
-    where the top is too dark to be ``k L_z`` (darker than a quarter of the lit pixels)."""
+    where the top is too dark to be ``k L_z`` (darker than a quarter of the lit pixels). Where
+    the outline gave a light too loose to answer with (``info["loose_limb"]``), the angle to it
+    joins the spread in quadrature."""
     mean = (normals * values[:, None]).sum(axis=0) if values.size else np.zeros(2)
     tilt = math.degrees(math.atan2(mean[1], mean[0])) if np.hypot(*mean) > 0 else 0.0
     slant = slant_from_peak(levels.top, levels.peak)
     # the slant is only bounded, and not even that where the top is too dark to be k L_z
     spread = bound_spread(slant) if levels.top >= levels.quartile else math.inf
+    if "loose_limb" in info:
+        # the outline's own light, in quadrature: where it disagrees (a dark-painted top and a
+        # bright-painted foot read as a grazing light, MIT-Berkeley's raw frog1: 83 degrees
+        # against the outline's 18), one of the two premises fails
+        info["cue_angle"] = angle_between(unit_light(slant, tilt), unit_light(*info["loose_limb"]))
+        spread = math.hypot(spread, info["cue_angle"])
     return Reading(slant, tilt, max(levels.peak, levels.top), "limb-peak", info, spread=spread)
 
 
