@@ -68,6 +68,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_stereo.py
 	$(PY) benchmarks/bench_methods.py
 	$(PY) benchmarks/bench_real.py
+	$(PY) benchmarks/bench_detail.py
 
 clean:
 	rm -rf $(VENV) $(JS)/node_modules $(WEB)/node_modules $(STATIC) out

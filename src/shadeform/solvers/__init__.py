@@ -53,7 +53,7 @@ NOISY = 0.003
 #: Share of outlying detail (:attr:`shadeform.preprocess.Detail.outliers`) from which a noisy image
 #: counts as a photograph with highlights, shadows, paint or texture rather than smooth shading plus
 #: noise: a solver's ``min_outliers`` rule uses it. Set between the two groups it was measured on
-#: (``benchmarks/results/real.md``): 189 noisy renderings (7 synthetic scenes, 64-512 px, 3 lights,
+#: (``benchmarks/results/detail.md``): 252 noisy renderings (7 synthetic scenes, 64-512 px, 3 lights,
 #: 1 and 3 % noise, float and 8-bit) reach at most 0.0029, and the 18 real photographs start at
 #: 0.0103 (MIT-Berkeley apple; up to 0.126); independent noise alone gives 6e-5.
 OUTLIERS = 0.005
