@@ -122,7 +122,8 @@ def find_boundary(mask) -> Boundary:
 
 def read_contour(image, mask, levels: Levels, boundary: Boundary) -> Reading:
     """The light from the occluding contour (``"limb"``), a tilted rim (``"rim"``) or, when
-    neither fixes it, the brightest point (``"limb-peak"``).
+    neither fixes it, the brightest point (``"limb-peak"``); where the contour read a light but
+    left its slant loose, the surer (smaller spread) of that light and the brightest point's.
 
     ``image`` (H, W) float64 and ``mask`` (H, W) bool are as :func:`shadeform.light.estimate_light`
     checked them, ``levels`` as it measured them; ``boundary`` (:func:`find_boundary`) has at least
@@ -154,7 +155,19 @@ def read_contour(image, mask, levels: Levels, boundary: Boundary) -> Reading:
                 return _with_spread(reading, image, ring, levels)
         normals, values = ring.normals, ring.values
     lit = values > levels.lit
-    return _brightest_point(normals[lit], values[lit], levels, info)
+    peak = _brightest_point(normals[lit], values[lit], levels, info)
+    if "loose_limb" in info:
+        # the outline's loose light, its spread its own slant error and the top's disagreement
+        # with the brightest point: kept where it is the surer of the two
+        loose = Reading(
+            *info["loose_limb"],
+            "limb",
+            info,
+            spread=math.hypot(info["slant_error"], info.get("cue_angle_limb", 0.0)),
+        )
+        if loose.spread < peak.spread:
+            return loose
+    return peak
 
 
 def _with_spread(reading: Reading, image, ring: _Ring, levels: Levels) -> Reading:
@@ -279,15 +292,15 @@ def _limb_or_rim(image, ring: _Ring, levels: Levels, info: dict) -> Reading | No
     # the other reading of k L_z, for the spread: the top, or the brightest point if it allows one
     other = top if evidence == "limb-brightest" else brightest
     if other > 0:
-        info["cue_angle"] = angle_between(
+        info["cue_angle"] = info["cue_angle_limb"] = angle_between(
             unit_light(*from_components(across, along_view)[:2]),
             unit_light(*from_components(across, other)[:2]),
         )
     info["slant_error"] = _slant_error(across, along_view, covariance)
     if info["slant_error"] > _DEGENERATE_SLANT and evidence == "limb":
         # the brightest point and the top may read the slant (when the top can be); the limb's
-        # own light, too loose to answer, still says how far that answer may be trusted
-        info["loose_limb"] = from_components(across, along_view)[:2]
+        # own light, too loose to answer alone, is weighed against theirs (read_contour)
+        info["loose_limb"] = from_components(across, along_view)
         return None
     return Reading(*from_components(across, along_view), evidence, info)
 
@@ -360,7 +373,7 @@ def _brightest_point(normals, values, levels: Levels, info: dict) -> Reading:
         # the outline's own light, in quadrature: where it disagrees (a dark-painted top and a
         # bright-painted foot read as a grazing light, MIT-Berkeley's raw frog1: 83 degrees
         # against the outline's 18), one of the two premises fails
-        info["cue_angle"] = angle_between(unit_light(slant, tilt), unit_light(*info["loose_limb"]))
+        info["cue_angle"] = angle_between(unit_light(slant, tilt), unit_light(*info["loose_limb"][:2]))
         spread = math.hypot(spread, info["cue_angle"])
     return Reading(slant, tilt, max(levels.peak, levels.top), "limb-peak", info, spread=spread)
 

@@ -126,7 +126,10 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     3. **The brightest point** (``evidence="limb-peak"`` in the result). When the contour
        cannot fix ``A`` (only straight sides lit, as on a cylinder), the brightest point is taken
        to face the light: ``k = I_max``, ``cos(slant) = k L_z / I_max``, and the tilt is the lit
-       contour's mean normal.
+       contour's mean normal. Where the contour does read a light but leaves its slant loose
+       (standard error above 1.5 degrees), the two are weighed by their spreads and the surer is
+       kept: paint can make the brightest point a poor witness (a dark-painted top under a
+       white-painted foot reads as a grazing light: MIT-Berkeley's raw ``frog1``, ``deer``).
     4. **A tilted rim** (``"rim"``: the edge of a cap, a bowl or a saddle seen from above). The
        boundary normals share one slant ``theta`` and the fit gains a constant term
        ``k cos(theta) L_z``; with the top's ``k L_z`` that gives ``theta``, then ``k L_xy``.
@@ -205,7 +208,10 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
       inverse of ``J^T J``);
     - ``round``: a jackknife over the rings;
     - ``limb-peak`` and ``relief-spectrum``, where the brightest point only bounds the slant from
-      below: the slant spread evenly between that bound and the horizon.
+      below: the slant spread evenly between that bound and the horizon, for ``limb-peak`` in
+      quadrature with the angle to the contour's loose light where there is one (and that loose
+      light's own spread: its slant's standard error and the top's disagreement with the
+      brightest point, in quadrature).
 
     Measured on held-out real photos (every MIT-Berkeley photo, every sixth DiLiGenT one; not the
     frontal photos the bars use) in ``benchmarks/results/light.md``; the spread misses biases
