@@ -50,6 +50,17 @@ def test_compiled_energy_is_the_reference(light):
         assert numeric == pytest.approx(expected_gradient[i], rel=1e-4, abs=1e-9)
 
 
+def test_no_outline_in_view_is_flat():
+    # a mask filling the frame (a relief, a landscape): nothing fixes the silhouette's height
+    assert np.all(silhouette_depth(np.ones((24, 32), dtype=bool)) == 0.0)
+    # nor a concave run from frame to frame: it stays as it was
+    depth = np.add.outer(np.zeros(24), np.linspace(0.0, 5.0, 32))
+    band = np.zeros((24, 32), dtype=bool)
+    band[10:14] = True
+    start = concave_start(depth, band, np.zeros_like(band))
+    assert np.isfinite(start).all() and np.array_equal(start, depth)
+
+
 def test_concave_start_dents_a_dome_and_keeps_a_dent():
     size, radius = 81, 30.0
     rows, cols = np.mgrid[:size, :size] - size // 2

@@ -71,6 +71,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
 from scipy import ndimage as ndi
 from scipy.optimize import isotonic_regression, minimize
@@ -163,10 +164,9 @@ def silhouette_depth(mask: np.ndarray) -> np.ndarray:
         Height in pixels, 0 off the mask.
     """
     mask = np.asarray(mask, dtype=bool)
-    laplacian, _ = _dirichlet_laplacian(mask, np.zeros(mask.shape), _FOUR)
-    u = spla.spsolve(laplacian, np.ones(laplacian.shape[0]))
+    u = _dirichlet_solve(mask, np.zeros(mask.shape), _FOUR, source=1.0)
     depth = np.zeros(mask.shape)
-    depth[mask] = 2.0 * np.sqrt(np.maximum(u, 0.0))
+    depth[mask] = 2.0 * np.sqrt(np.maximum(np.nan_to_num(u), 0.0))  # no outline in view: flat
     return depth
 
 
@@ -199,8 +199,8 @@ def concave_start(depth: np.ndarray, concave_x: np.ndarray, concave_y: np.ndarra
     ):
         if not region.any():
             continue
-        laplacian, rim = _dirichlet_laplacian(region, depth, steps)
-        rim_surface = spla.spsolve(laplacian, rim)
+        rim_surface = _dirichlet_solve(region, depth, steps)
+        rim_surface = np.where(np.isnan(rim_surface), depth[region], rim_surface)  # no rim: as it was
         start[region] = rim_surface - np.abs(depth[region] - rim_surface)
     return start
 
@@ -209,29 +209,34 @@ def concave_start(depth: np.ndarray, concave_x: np.ndarray, concave_y: np.ndarra
 _FOUR = ((0, 1), (0, -1), (1, 0), (-1, 0))
 
 
-def _dirichlet_laplacian(region, outside, steps):
-    """The graph Laplacian over ``region``'s pixels along ``steps``, with the values ``outside``
-    (H, W) fixed on the neighbours off the region: returns the (n, n) sparse matrix and the (n,)
-    sum of those fixed neighbours' values. A step off the image frame has no neighbour (the
-    object goes on beyond the picture)."""
+def _dirichlet_solve(region, outside, steps, *, source=0.0):
+    """``u`` on ``region``'s pixels (n,) with ``-laplacian(u) = source`` along ``steps`` and
+    ``u = outside`` (H, W) on the neighbours off the region. A step off the image frame has no
+    neighbour (the object goes on beyond the picture); a connected part with no neighbour off the
+    region inside the frame has nothing to fix ``u`` and gets NaN."""
     index, rows, cols = _index(region)
     n = rows.size
-    neighbours, fixed = np.zeros(n), np.zeros(n)
+    neighbours, fixed, anchors = np.zeros(n), np.zeros(n), np.zeros(n)
     pairs_i, pairs_j = [], []
     for d_row, d_col in steps:
         other, inside = _neighbour(index, rows + d_row, cols + d_col)
         neighbours += inside
         off = inside & (other < 0)
         fixed[off] += outside[rows[off] + d_row, cols[off] + d_col]
+        anchors += off
         on_region = other >= 0
         pairs_i.append(np.flatnonzero(on_region))
         pairs_j.append(other[on_region])
     i, j = np.concatenate(pairs_i), np.concatenate(pairs_j)
-    diagonal = np.arange(n)
-    laplacian = sp.csc_matrix(
-        (np.r_[neighbours, -np.ones(i.size)], (np.r_[diagonal, i], np.r_[diagonal, j])), shape=(n, n)
-    )
-    return laplacian, fixed
+    adjacency = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
+    _, part = csgraph.connected_components(adjacency, directed=False)
+    anchored = np.bincount(part, weights=anchors)[part] > 0
+    u = np.full(n, np.nan)
+    if anchored.any():
+        keep = np.flatnonzero(anchored)
+        laplacian = sp.diags(neighbours[keep]) - adjacency[keep][:, keep]
+        u[keep] = spla.spsolve(laplacian.tocsc(), fixed[keep] + source)
+    return u
 
 
 def photo_depth(
