@@ -16,7 +16,6 @@ Usage: ``python benchmarks/bench_detail.py [--out benchmarks/results/detail.md]`
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import time
 from pathlib import Path
@@ -26,17 +25,13 @@ import numpy as np
 import real_data
 from shadeform import synth
 from shadeform.io.atomic import atomic_write
+from shadeform.light import light_from_slant_tilt
 from shadeform.preprocess import image_detail
 from shadeform.solvers import NOISY, OUTLIERS
 
 SIZES = (64, 256, 512)
 NOISES = (0.01, 0.03)
 SLANTS = (0.0, 30.0, 45.0)
-
-
-def _light(slant: float) -> tuple[float, float, float]:
-    s, t = math.radians(slant), math.radians(45.0)
-    return (math.sin(s) * math.cos(t), math.sin(s) * math.sin(t), math.cos(s))
 
 
 def _row(image: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
@@ -51,7 +46,9 @@ def renders() -> list[tuple[str, float, float]]:
         for size in SIZES:
             for slant in SLANTS:
                 for noise in NOISES:
-                    scene = synth.scene(name, size=size, light=_light(slant), noise=noise, seed=0)
+                    scene = synth.scene(
+                        name, size=size, light=light_from_slant_tilt(slant, 45.0), noise=noise, seed=0
+                    )
                     image = np.clip(scene.image, 0.0, None)
                     label = f"{name} {size} px, slant {slant:.0f}, noise {noise:.0%}"
                     rows.append((label, *_row(image, scene.mask)))

@@ -159,11 +159,12 @@ def read_contour(image, mask, levels: Levels, boundary: Boundary) -> Reading:
     if "loose_limb" in info:
         # the outline's loose light, its spread its own slant error and the top's disagreement
         # with the brightest point: kept where it is the surer of the two
+        cues = info.get("cue_angle_limb", 0.0)
         loose = Reading(
             *info["loose_limb"],
             "limb",
-            info,
-            spread=math.hypot(info["slant_error"], info.get("cue_angle_limb", 0.0)),
+            {**info, "cue_angle": cues},  # its own cue, not the brightest point's
+            spread=math.hypot(info["slant_error"], cues),
         )
         if loose.spread < peak.spread:
             return loose

@@ -379,7 +379,7 @@ class _Level:
             on_y = concave_y[boundary.rows, boundary.cols]
             contour = ~((on_x & across_x) | (on_y & ~across_x))
         self.outline = index[boundary.rows[contour], boundary.cols[contour]]
-        self.outward = boundary.normals[contour]
+        self.outward = np.ascontiguousarray(boundary.normals[contour], dtype=np.float64)
         # a clipped plateau (two or more pixels at the object's top value) carries no shading
         top = self.values.max()
         at_top = self.values >= top * (1.0 - 1e-3)
@@ -422,8 +422,8 @@ class _Level:
             self.first,
             self.second,
             self.outline,
-            np.ascontiguousarray(self.outward, dtype=np.float64),
-            np.array([MU, EPS, NU, SCALE]),
+            self.outward,
+            np.array([MU, EPS, NU, SCALE]),  # read per call: tests and experiments may change them
             g_z,
         )
         return energy, np.concatenate([b.T @ g_z for b in self.basis])
