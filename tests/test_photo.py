@@ -4,9 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+from scipy.optimize import minimize, rosen, rosen_der
 
 from shadeform import available_methods, metrics, reconstruct, synth
-from shadeform.solvers.photo import _Level, concave_start, photo_depth, response_curve, silhouette_depth
+from shadeform.solvers.photo import (
+    _Basis,
+    _descend,
+    _Level,
+    concave_start,
+    photo_depth,
+    response_curve,
+    silhouette_depth,
+)
 
 
 def test_silhouette_depth_is_a_sphere_for_a_disc():
@@ -48,6 +58,68 @@ def test_compiled_energy_is_the_reference(light):
             level.energy_reference(state + bump, curve)[0] - level.energy_reference(state - bump, curve)[0]
         ) / (2 * step)
         assert numeric == pytest.approx(expected_gradient[i], rel=1e-4, abs=1e-9)
+
+
+def _bilinear_matrix(mask, factor):
+    """The obvious reference for one coarse grid of the hierarchical basis: (object pixels,
+    coarse cells) weights of bilinear interpolation from a grid ``factor`` times coarser, cell
+    centres aligned and ends held, written pixel by pixel."""
+    height, width = -(-mask.shape[0] // factor), -(-mask.shape[1] // factor)
+    entries = {}
+    for i, (row, col) in enumerate(zip(*np.nonzero(mask))):
+        at_row = min(max((row + 0.5) / factor - 0.5, 0.0), height - 1)
+        at_col = min(max((col + 0.5) / factor - 0.5, 0.0), width - 1)
+        r0 = min(int(np.floor(at_row)), max(height - 2, 0))
+        c0 = min(int(np.floor(at_col)), max(width - 2, 0))
+        for r, w_r in ((r0, 1 - (at_row - r0)), (min(r0 + 1, height - 1), at_row - r0)):
+            for c, w_c in ((c0, 1 - (at_col - c0)), (min(c0 + 1, width - 1), at_col - c0)):
+                entries[i, r * width + c] = entries.get((i, r * width + c), 0.0) + w_r * w_c
+    keys = list(entries)
+    return sp.csr_matrix(
+        ([entries[k] for k in keys], ([k[0] for k in keys], [k[1] for k in keys])),
+        shape=(int(mask.sum()), height * width),
+    )
+
+
+def test_hierarchical_basis_is_the_sum_of_bilinear_grids():
+    rng = np.random.default_rng(0)
+    mask = synth.scene("vase", size=37).mask.copy()
+    mask[30:, :5] = True  # a part touching the frame's corner: the ends are held
+    basis = _Basis(mask)
+    matrices = [sp.identity(int(mask.sum()), format="csr")]
+    factor = 2
+    while min(mask.shape) // factor >= 4:
+        matrices.append(_bilinear_matrix(mask, factor))
+        factor *= 2
+    # the basis keeps the coarse cells that reach the object; put its coefficients on all of them
+    full = sp.hstack(matrices).tocsr()
+    reaching = np.flatnonzero(np.abs(full).sum(axis=0).A1 > 0)
+    assert basis.size == reaching.size
+    coefficients = rng.normal(size=basis.size)
+    whole = np.zeros(full.shape[1])
+    whole[reaching] = coefficients
+    np.testing.assert_allclose(basis.expand(coefficients), full @ whole, atol=1e-12)
+    gradient = rng.normal(size=basis.n)
+    np.testing.assert_allclose(basis.reduce(gradient), (full.T @ gradient)[reaching], atol=1e-12)
+
+
+def test_descent_finds_a_minimum():
+    # Rosenbrock's curved valley from its classic start: the minimum is (1, 1)
+    start = np.array([-1.2, 1.0])
+    x, steps = _descend(lambda x: (rosen(x), rosen_der(x)), start, iterations=400)
+    np.testing.assert_allclose(x, 1.0, atol=1e-6)
+    assert steps <= 400
+    # a quadratic in 2000 unknowns: within the iterations SciPy's L-BFGS-B needs, as close
+    rng = np.random.default_rng(1)
+    scales = np.exp(rng.uniform(0, 4, 2000))
+    target = rng.normal(size=2000)
+
+    def bowl(x):
+        return 0.5 * np.sum(scales * (x - target) ** 2), scales * (x - target)
+
+    x, _ = _descend(bowl, np.zeros(2000), iterations=150)
+    reference = minimize(bowl, np.zeros(2000), jac=True, method="L-BFGS-B", options={"maxiter": 150})
+    assert bowl(x)[0] <= max(10 * reference.fun, 1e-10)
 
 
 def test_no_outline_in_view_is_flat():
