@@ -122,6 +122,7 @@ def main(argv=None):
         help="comma-separated methods to measure again on every object, the other columns kept from "
         "the rows file (default: measure every method)",
     )
+    parser.add_argument("--note", default="", help="a paragraph under the header: how this run was made")
     args = parser.parse_args(argv)
     if not real_data.available():
         print(f"no real data at {real_data.DATA}: nothing to measure")
@@ -169,6 +170,7 @@ def main(argv=None):
             "per object, the one lit nearest the camera (DiLiGenT: 8-bit linear crop divided by its "
             "light's strength, albedo, highlights and shadows kept; MIT-Berkeley: luma over the "
             "reflectance's luma). Lights: DiLiGenT calibrated, MIT fitted to the ground truth.",
+            *([args.note] if args.note else []),
             "## Normals (degrees)",
             table(rows, angle_columns, sets, compare=True),
             "## Estimated light",

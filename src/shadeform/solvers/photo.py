@@ -515,18 +515,21 @@ def _descend(energy, start, *, iterations):
 
 def _two_loop(gradient, remembered):
     """The L-BFGS product of the inverse Hessian's estimate with ``gradient`` (Nocedal and
-    Wright, Algorithm 7.4), scaled by the last pair's ``s . y / y . y``."""
+    Wright, Algorithm 7.4), scaled by the last pair's ``s . y / y . y``. The products go through
+    one scratch array: a fresh temporary per ``q -= alpha * y`` is fetched from the system
+    each time, which made this loop cost as much as the energy."""
     q = gradient.copy()
+    scratch = np.empty_like(q)
     alphas = []
     for s, y, rho in reversed(remembered):
         alpha = rho * float(s @ q)
-        q -= alpha * y
+        q -= np.multiply(y, alpha, out=scratch)
         alphas.append(alpha)
     if remembered:
         s, y, rho = remembered[-1]
         q *= 1.0 / (rho * float(y @ y))
     for (s, y, rho), alpha in zip(remembered, reversed(alphas)):
-        q += (alpha - rho * float(y @ q)) * s
+        q += np.multiply(s, alpha - rho * float(y @ q), out=scratch)
     return q
 
 
