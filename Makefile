@@ -69,6 +69,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_methods.py
 	$(PY) benchmarks/bench_real.py
 	$(PY) benchmarks/bench_detail.py
+	$(PY) benchmarks/bench_photo.py
 
 clean:
 	rm -rf $(VENV) $(JS)/node_modules $(WEB)/node_modules $(STATIC) out

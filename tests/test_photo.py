@@ -12,6 +12,7 @@ from shadeform.solvers.photo import (
     _Basis,
     _descend,
     _Level,
+    _two_loop,
     concave_start,
     photo_depth,
     response_curve,
@@ -101,6 +102,30 @@ def test_hierarchical_basis_is_the_sum_of_bilinear_grids():
     np.testing.assert_allclose(basis.expand(coefficients), full @ whole, atol=1e-12)
     gradient = rng.normal(size=basis.n)
     np.testing.assert_allclose(basis.reduce(gradient), (full.T @ gradient)[reaching], atol=1e-12)
+
+
+def test_two_loop_is_the_textbook_recursion():
+    # Nocedal and Wright, Algorithm 7.4, written plainly, against the fused compiled loop
+    rng = np.random.default_rng(2)
+    n, rows = 500, 6
+    steps_s, steps_y = rng.normal(size=(2, rows, n))
+    steps_y = steps_s * rng.uniform(0.5, 3.0, (rows, n)) + 0.1 * steps_y
+    rho = 1.0 / np.sum(steps_s * steps_y, axis=1)
+    gradient = rng.normal(size=n)
+    for order in ([], [3], [4, 0, 2, 5, 1]):
+        q = gradient.copy()
+        alphas = {}
+        for i in reversed(order):
+            alphas[i] = rho[i] * (steps_s[i] @ q)
+            q = q - alphas[i] * steps_y[i]
+        if order:
+            newest = order[-1]
+            q = q * (steps_s[newest] @ steps_y[newest]) / (steps_y[newest] @ steps_y[newest])
+        for i in order:
+            q = q + (alphas[i] - rho[i] * (steps_y[i] @ q)) * steps_s[i]
+        out = np.empty(n)
+        _two_loop(gradient, steps_s, steps_y, rho, np.array(order, dtype=np.int64), out)
+        np.testing.assert_allclose(out, q, rtol=1e-12, atol=1e-12 * np.abs(q).max())
 
 
 def test_descent_finds_a_minimum():
