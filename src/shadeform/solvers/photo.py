@@ -110,10 +110,11 @@ COARSEST = 4000
 #: instead of 50 iterations there moved the error by -0.1 to +0.2 degrees and saved 35-45 % of
 #: the time (``benchmarks/results/photo-experiments.md``).
 ITERATIONS = (300, 100, 50, 12)
-#: Times per level the reflectance curve is re-estimated and the level solved again; once on the
-#: finest of several levels, where the coarser ones have settled it (the 18 real photos of
-#: ``benchmarks/results/real.md``: same medians, each object within 0.4 degrees; 0.3 Mpx in 6.7
-#: instead of 9.3 s).
+#: Times per level the reflectance curve is re-estimated and the level solved again on the first
+#: two levels; once on every finer one and on the finest of several, where the coarser ones have
+#: settled it (the 18 real photos of ``benchmarks/results/real.md``: same medians, each object
+#: within 0.4 degrees; six objects scaled to four levels within -0.1..+0.3 degrees and 20-30 %
+#: faster).
 ROUNDS = 2
 #: Bins of ``n . L`` over [0, 1] for the reflectance curve, and the fewest pixels a bin needs:
 #: set once before any measurement (a tenth of the range per bin; a median of 20 pixels), not
@@ -299,8 +300,8 @@ def photo_depth(
         else:
             depth = _double(depth, previous, level_mask)
         iterations = ITERATIONS[min(level, len(ITERATIONS) - 1)]
-        # the curve is settled on the coarser levels: the finest one (the costliest) fits it once
-        settled = albedo is not None or 0 < level == len(pyramid) - 1
+        # the curve is settled on the first two levels: the finer ones (the costliest) fit it once
+        settled = albedo is not None or level >= 2 or 0 < level == len(pyramid) - 1
         for _ in range(1 if settled else ROUNDS):
             if albedo is None:
                 shading = grid.normals(depth[level_mask]) @ light
