@@ -695,6 +695,9 @@ def _energy_kernel(
     g_x, g_y, g_nx, g_ny, g_nz = work[6], work[7], work[8], work[9], work[10]
     g_x[:], g_y[:], g_nx[:], g_ny[:], g_nz[:] = 0.0, 0.0, 0.0, 0.0, 0.0
     energy = 0.0
+    # the sum of the Cauchy terms' logarithms is taken as the logarithm of their product, one
+    # logarithm per 1e50 of product instead of one per pixel (a third of the kernel's time)
+    product, logs = 1.0, 0.0
     for p in range(n):  # shading: Cauchy loss on (f(n . L) - I) / a
         a = col_half[p] * (z[col_ahead[p]] - z[col_behind[p]])
         b = row_half[p] * (z[row_ahead[p]] - z[row_behind[p]])
@@ -717,11 +720,18 @@ def _energy_kernel(
             value = levels[segment] + slope * (shading - knots[segment])
         residual = (value - values[p]) * inverse_albedo
         ratio = residual * residual / (scale * scale)
-        energy += 0.5 * scale * scale * np.log1p(ratio)
+        if ratio > 1e200:  # a product could not hold it
+            logs += np.log1p(ratio)
+        else:
+            product *= 1.0 + ratio
+            if product > 1e50:
+                logs += np.log(product)
+                product = 1.0
         if knots[0] < shading < knots[k - 1]:  # f is flat beyond its ends
             d = residual / (1.0 + ratio) * slope * inverse_albedo
             g_x[p] = d * (-lx * c - shading * a * c * c)
             g_y[p] = d * (ly * c - shading * b * c * c)
+    energy += 0.5 * scale * scale * (logs + np.log(product))
     for e in range(first.size):  # smoothness: robust in the change of the normal
         p, q = first[e], second[e]
         sx, sy, sz = nx[q] - nx[p], ny[q] - ny[p], nz[q] - nz[p]
