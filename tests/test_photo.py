@@ -148,6 +148,16 @@ def test_descent_finds_a_minimum():
     assert bowl(x)[0] <= max(10 * reference.fun, 1e-10)
 
 
+def test_tiny_and_featureless_photos_give_a_shape():
+    # under 8 pixels across (no coarse grid in the basis), and one clipped plateau (no shading)
+    mask = np.zeros((6, 40), dtype=bool)
+    mask[1:5, 3:37] = True
+    for image in (np.where(mask, np.linspace(0.2, 0.9, 40)[None], 0.0), np.where(mask, 0.8, 0.0)):
+        result = photo_depth(image, mask, np.array([0.0, 0.0, 1.0]))
+        assert np.isfinite(result.depth[mask]).all() and np.isnan(result.depth[~mask]).all()
+    assert result.albedo == pytest.approx(0.8)
+
+
 def test_no_outline_in_view_is_flat():
     # a mask filling the frame (a relief, a landscape): nothing fixes the silhouette's height
     assert np.all(silhouette_depth(np.ones((24, 32), dtype=bool)) == 0.0)

@@ -305,7 +305,11 @@ def photo_depth(
         for _ in range(1 if settled else ROUNDS):
             if albedo is None:
                 shading = grid.normals(depth[level_mask]) @ light
-                curve = response_curve(shading[grid.data], grid.values[grid.data])
+                curve = (
+                    response_curve(shading[grid.data], grid.values[grid.data])
+                    if grid.data.any()
+                    else _lambert(max(float(grid.values.max()), 1e-12))  # all one clipped plateau
+                )
             start = np.zeros(grid.unknowns)
             start[: grid.n] = depth[level_mask]
             coefficients, steps = _descend(partial(grid.energy, curve=curve), start, iterations=iterations)
@@ -606,7 +610,7 @@ def response_curve(shading: np.ndarray, values: np.ndarray) -> np.ndarray:
     groups = np.split(order, np.searchsorted(which[order], np.arange(1, BINS)))
     kept = [g for g in groups if g.size >= BIN_PIXELS]
     if len(kept) < 2:  # too few pixels facing the light to see a curve: Lambert's line
-        return _lambert(max(float(values.max()), 1e-12))
+        return _lambert(max(float(values.max(initial=0.0)), 1e-12))
     centres = np.array([np.median(lit[g]) for g in kept])
     fitted = isotonic_regression(
         np.array([np.median(bright[g]) for g in kept]),
@@ -784,9 +788,13 @@ class _Basis:
             )
             shapes.append(shape)
             factor *= 2
-        # per coarse grid: rows' and columns' lower cell, upper cell and upper weight, stacked
+        # per coarse grid: rows' and columns' lower cell, upper cell and upper weight, stacked (an
+        # image under 8 pixels across has none)
         self.steps = tuple(
-            np.ascontiguousarray(np.array([s[i] for s in steps]).reshape(len(steps), -1)) for i in range(6)
+            np.array([s[i] for s in steps], dtype=np.float64 if i % 3 == 2 else np.int64).reshape(
+                len(steps), mask.shape[i // 3]
+            )
+            for i in range(6)
         )
         self.widths = np.array([shape[1] for shape in shapes], dtype=np.int64)
         self.offsets = np.cumsum([0] + [h * w for h, w in shapes])
