@@ -525,7 +525,7 @@ def _descend(energy, start, *, iterations):
         curvature = float(steps_s[row] @ steps_y[row])
         if curvature > 1e-12 * float(steps_y[row] @ steps_y[row]):
             rho[row] = 1.0 / curvature
-            order = order[-(MEMORY - 1) :] + [row]
+            order = (order + [row])[-MEMORY:]
         x, value, gradient = trial, trial_value, trial_gradient
     return x, iterations
 
