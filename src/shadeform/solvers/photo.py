@@ -106,15 +106,15 @@ SCALE = 0.1
 #: About this many object pixels at the coarsest pyramid level.
 COARSEST = 4000
 #: L-BFGS iterations at the coarsest level, the next two, and every finer one. Levels past the
-#: third only sharpen detail: on six real objects scaled up to four levels (0.3-0.7 Mpx), 12
-#: instead of 50 iterations there moved the error by -0.1 to +0.2 degrees and saved 35-45 % of
-#: the time (``benchmarks/results/photo-experiments.md``).
+#: third only sharpen detail: on four benchmark objects scaled up until their pyramid has four
+#: levels (0.3-0.5 Mpx), 12 instead of 50 iterations there moved the error by -0.1 to +0.2
+#: degrees and saved 34-45 % of the time (``benchmarks/results/photo-experiments.md``).
 ITERATIONS = (300, 100, 50, 12)
 #: Times per level the reflectance curve is re-estimated and the level solved again on the first
 #: two levels; once on every finer one and on the finest of several, where the coarser ones have
 #: settled it (the 18 real photos of ``benchmarks/results/real.md``: same medians, each object
-#: within 0.4 degrees; six objects scaled to four levels within -0.1..+0.3 degrees and 20-30 %
-#: faster).
+#: within 0.4 degrees; six benchmark objects scaled up to four levels within -0.1..+0.3 degrees
+#: and 19-29 % faster).
 ROUNDS = 2
 #: Bins of ``n . L`` over [0, 1] for the reflectance curve, and the fewest pixels a bin needs:
 #: set once before any measurement (a tenth of the range per bin; a median of 20 pixels), not
@@ -465,10 +465,10 @@ class _Level:
         return energy, self.basis.reduce(g_z)
 
 
-#: Curvature pairs L-BFGS keeps.
+#: Curvature pairs L-BFGS keeps (the textbook value; Nocedal & Wright suggest 3 to 20).
 MEMORY = 10
 #: Armijo's sufficient decrease: a step must lower the energy by this share of what the slope
-#: promises.
+#: promises (the textbook value).
 ARMIJO = 1e-4
 
 
@@ -479,8 +479,8 @@ def _descend(energy, start, *, iterations):
     Armijo's condition holds.
 
     Plain L-BFGS, because the problem has no bounds: SciPy's L-BFGS-B spends 26 ms per
-    iteration on its bound machinery at 0.4 M unknowns, against about 8 ms here for the whole
-    step outside the energy. A step whose curvature ``s . y`` is not positive (the energy is not
+    iteration on its bound machinery at 0.4 M unknowns, against 9-11 ms here for the whole
+    step outside the energy (a diagonal quadratic of 0.4 M unknowns, 50 steps, one thread). A step whose curvature ``s . y`` is not positive (the energy is not
     convex) is not remembered; a direction that does not descend restarts from the gradient.
 
     Returns
@@ -779,44 +779,45 @@ class _Basis:
     def __init__(self, mask):
         self.rows, self.cols = np.nonzero(mask)
         self.n = self.rows.size
-        steps, shapes = [], []
+        # all coarse grids in one flat array: per grid, each fine row's two grid rows (as flat
+        # starts) and the upper one's weight, each fine column's two grid columns and the upper
+        # one's weight, and the grid's width (an image under 8 pixels across has no grid)
+        row_steps, col_steps, widths, cells = [], [], [], 0
         factor = 2
         while min(mask.shape) // factor >= 4:
-            shape = tuple(-(-side // factor) for side in mask.shape)
-            steps.append(
-                _axis_steps(mask.shape[0], shape[0], factor) + _axis_steps(mask.shape[1], shape[1], factor)
-            )
-            shapes.append(shape)
+            height, width = (-(-side // factor) for side in mask.shape)
+            lower, upper, weight = _axis_steps(mask.shape[0], height, factor)
+            row_steps.append((cells + lower * width, cells + upper * width, weight))
+            col_steps.append(_axis_steps(mask.shape[1], width, factor))
+            widths.append(width)
+            cells += height * width
             factor *= 2
-        # per coarse grid: rows' and columns' lower cell, upper cell and upper weight, stacked (an
-        # image under 8 pixels across has none)
         self.steps = tuple(
-            np.array([s[i] for s in steps], dtype=np.float64 if i % 3 == 2 else np.int64).reshape(
-                len(steps), mask.shape[i // 3]
-            )
-            for i in range(6)
+            np.array([step[i] for step in steps], dtype=dtype).reshape(len(steps), length)
+            for steps, length in ((row_steps, mask.shape[0]), (col_steps, mask.shape[1]))
+            for i, dtype in enumerate((np.int64, np.int64, np.float64))
         )
-        self.widths = np.array([shape[1] for shape in shapes], dtype=np.int64)
-        self.offsets = np.cumsum([0] + [h * w for h, w in shapes])
-        reached = np.zeros(self.offsets[-1])
-        _spread(np.ones(self.n), self.rows, self.cols, self.offsets, self.widths, *self.steps, reached)
+        self.widths = np.array(widths, dtype=np.int64)
+        self.cells = cells
+        reached = np.zeros(cells)
+        _spread(np.ones(self.n), self.rows, self.cols, self.widths, *self.steps, reached)
         self.kept = np.flatnonzero(reached > 0)
         self.size = self.n + self.kept.size
 
     def expand(self, coefficients):
         """(n,) depth on the object's pixels of (size,) coefficients."""
-        grids = np.zeros(self.offsets[-1])
+        grids = np.zeros(self.cells)
         grids[self.kept] = coefficients[self.n :]
         z = np.array(coefficients[: self.n], dtype=np.float64)
-        _gather(grids, self.rows, self.cols, self.offsets, self.widths, *self.steps, z)
+        _gather(grids, self.rows, self.cols, self.widths, *self.steps, z)
         return z
 
     def reduce(self, gradient):
         """The transpose of :meth:`expand`: (size,) from (n,) (a gradient with respect to the
         depth becomes one with respect to the coefficients)."""
-        grids = np.zeros(self.offsets[-1])
+        grids = np.zeros(self.cells)
         gradient = np.ascontiguousarray(gradient, dtype=np.float64)
-        _spread(gradient, self.rows, self.cols, self.offsets, self.widths, *self.steps, grids)
+        _spread(gradient, self.rows, self.cols, self.widths, *self.steps, grids)
         return np.concatenate([gradient, grids[self.kept]])
 
 
@@ -830,24 +831,17 @@ def _axis_steps(fine, coarse, factor):
 
 
 @numba.njit(cache=True)
-def _gather(
-    grids, rows, cols, offsets, widths, row_lower, row_upper, row_weight, col_lower, col_upper, col_weight, z
-):
-    """Add to ``z`` (n,) every coarse grid's bilinear interpolation at the object's pixels."""
-    height = row_lower.shape[1]
+def _gather(grids, rows, cols, widths, row_top, row_bottom, row_weight, col_left, col_right, col_weight, z):
+    """Add to ``z`` (n,) every coarse grid's bilinear interpolation at the object's pixels
+    (:class:`_Basis` holds the steps)."""
     for k in range(widths.size):
-        w = widths[k]
-        # the grid interpolated along the rows first: one row per fine row
-        lines = np.empty((height, w))
-        for r in range(height):
-            top, bottom, t = (
-                offsets[k] + row_lower[k, r] * w,
-                offsets[k] + row_upper[k, r] * w,
-                row_weight[k, r],
-            )
-            for j in range(w):
+        # the grid interpolated along the rows first: one line per fine row
+        lines = np.empty((row_top.shape[1], widths[k]))
+        for r in range(lines.shape[0]):
+            top, bottom, t = row_top[k, r], row_bottom[k, r], row_weight[k, r]
+            for j in range(lines.shape[1]):
                 lines[r, j] = grids[top + j] + t * (grids[bottom + j] - grids[top + j])
-        left, right, weight = col_lower[k], col_upper[k], col_weight[k]
+        left, right, weight = col_left[k], col_right[k], col_weight[k]
         for p in range(z.size):
             r, c = rows[p], cols[p]
             z[p] += lines[r, left[c]] + weight[c] * (lines[r, right[c]] - lines[r, left[c]])
@@ -855,36 +849,19 @@ def _gather(
 
 @numba.njit(cache=True)
 def _spread(
-    values,
-    rows,
-    cols,
-    offsets,
-    widths,
-    row_lower,
-    row_upper,
-    row_weight,
-    col_lower,
-    col_upper,
-    col_weight,
-    grids,
+    values, rows, cols, widths, row_top, row_bottom, row_weight, col_left, col_right, col_weight, grids
 ):
     """The transpose of :func:`_gather`: add each pixel's value to the coarse cells it reads."""
-    height = row_lower.shape[1]
     for k in range(widths.size):
-        w = widths[k]
-        lines = np.zeros((height, w))
-        left, right, weight = col_lower[k], col_upper[k], col_weight[k]
+        lines = np.zeros((row_top.shape[1], widths[k]))
+        left, right, weight = col_left[k], col_right[k], col_weight[k]
         for p in range(values.size):
             r, c = rows[p], cols[p]
             lines[r, left[c]] += (1.0 - weight[c]) * values[p]
             lines[r, right[c]] += weight[c] * values[p]
-        for r in range(height):
-            top, bottom, t = (
-                offsets[k] + row_lower[k, r] * w,
-                offsets[k] + row_upper[k, r] * w,
-                row_weight[k, r],
-            )
-            for j in range(w):
+        for r in range(lines.shape[0]):
+            top, bottom, t = row_top[k, r], row_bottom[k, r], row_weight[k, r]
+            for j in range(lines.shape[1]):
                 grids[top + j] += (1.0 - t) * lines[r, j]
                 grids[bottom + j] += t * lines[r, j]
 
