@@ -480,8 +480,9 @@ def _descend(energy, start, *, iterations):
 
     Plain L-BFGS, because the problem has no bounds: SciPy's L-BFGS-B spends 26 ms per
     iteration on its bound machinery at 0.4 M unknowns, against 9-11 ms here for the whole
-    step outside the energy (a diagonal quadratic of 0.4 M unknowns, 50 steps, one thread). A step whose curvature ``s . y`` is not positive (the energy is not
-    convex) is not remembered; a direction that does not descend restarts from the gradient.
+    step outside the energy (a diagonal quadratic of 0.4 M unknowns, 50 steps, one thread). A
+    step whose curvature ``s . y`` is not positive (the energy is not convex) is not
+    remembered; a direction that does not descend restarts from the gradient.
 
     Returns
     -------
