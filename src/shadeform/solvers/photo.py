@@ -41,7 +41,10 @@ Concave regions the user marks (the app's "Mark concave", ``concave=``) dent the
 it, along the region's axis), and where such a region meets the outline across its concave axis
 the outline is a rim, not an occluding contour, so the contour term leaves it out. The descent
 then refines the dent as it would the dome (the synthetic bowl with 1 % noise: depth error 65 %
-without its region, 9 % with it at +z; 53 % and 4.5 % at light (5, 5, 7)).
+without its region, 7-9 % with it at +z from 48 to 192 px). Under an oblique light the dent is
+fragile: at light (5, 5, 7) the bowl keeps it at 128 px (53 % -> 4.5 %) but not at 48, 64, 96
+or 192 px (22-27 %), where the descent from the dented start falls into a shallower, tilted
+dish of higher energy than the truth (``benchmarks/results/photo-experiments.md``).
 
 Limits. One light, orthographic camera, one reflectance curve for the whole object (painted
 patches of other albedo are left to the robust loss); the
