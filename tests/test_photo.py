@@ -198,7 +198,8 @@ def test_concave_regions_turn_the_bowl(light, size):
         )
         for given in (None, regions)
     ]
-    # measured: +z 63 % -> 6.7 %; (5, 5, 7) 53 % -> 4.5 %
+    # measured: +z 63 % -> 6.7 %; (5, 5, 7) 53 % -> 4.5 %. At (5, 5, 7) the dent is kept at 128 px
+    # only: 48, 64, 96 and 192 px end at 22-27 % (a known limit, in the module's description)
     assert errors[0] > 40.0 and errors[1] < 10.0
 
 
