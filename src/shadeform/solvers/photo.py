@@ -43,8 +43,10 @@ the outline is a rim, not an occluding contour, so the contour term leaves it ou
 then refines the dent as it would the dome (the synthetic bowl with 1 % noise: depth error 65 %
 without its region, 7-9 % with it at +z from 48 to 192 px). Under an oblique light the dent is
 fragile: at light (5, 5, 7) the bowl keeps it at 128 px (53 % -> 4.5 %) but not at 48, 64, 96
-or 192 px (22-27 %), where the descent from the dented start falls into a shallower, tilted
-dish of higher energy than the truth (``benchmarks/results/photo-experiments.md``).
+or 192 px (22-27 %): there a shallower, tilted dish has a lower energy than the truth (the
+smoothness outweighs the shading of a surface with no occluding contour at those pixel counts),
+and a descent started from the truth itself ends in it
+(``benchmarks/results/photo-experiments.md``).
 
 Limits. One light, orthographic camera, one reflectance curve for the whole object (painted
 patches of other albedo are left to the robust loss); the
