@@ -38,7 +38,8 @@ def test_compiled_energy_is_the_reference(light):
     # a rough state (every term active: shadows, both ends of the curve, creases, the outline)
     scene = synth.scene("vase", size=48, light=light, noise=0.02)
     light = np.asarray(scene.light)
-    level = _Level(np.where(scene.mask, scene.image, 0.0), scene.mask, light)
+    # at a spacing other than 1, so that the weights' scaling is checked too
+    level = _Level(np.where(scene.mask, scene.image, 0.0), scene.mask, light, spacing=1.6)
     rng = np.random.default_rng(3)
     state = rng.normal(0.0, 0.5, level.unknowns)
     state[: level.n] += silhouette_depth(scene.mask)[scene.mask]
@@ -186,7 +187,10 @@ def test_concave_start_dents_a_dome_and_keeps_a_dent():
     assert np.all(np.diff(column, 2)[1:-1] >= -1e-9)  # concave up along the run
 
 
-@pytest.mark.parametrize("light, size", [((0.0, 0.0, 1.0), 48), ((5.0, 5.0, 7.0), 128)])
+@pytest.mark.parametrize(
+    "light, size",
+    [((0.0, 0.0, 1.0), 48), ((5.0, 5.0, 7.0), 64), ((5.0, 5.0, 7.0), 96), ((5.0, 5.0, 7.0), 128)],
+)
 def test_concave_regions_turn_the_bowl(light, size):
     scene = synth.scene("bowl", size=size, light=light, noise=0.01)
     regions = synth.concave_regions("bowl", size=size)
@@ -198,8 +202,8 @@ def test_concave_regions_turn_the_bowl(light, size):
         )
         for given in (None, regions)
     ]
-    # measured: +z 63 % -> 6.7 %; (5, 5, 7) 53 % -> 4.5 %. At (5, 5, 7) the dent is kept at 128 px
-    # only: 48, 64, 96 and 192 px end at 22-27 % (a known limit, in the module's description)
+    # measured: +z 63 % -> 6.7 %; (5, 5, 7) 52-53 % -> 4.1 % (64 px), 4.6 % (96), 4.6 % (128). With
+    # another noise draw (seed 1) 96 px ends at 26 %: a known limit, in the module's description
     assert errors[0] > 40.0 and errors[1] < 10.0
 
 

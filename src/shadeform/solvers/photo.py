@@ -5,8 +5,8 @@ albedo, noise), so this solver does not march or propagate from single pixels. I
 ``z`` (H, W) itself, integrable by construction, as the minimum of one energy over the object:
 
     E(z) = sum_p rho((f(n_p . L) - I_p) / a)                              shading, robust
-         + MU  * sum_(p,q) (sqrt(EPS^2 + |n_p - n_q|^2) - EPS)            smooth, creases allowed
-         + NU  * sum_(b on the outline) (n_b . m_b - 1)^2                 occluding contour
+         + mu  * sum_(p,q) (sqrt(eps^2 + |n_p - n_q|^2) - eps)            smooth, creases allowed
+         + nu  * sum_(b on the outline) (n_b . m_b - 1)^2                 occluding contour
 
 with ``n = (-dz/dx, -dz/dy, 1) / |.|`` (``docs/conventions.md``), ``rho`` Cauchy's loss of scale
 :data:`SCALE` (a highlight, a shadow cast on a lit surface or a patch of other paint costs a
@@ -36,17 +36,26 @@ levels down to about :data:`COARSEST` object pixels) by L-BFGS over a hierarchic
 depth is the sum of bilinearly upsampled grids of every coarser scale, Szeliski 1990), which
 is what lets a descent move a whole region at once rather than a pixel at a time.
 
+The shading is summed per pixel, the smoothness per pair and the contour per outline pixel, so
+their balance moves with the number of pixels: with the same weights a small object is held
+smoother than a large one. The coarsest level, which sets the global shape, is therefore
+weighed as one continuous energy sampled at ``2 COARSEST`` object pixels (the middle of that
+level's range): with ``h = sqrt(2 COARSEST / n)`` for its ``n`` object pixels, ``mu = MU / h``,
+``eps = EPS * h``, ``nu = NU / h``, and every finer level keeps that ``h``, so the shading's share
+grows 4x per level from the outline's shape to the shading's detail. (Rescaling the finer levels
+too, or all levels to another reference, costs the real photos 0.7-2.7 degrees on MIT-Berkeley's
+median: ``benchmarks/results/photo-experiments.md``.)
+
 Concave regions the user marks (the app's "Mark concave", ``concave=``) dent the start
 (:func:`concave_start`: what rises above the surface spanning a region's rim is mirrored below
 it, along the region's axis), and where such a region meets the outline across its concave axis
 the outline is a rim, not an occluding contour, so the contour term leaves it out. The descent
-then refines the dent as it would the dome (the synthetic bowl with 1 % noise: depth error 65 %
-without its region, 7-9 % with it at +z from 48 to 192 px). Under an oblique light the dent is
-fragile: at light (5, 5, 7) the bowl keeps it at 128 px (53 % -> 4.5 %) but not at 48, 64, 96
-or 192 px (22-27 %): there a shallower, tilted dish has a lower energy than the truth (the
-smoothness outweighs the shading of a surface with no occluding contour at those pixel counts),
-and a descent started from the truth itself ends in it
-(``benchmarks/results/photo-experiments.md``).
+then refines the dent as it would the dome (the synthetic bowl with 1 % noise: depth error 63 %
+without its region, 6-9 % with it at +z from 48 to 192 px; at light (5, 5, 7) 52-56 % without,
+4.0-4.6 % with it from 48 to 192 px). Under an oblique light the dent is still fragile: with
+another noise draw the 96 px bowl ends at 26 %, a shallower, tilted dish that has a lower energy
+than the truth (the rim is not an occluding contour, so only the shading holds the walls against
+the smoothness; ``benchmarks/results/photo-experiments.md``).
 
 Limits. One light, orthographic camera, one reflectance curve for the whole object (painted
 patches of other albedo are left to the robust loss); the
@@ -99,12 +108,13 @@ __all__ = [
     "solve",
 ]
 
-#: Smoothness weight per pair of neighbouring pixels.
+#: Smoothness weight per pair of neighbouring pixels, for an object of ``2 COARSEST`` pixels
+#: (other sizes: the module's description).
 MU = 1e-2
 #: Change of the unit normal between neighbours (about 3 degrees) below which smoothness is
-#: quadratic; above it grows linearly, so a crease costs its length, not its square.
+#: quadratic; above it grows linearly, so a crease costs its length, not its square (same size).
 EPS = 0.05
-#: Contour weight per outline pixel.
+#: Contour weight per outline pixel (same size).
 NU = 1e-2
 #: Scale of Cauchy's loss on the shading residual, in units of ``N . L``.
 SCALE = 0.1
@@ -295,11 +305,15 @@ def photo_depth(
         marked.append(
             tuple((_half(m.astype(np.float64), finer)[0] >= 0.5) & pyramid[-1][1] for m in marked[-1])
         )
+    # the coarsest level, which sets the global shape, weighs shading against smoothness as an
+    # object of 2 COARSEST pixels would (the middle of its range): where in that range it falls,
+    # or how small the photo is, does not tip the balance; every finer level keeps its spacing
+    spacing = np.sqrt(2 * COARSEST / np.count_nonzero(pyramid[-1][1]))
     depth = previous = None
     curve = None if albedo is None else _lambert(float(albedo))
     total = 0
     for level, ((values, level_mask), (level_x, level_y)) in enumerate(zip(pyramid[::-1], marked[::-1])):
-        grid = _Level(values, level_mask, light, concave_x=level_x, concave_y=level_y)
+        grid = _Level(values, level_mask, light, spacing=spacing, concave_x=level_x, concave_y=level_y)
         if depth is None:
             depth = concave_start(silhouette_depth(level_mask), level_x, level_y)
         else:
@@ -353,10 +367,11 @@ def solve(problem: Problem) -> Solution:
 class _Level:
     """One pyramid level: the object's pixels, its difference operators and hierarchical basis."""
 
-    def __init__(self, image, mask, light, *, concave_x=None, concave_y=None):
+    def __init__(self, image, mask, light, *, spacing=1.0, concave_x=None, concave_y=None):
         from shadeform.light.contour import find_boundary
 
         self.mask = mask
+        self.spacing = spacing
         index, rows, cols = _index(mask)
         self.n = rows.size
         self.values = image[mask]
@@ -389,6 +404,13 @@ class _Level:
         self.unknowns = self.basis.size
         self.work = np.empty((11, self.n))
 
+    def weights(self):
+        """``(MU, EPS, NU, SCALE)`` at this level's pixel spacing ``h`` (in units of the reference
+        resolution): ``MU / h``, ``EPS * h``, ``NU / h``. Read per call: tests and experiments may
+        change the module's constants."""
+        h = self.spacing
+        return np.array([MU / h, EPS * h, NU / h, SCALE])
+
     def depth(self, coefficients):
         """Depth on the object's pixels from the basis coefficients."""
         return self.basis.expand(coefficients)
@@ -420,7 +442,7 @@ class _Level:
             self.second,
             self.outline,
             self.outward,
-            np.array([MU, EPS, NU, SCALE]),  # read per call: tests and experiments may change them
+            self.weights(),
             self.work,
             g_z,
         )
@@ -452,16 +474,17 @@ class _Level:
         g_x = d_shading * (-lx * inverse - shading * gx * inverse * inverse)
         g_y = d_shading * (ly * inverse - shading * gy * inverse * inverse)
         # smoothness: robust in the change of the normal between neighbours
+        mu, eps, nu, _ = self.weights()
         steps = [pairs @ component for component in (nx, ny, nz)]
-        root = np.sqrt(EPS * EPS + steps[0] ** 2 + steps[1] ** 2 + steps[2] ** 2)
-        energy += MU * np.sum(root - EPS)
-        weight = MU / root
+        root = np.sqrt(eps * eps + steps[0] ** 2 + steps[1] ** 2 + steps[2] ** 2)
+        energy += mu * np.sum(root - eps)
+        weight = mu / root
         g_n = [pairs.T @ (weight * step) for step in steps]
         # contour: the normal on the outline is its outward normal
         miss = nx[self.outline] * self.outward[:, 0] + ny[self.outline] * self.outward[:, 1] - 1.0
-        energy += NU * np.sum(miss * miss)
-        g_n[0][self.outline] += 2.0 * NU * miss * self.outward[:, 0]  # outline pixels are distinct
-        g_n[1][self.outline] += 2.0 * NU * miss * self.outward[:, 1]
+        energy += nu * np.sum(miss * miss)
+        g_n[0][self.outline] += 2.0 * nu * miss * self.outward[:, 0]  # outline pixels are distinct
+        g_n[1][self.outline] += 2.0 * nu * miss * self.outward[:, 1]
         # back through n(gx, gy) to the slopes, the depth and the basis
         cube = inverse**3
         g_x += g_n[0] * (gx * gx * cube - inverse) - g_n[1] * gx * gy * cube - g_n[2] * gx * cube
@@ -693,7 +716,7 @@ def _energy_kernel(
     first, second, outline, outward, weights, work, g_z,
 ):  # fmt: skip
     """The energy of the module's description at depth ``z`` (n,) and its gradient, written into
-    ``g_z`` (n,); ``weights`` is ``(MU, EPS, NU, SCALE)``, ``work`` (11, n) scratch space (kept
+    ``g_z`` (n,); ``weights`` is ``(MU, EPS, NU, SCALE)`` at the level's spacing, ``work`` (11, n) scratch space (kept
     by the caller: fresh arrays on every call cost a fifth of the time). Same terms, in the same
     order, as :meth:`_Level.energy_reference`."""
     mu, eps, nu, scale = weights[0], weights[1], weights[2], weights[3]
