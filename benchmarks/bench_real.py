@@ -13,7 +13,11 @@ then the medians per set and, per column, how many objects end worse than the co
 The solvers that need the light at the camera are run only where it is (none of these photos).
 Writes ``benchmarks/results/real.md``.
 
-Run: ``python benchmarks/bench_real.py [--objects cat,apple]``.
+``--slant 30`` measures each object's photo lit nearest 30 degrees off the camera instead (a
+second photo of every object, for a check on photos the solvers' constants were not set on),
+into ``benchmarks/results/real-slant30.md``.
+
+Run: ``python benchmarks/bench_real.py [--objects cat,apple] [--slant 30]``.
 """
 
 from __future__ import annotations
@@ -123,7 +127,16 @@ def main(argv=None):
         "the rows file (default: measure every method)",
     )
     parser.add_argument("--note", default="", help="a paragraph under the header: how this run was made")
+    parser.add_argument(
+        "--slant",
+        type=float,
+        default=0.0,
+        help="each object's photo lit nearest this many degrees off the camera (default 0: the most "
+        "frontal); other than 0 the default --out is results/real-slant<N>.md",
+    )
     args = parser.parse_args(argv)
+    if args.slant and args.out == RESULTS:
+        args.out = RESULTS.with_name(f"real-slant{args.slant:g}.md")
     if not real_data.available():
         print(f"no real data at {real_data.DATA}: nothing to measure")
         return 1
@@ -137,7 +150,7 @@ def main(argv=None):
         for line in rows_file.read_text().splitlines():
             item = json.loads(line)
             done[(item.pop("object"), item.pop("set"))] = item
-    cases = [real_data.diligent(n) for n in real_data.DILIGENT] + [real_data.mit(n) for n in real_data.MIT]
+    cases = real_data.cases(slant=args.slant)
     for case in cases:
         if wanted and case.name not in wanted:
             continue
@@ -164,10 +177,16 @@ def main(argv=None):
     text = "\n\n".join(
         [
             "# Real photographs: single-photo shape from shading against measured normals",
-            f"`python benchmarks/bench_real.py` on {platform.node() or 'this machine'} "
+            f"`python benchmarks/bench_real.py{f' --slant {args.slant:g}' if args.slant else ''}` on "
+            f"{platform.node() or 'this machine'} "
             f"({os.cpu_count()} cores, Python {platform.python_version()}), {time.strftime('%Y-%m-%d')}. "
             "Mean angular error of the normals (degrees) over the pixels with ground truth; one photo "
-            "per object, the one lit nearest the camera (DiLiGenT: 8-bit linear crop divided by its "
+            + (
+                "per object, the one lit nearest the camera "
+                if not args.slant
+                else f"per object, the one lit nearest {args.slant:g} degrees off the camera "
+            )
+            + "(DiLiGenT: 8-bit linear crop divided by its "
             "light's strength, albedo, highlights and shadows kept; MIT-Berkeley: luma over the "
             "reflectance's luma). Lights: DiLiGenT calibrated, MIT fitted to the ground truth.",
             *([args.note] if args.note else []),

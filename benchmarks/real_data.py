@@ -67,10 +67,12 @@ def available() -> bool:
     return DATA.is_dir()
 
 
-def _frontal(folder: Path) -> tuple[str, np.ndarray, int]:
+def _photo(folder: Path, slant: float) -> tuple[str, np.ndarray, int]:
+    """The photo whose light is nearest ``slant`` degrees off the camera (0: the most frontal)."""
     lights = np.loadtxt(folder / "light_directions.txt", comments="#", ndmin=2)
     names = (folder / "filenames.txt").read_text().split()
-    index = int(np.argmax(lights[:, 2] / np.linalg.norm(lights, axis=1)))
+    slants = np.degrees(np.arccos(np.clip(lights[:, 2] / np.linalg.norm(lights, axis=1), -1.0, 1.0)))
+    index = int(np.argmin(np.abs(slants - slant)))
     return names[index], lights[index] / np.linalg.norm(lights[index]), index
 
 
@@ -79,10 +81,11 @@ def _valid(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return mask & np.isfinite(normals).all(axis=-1) & (length > 0.5)
 
 
-def diligent(name: str) -> Case:
-    """The DiLiGenT object ``name`` (its most frontal photo)."""
+def diligent(name: str, *, slant: float = 0.0) -> Case:
+    """The DiLiGenT object ``name``: its photo lit nearest ``slant`` degrees off the camera (0:
+    the most frontal)."""
     folder = DATA / "diligent" / name
-    file, light, index = _frontal(folder)
+    file, light, index = _photo(folder, slant)
     strength = np.loadtxt(folder / "light_intensities.txt", ndmin=2)[index]
     rgb = load_pixels(folder / file).astype(np.float64) / strength
     image = rgb @ LUMA
@@ -93,11 +96,11 @@ def diligent(name: str) -> Case:
     return Case(name, "diligent", image, mask, light, normals, valid)
 
 
-def mit(name: str, *, raw: bool = False) -> Case:
-    """The MIT-Berkeley object ``name`` (its most frontal photo), divided by its reflectance
-    unless ``raw``."""
+def mit(name: str, *, raw: bool = False, slant: float = 0.0) -> Case:
+    """The MIT-Berkeley object ``name`` (its photo lit nearest ``slant`` degrees off the camera),
+    divided by its reflectance unless ``raw``."""
     folder = DATA / "mit-berkeley" / name
-    file, light, _ = _frontal(folder)
+    file, light, _ = _photo(folder, slant)
     image = load_pixels(folder / file).astype(np.float64) @ LUMA
     mask = load_mask(folder / "mask.png", shape=image.shape)
     if not raw:
@@ -117,9 +120,12 @@ def normals_of_height(z: np.ndarray) -> np.ndarray:
     return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
 
 
-def cases(*, raw_mit: bool = False) -> list[Case]:
-    """Every case: the six DiLiGenT objects, then the twelve MIT-Berkeley ones."""
-    return [diligent(name) for name in DILIGENT] + [mit(name, raw=raw_mit) for name in MIT]
+def cases(*, raw_mit: bool = False, slant: float = 0.0) -> list[Case]:
+    """Every case: the six DiLiGenT objects, then the twelve MIT-Berkeley ones, each with its
+    photo lit nearest ``slant`` degrees off the camera."""
+    return [diligent(name, slant=slant) for name in DILIGENT] + [
+        mit(name, raw=raw_mit, slant=slant) for name in MIT
+    ]
 
 
 def angular_error(normals: np.ndarray, case: Case) -> float:
