@@ -66,8 +66,9 @@ Accuracy on real photographs with ground truth: ``benchmarks/results/real.md``.
 
 The weights :data:`MU`, :data:`EPS`, :data:`NU` and :data:`SCALE` were set by hand on the
 synthetic sphere and on one real object, MIT-Berkeley ``box``, which is also one of the 18
-objects the benchmark reports (its figure there is not independent of that choice); they were
-not swept over the benchmark.
+objects the benchmark reports (its figure there is not independent of that choice), before the
+coarsest level was weighed at a fixed size (which leaves them as they were at ``2 COARSEST``
+pixels); they were not swept over the benchmark.
 
 References
 ----------
