@@ -174,6 +174,7 @@ def main(argv=None):
     light_columns = ["light error", "confidence", "auto (known) picks", "auto (estimate) picks"]
     time_columns = [c + " s" for c in angle_columns if any((c + " s") in r for r in rows.values())]
     sets = [s for s in ("diligent", "mit") if any(k[1] == s for k in rows)]
+    where = f"{args.slant:g} degrees off the camera" if args.slant else "the camera"
     text = "\n\n".join(
         [
             "# Real photographs: single-photo shape from shading against measured normals",
@@ -181,12 +182,7 @@ def main(argv=None):
             f"{platform.node() or 'this machine'} "
             f"({os.cpu_count()} cores, Python {platform.python_version()}), {time.strftime('%Y-%m-%d')}. "
             "Mean angular error of the normals (degrees) over the pixels with ground truth; one photo "
-            + (
-                "per object, the one lit nearest the camera "
-                if not args.slant
-                else f"per object, the one lit nearest {args.slant:g} degrees off the camera "
-            )
-            + "(DiLiGenT: 8-bit linear crop divided by its "
+            f"per object, the one lit nearest {where} (DiLiGenT: 8-bit linear crop divided by its "
             "light's strength, albedo, highlights and shadows kept; MIT-Berkeley: luma over the "
             "reflectance's luma). Lights: DiLiGenT calibrated, MIT fitted to the ground truth.",
             *([args.note] if args.note else []),

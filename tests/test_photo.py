@@ -52,6 +52,10 @@ def test_compiled_energy_is_the_reference(light):
         np.testing.assert_allclose(
             gradient, expected_gradient, rtol=1e-9, atol=1e-12 * np.abs(expected_gradient).max()
         )
+    # the spacing reaches the energy: the same state weighs differently at the reference spacing
+    level.spacing = 1.0
+    assert level.energy(state, curve)[0] != pytest.approx(energy, rel=1e-6)
+    level.spacing = 1.6
     # and the reference is the energy's gradient (central differences on a few coefficients)
     step = 1e-6
     for i in rng.choice(level.unknowns, 5, replace=False):

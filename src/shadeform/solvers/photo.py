@@ -307,8 +307,9 @@ def photo_depth(
             tuple((_half(m.astype(np.float64), finer)[0] >= 0.5) & pyramid[-1][1] for m in marked[-1])
         )
     # the coarsest level, which sets the global shape, weighs shading against smoothness as an
-    # object of 2 COARSEST pixels would (the middle of its range): where in that range it falls,
-    # or how small the photo is, does not tip the balance; every finer level keeps its spacing
+    # object of 2 COARSEST pixels would (the middle of its range, taken as such, not swept): where
+    # in that range it falls, or how small the photo is, does not tip the balance; every finer
+    # level keeps its spacing
     spacing = np.sqrt(2 * COARSEST / np.count_nonzero(pyramid[-1][1]))
     depth = previous = None
     curve = None if albedo is None else _lambert(float(albedo))
@@ -717,8 +718,8 @@ def _energy_kernel(
     first, second, outline, outward, weights, work, g_z,
 ):  # fmt: skip
     """The energy of the module's description at depth ``z`` (n,) and its gradient, written into
-    ``g_z`` (n,); ``weights`` is ``(MU, EPS, NU, SCALE)`` at the level's spacing, ``work`` (11, n) scratch space (kept
-    by the caller: fresh arrays on every call cost a fifth of the time). Same terms, in the same
+    ``g_z`` (n,); ``weights`` is :meth:`_Level.weights`, ``work`` (11, n) scratch space (kept by
+    the caller: fresh arrays on every call cost a fifth of the time). Same terms, in the same
     order, as :meth:`_Level.energy_reference`."""
     mu, eps, nu, scale = weights[0], weights[1], weights[2], weights[3]
     n = z.size
