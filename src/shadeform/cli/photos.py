@@ -208,8 +208,12 @@ def stereo(
         typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
     ] = None,
     method: Annotated[
-        str, typer.Option(help="robust (leaves shadows and highlights out) or least_squares.")
-    ] = "robust",
+        str,
+        typer.Option(
+            help="bivariate (a reflectance model per pixel: gloss, falloff, shadows weighted out), "
+            "robust (Lambertian, shadows and highlights left out) or least_squares (Woodham)."
+        ),
+    ] = "bivariate",
     integrator: Annotated[
         str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")
     ] = "poisson",
@@ -282,6 +286,12 @@ def stereo(
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
     )
+    if rec.info["photos_rescaled"]:
+        listed = ", ".join(f"{i + 1} (x{f:.2f})" for i, f in rec.info["photos_rescaled"])
+        out.print(f"  photos whose light was not as bright as its strength said, rescaled: {listed}")
+    if rec.info["photos_dropped"]:
+        listed = ", ".join(str(i + 1) for i in rec.info["photos_dropped"])
+        out.print(f"  photos left out because they contradict the others: {listed}")
     out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
     out.print(
         f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "

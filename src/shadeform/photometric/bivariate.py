@@ -1,0 +1,394 @@
+"""Photometric stereo with a low-frequency reflectance model: shadows, gloss and non-Lambertian
+falloff, fitted per pixel.
+
+Real paints and glazes are not Lambertian: their brightness falls off with ``n . l`` more steeply
+or more gently than the cosine, and gloss adds a lobe round the mirror direction, broad on a
+metallic paint (DiLiGenT's ``cow``) and sharp on a glaze (``ball``). A Lambertian fit reads both as
+shape, however carefully it leaves highlights out. Here each pixel's readings are explained by
+
+    I_j = sum_k a_k c_j^k  +  c_j sum_m b_m h_j^(4^m)      (c_j = max(0, n . l_j), h_j = n . h_j)
+
+with ``k = 1 .. POWERS`` (Lambert's cosine and the lowest-order correction of its falloff) and
+``m = 1 .. LOBES`` (lobes round the half vector ``h_j = (l_j + v) / |l_j + v|``, ``v = +z``, each four
+times narrower than the last: half-widths of about 34, 17 and 8 degrees). For a given normal the
+coefficients are a small linear least-squares fit; the normal is the one whose fit leaves the
+least weighted residual, found by a pattern search on the sphere from the robust Lambertian
+normal. Readings the model cannot explain (cast shadows on a lit surface, interreflections, a
+highlight sharper than the narrowest lobe) are weighted down by Tukey's biweight of the residual
+over its median absolute deviation (the textbook 4.685 scale), re-weighted :data:`ROUNDS` times.
+
+This is a classical bivariate reflectance fit in the family the DiLiGenT benchmark ranks best
+among non-learned methods (Shi et al. 2014, Ikehata and Aizawa 2014); the basis here is its own.
+Measured on the seven real DiLiGenT objects: ``benchmarks/results/stereo.md``. The basis sizes
+were compared on ``ball``, ``cow`` and ``cat`` (powers 1-3 with three lobes, lobes 2-4 with one
+power): one power loses the ball's falloff (2.0 against 1.74 degrees on the 16-bit ball), three
+let the normal trade with the falloff (cow 13.5 against 8.7).
+
+References
+----------
+.. [1] B. Shi, P. Tan, Y. Matsushita, K. Ikeuchi, "Bi-polynomial modeling of low-frequency
+   reflectances", IEEE TPAMI 36(6), 2014.
+.. [2] S. Ikehata, K. Aizawa, "Photometric stereo using constrained bivariate regression for
+   general isotropic surfaces", CVPR 2014.
+.. [3] B. Shi et al., "A benchmark dataset and evaluation for non-Lambertian and uncalibrated
+   photometric stereo", IEEE TPAMI 41(2), 2019.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import prange
+
+from shadeform.photometric import lambertian
+
+#: Terms of the diffuse part: ``c - c^2 / 2`` and ``c^2 / 2`` with non-negative weights, which
+#: spans exactly the quadratics in ``c`` through 0 that do not decrease on [0, 1].
+POWERS = 2
+#: Lobes round the half vector, with exponents 4, 16, 64.
+LOBES = 3
+#: Tukey's biweight scale in units of the residuals' robust sigma (95 % efficiency for Gaussian
+#: noise: the textbook value).
+TUKEY = 4.685
+#: A small ridge on the lobes' coefficients (the basis is dimensionless), so that a pixel whose
+#: readings barely reach a lobe still has a solvable fit; not swept.
+RIDGE = 0.01
+#: Lit readings a pixel needs per unknown of the model (its coefficients and the normal's two
+#: angles) for the model to be fitted; with fewer (a set of a few photos) the robust Lambertian
+#: normal is kept. A rule of thumb, not swept.
+READINGS_PER_UNKNOWN = 3
+#: Re-weightings of the residuals; the pattern search's first step (radians), and how many times
+#: it halves. The first round searches from the first step, later ones from a quarter of it.
+ROUNDS = 2
+FIRST_STEP = 0.05
+HALVINGS = 6
+
+
+def fit(lights, readings, *, min_shading, highlight_cos, iterations):
+    """Per pixel ``g = f(1) n`` (P, 3), ``f(1)`` the diffuse brightness facing the light, and
+    the readings the final fit counted (N, P): lit and not weighted out. Pixels the robust
+    Lambertian start cannot solve stay NaN; those with too few lit readings for the model
+    (:data:`READINGS_PER_UNKNOWN`) keep the start.
+
+    Parameters
+    ----------
+    lights : (N, 3) float64
+        Unit directions toward the lights.
+    readings : (N, P) float64
+        Each pixel's readings, divided by the lights' strengths.
+    min_shading, highlight_cos, iterations
+        The robust Lambertian start's options (:func:`shadeform.photometric.lambertian.robust`).
+    """
+    g, usable = lambertian.robust(
+        lights, readings, min_shading=min_shading, highlight_cos=highlight_cos, iterations=iterations
+    )
+    solved = np.isfinite(g[:, 0]) & (np.linalg.norm(g, axis=1) > 0)
+    start = np.zeros_like(g)
+    start[solved] = g[solved] / np.linalg.norm(g[solved], axis=1, keepdims=True)
+    lit = (lights @ start.T > 0) & (readings > 0)
+    modelled = solved & (lit.sum(axis=0) >= READINGS_PER_UNKNOWN * (POWERS + LOBES + 2))
+    normals, brightness, weights = _refine(
+        start[modelled], np.ascontiguousarray(readings[:, modelled]), lights, _half_vectors(lights)
+    )
+    result = g.copy()  # where the model is not fitted: the robust Lambertian g
+    # a fit whose diffuse part is not positive keeps the Lambertian albedo
+    albedo = np.where(brightness > 0, brightness, np.linalg.norm(g[modelled], axis=1))
+    result[modelled] = normals * albedo[:, None]
+    usable[:, modelled] = (weights > 0) & (lights @ normals.T > 0)
+    return result, usable
+
+
+def _half_vectors(lights):
+    half = lights + np.array([0.0, 0.0, 1.0])
+    return half / np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-12)
+
+
+def _basis(n, light, half):
+    """The model's basis at normal ``n`` (3,) for one reading: (POWERS + LOBES,), zero where the
+    light does not reach (slow reference of :func:`_basis_kernel`)."""
+    c = float(n @ light)
+    if c <= 0:
+        return np.zeros(POWERS + LOBES)
+    h = max(0.0, float(n @ half))
+    return np.r_[c - c * c / 2, c * c / 2, [c * h ** (4 ** (m + 1)) for m in range(LOBES)]]
+
+
+def model_fit_reference(n, lights, values, weights):
+    """The weighted, non-negative least-squares fit of the model at normal ``n``: its weighted
+    residual sum (unlit readings count as predicted dark) and the coefficients (POWERS + LOBES,),
+    all >= 0. Plain numpy and SciPy's bounded least squares, one reading at a time: the compiled
+    kernel is tested against it."""
+    from scipy.optimize import lsq_linear
+
+    half = _half_vectors(lights)
+    basis = np.array([_basis(n, light, h) for light, h in zip(lights, half)])
+    lit = basis.any(axis=1)
+    ridge = np.r_[[1e-12] * POWERS, [RIDGE + 1e-12] * LOBES]
+    root = np.sqrt(weights * lit)
+    # the ridge as extra rows: the same objective as the kernel's normal equations
+    system = np.vstack([root[:, None] * basis, np.diag(np.sqrt(ridge))])
+    target = np.r_[root * values, np.zeros(POWERS + LOBES)]
+    coefficients = lsq_linear(system, target, bounds=(0.0, np.inf), tol=1e-14, lsmr_tol="auto").x
+    residual = np.sum(weights * values * values) - np.sum(weights * lit * values * values)
+    residual += np.sum((system @ coefficients - target) ** 2)
+    return residual, coefficients
+
+
+def search_reference(n, lights, values):
+    """:func:`_search_pixel` in plain Python over :func:`model_fit_reference` (slow, obviously
+    correct: the compiled search is tested against it): the unit normal (3,), ``f(1)`` and the
+    final weights (N,) from the unit start ``n``."""
+    n = np.asarray(n, dtype=np.float64)
+    half = _half_vectors(lights)
+    weights = np.ones(len(values))
+    for round_ in range(ROUNDS):
+        _, coefficients = model_fit_reference(n, lights, values, weights)
+        basis = np.array([_basis(n, light, h) for light, h in zip(lights, half)])
+        residuals = np.abs(values - basis @ coefficients)
+        lit = basis.any(axis=1)
+        u = residuals / (TUKEY * 1.4826 * np.median(residuals[lit] if lit.any() else residuals) + 1e-12)
+        weights = np.where(u < 1.0, (1.0 - u * u) ** 2, 0.0)
+        best = model_fit_reference(n, lights, values, weights)[0]
+        step = FIRST_STEP if round_ == 0 else FIRST_STEP / 4
+        for _ in range(HALVINGS if round_ == 0 else HALVINGS - 2):
+            moved = True
+            while moved:
+                moved = False
+                for u_step, v_step in ((step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step)):
+                    first, second = _tangents_reference(n)
+                    m = n + u_step * first + v_step * second
+                    m /= np.linalg.norm(m)
+                    cost = model_fit_reference(m, lights, values, weights)[0]
+                    if cost < best:
+                        best, n, moved = cost, m, True
+            step *= 0.5
+    coefficients = model_fit_reference(n, lights, values, weights)[1]
+    return n, float(coefficients[0] / 2 + coefficients[1] / 2), weights
+
+
+def _tangents_reference(n):
+    """Two unit vectors spanning the plane perpendicular to the unit ``n``."""
+    first = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    first /= np.linalg.norm(first)
+    return first, np.cross(n, first)
+
+
+@numba.njit(cache=True, inline="always")
+def _basis_kernel(n0, n1, n2, lights, half, j, basis):
+    c = n0 * lights[j, 0] + n1 * lights[j, 1] + n2 * lights[j, 2]
+    if c <= 0.0:
+        return False
+    h = max(0.0, n0 * half[j, 0] + n1 * half[j, 1] + n2 * half[j, 2])
+    basis[0] = c - 0.5 * c * c
+    basis[1] = 0.5 * c * c
+    for m in range(LOBES):
+        h = h * h
+        h = h * h  # h^(4^(m+1))
+        basis[POWERS + m] = c * h
+    return True
+
+
+@numba.njit(cache=True)
+def _model_fit(n0, n1, n2, lights, half, values, weights, work):
+    """The kernel of :func:`model_fit_reference`: the weighted residual sum; the coefficients in
+    ``work[3, :size]`` (``work`` is (6, size^2) scratch space: the system, its right-hand side,
+    one reading's basis, the coefficients, and the active set's own)."""
+    size = POWERS + LOBES
+    system = work[0, : size * size].reshape(size, size)
+    moment, basis, coefficients = work[1, :size], work[2, :size], work[3, :size]
+    system[:, :] = 0.0
+    moment[:] = 0.0
+    total = 0.0
+    for j in range(values.size):
+        w = weights[j]
+        if w == 0.0:
+            continue
+        total += w * values[j] * values[j]
+        if not _basis_kernel(n0, n1, n2, lights, half, j, basis):
+            continue
+        for a in range(size):
+            moment[a] += w * values[j] * basis[a]
+            wa = w * basis[a]
+            for b in range(a + 1):
+                system[a, b] += wa * basis[b]
+    for a in range(size):
+        system[a, a] += (RIDGE if a >= POWERS else 0.0) + 1e-12
+        for b in range(a):
+            system[b, a] = system[a, b]
+    _nonnegative_solve(
+        system, moment, coefficients, basis, work[4, : size * size].reshape(size, size), work[5, :size]
+    )
+    # sum w I^2 - 2 x . b + x . A x
+    residual = total
+    for a in range(size):
+        residual -= 2.0 * coefficients[a] * moment[a]
+        for b in range(size):
+            residual += coefficients[a] * system[a, b] * coefficients[b]
+    return residual
+
+
+@numba.njit(cache=True)
+def _nonnegative_solve(system, rhs, x, scratch, sub, z):
+    """``x >= 0`` minimising ``x . A x / 2 - b . x`` for a small symmetric positive definite ``A``
+    (``system``, kept) by Lawson and Hanson's active set; ``scratch`` (size,), ``sub`` (size,
+    size) and ``z`` (size,) are work space."""
+    size = rhs.size
+    passive = np.zeros(size, dtype=np.bool_)
+    x[:] = 0.0
+    for _ in range(3 * size):
+        # the most promising variable held at zero: the largest gradient b - A x
+        best, enter = 1e-14, -1
+        for a in range(size):
+            if passive[a]:
+                continue
+            gradient = rhs[a]
+            for b in range(size):
+                gradient -= system[a, b] * x[b]
+            if gradient > best:
+                best, enter = gradient, a
+        if enter < 0:
+            return
+        passive[enter] = True
+        for _inner in range(size):
+            # the unconstrained minimum over the passive variables
+            k = 0
+            for a in range(size):
+                if passive[a]:
+                    scratch[k] = rhs[a]
+                    m = 0
+                    for b in range(size):
+                        if passive[b]:
+                            sub[k, m] = system[a, b]
+                            m += 1
+                    k += 1
+            _cholesky_solve(sub[:k, :k], scratch[:k], z[:k])
+            step, k = 1.0, 0
+            for a in range(size):
+                if passive[a]:
+                    if z[k] <= 0.0:
+                        step = min(step, x[a] / (x[a] - z[k]))
+                    k += 1
+            k = 0
+            for a in range(size):
+                if passive[a]:
+                    x[a] += step * (z[k] - x[a])
+                    k += 1
+            if step >= 1.0:
+                break
+            for a in range(size):  # variables the step brought to zero leave
+                if passive[a] and x[a] <= 1e-15:
+                    passive[a] = False
+                    x[a] = 0.0
+
+
+@numba.njit(cache=True)
+def _cholesky_solve(system, rhs, out):
+    """Solve ``system @ out = rhs`` for a small symmetric positive definite ``system`` given by its
+    lower triangle (overwritten by its Cholesky factor)."""
+    size = rhs.size
+    for i in range(size):
+        for j in range(i + 1):
+            s = system[i, j]
+            for k in range(j):
+                s -= system[i, k] * system[j, k]
+            if i == j:
+                system[i, i] = np.sqrt(max(s, 1e-300))
+            else:
+                system[i, j] = s / system[j, j]
+    for i in range(size):
+        s = rhs[i]
+        for k in range(i):
+            s -= system[i, k] * out[k]
+        out[i] = s / system[i, i]
+    for i in range(size - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, size):
+            s -= system[k, i] * out[k]
+        out[i] = s / system[i, i]
+
+
+@numba.njit(cache=True)
+def _tangents(n0, n1, n2):
+    """Two unit vectors spanning the plane perpendicular to the unit ``n``."""
+    if abs(n0) < 0.9:  # n x (1, 0, 0)
+        a0, a1, a2 = 0.0, n2, -n1
+    else:  # n x (0, 1, 0)
+        a0, a1, a2 = -n2, 0.0, n0
+    length = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0, a1, a2 = a0 / length, a1 / length, a2 / length
+    return a0, a1, a2, n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
+
+
+@numba.njit(cache=True)
+def _search_pixel(n, lights, half, values, weights, residuals, lit, work):
+    """One pixel's re-weighted pattern search from the unit normal ``n`` (3,), in place; returns
+    ``f(1)``. ``weights`` ends as the final round's."""
+    size = POWERS + LOBES
+    basis, coefficients = work[2, :size], work[3, :size]
+    weights[:] = 1.0
+    n0, n1, n2 = n[0], n[1], n[2]
+    for round_ in range(ROUNDS):
+        # Tukey's weights of the current fit's residuals
+        _model_fit(n0, n1, n2, lights, half, values, weights, work)
+        count = 0  # the residuals' scale from the readings the normal says are lit
+        for j in range(values.size):
+            predicted = 0.0
+            if _basis_kernel(n0, n1, n2, lights, half, j, basis):
+                for a in range(size):
+                    predicted += coefficients[a] * basis[a]
+                lit[count] = abs(values[j] - predicted)
+                count += 1
+            residuals[j] = abs(values[j] - predicted)
+        scale = TUKEY * 1.4826 * (np.median(lit[:count]) if count else np.median(residuals)) + 1e-12
+        for j in range(values.size):
+            u = residuals[j] / scale
+            weights[j] = (1.0 - u * u) ** 2 if u < 1.0 else 0.0
+        best = _model_fit(n0, n1, n2, lights, half, values, weights, work)
+        step = FIRST_STEP if round_ == 0 else FIRST_STEP / 4
+        for _ in range(HALVINGS if round_ == 0 else HALVINGS - 2):
+            moved = True
+            while moved:  # compass search: the four directions, moving while one improves
+                moved = False
+                t0, t1, t2, s0, s1, s2 = _tangents(n0, n1, n2)
+                for d in range(4):
+                    u = step if d == 0 else (-step if d == 1 else 0.0)
+                    v = step if d == 2 else (-step if d == 3 else 0.0)
+                    m0, m1, m2 = n0 + u * t0 + v * s0, n1 + u * t1 + v * s1, n2 + u * t2 + v * s2
+                    length = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+                    m0, m1, m2 = m0 / length, m1 / length, m2 / length
+                    cost = _model_fit(m0, m1, m2, lights, half, values, weights, work)
+                    if cost < best:
+                        best, n0, n1, n2, moved = cost, m0, m1, m2, True
+                        t0, t1, t2, s0, s1, s2 = _tangents(n0, n1, n2)
+            step *= 0.5
+    _model_fit(n0, n1, n2, lights, half, values, weights, work)
+    n[0], n[1], n[2] = n0, n1, n2
+    return 0.5 * (coefficients[0] + coefficients[1])  # f(1)
+
+
+@numba.njit(cache=True, parallel=True)
+def _refine_kernel(normals, readings, lights, half, brightness, weights):
+    """:func:`_search_pixel` over the pixels (columns of ``readings``), each independent of the
+    others (the result does not depend on the number of threads)."""
+    count, pixels = readings.shape
+    size = POWERS + LOBES
+    for p in prange(pixels):
+        work = np.empty((6, size * size))
+        residuals = np.empty(count)
+        values = readings[:, p].copy()
+        column = np.empty(count)
+        n = normals[p].copy()
+        brightness[p] = _search_pixel(n, lights, half, values, column, residuals, np.empty(count), work)
+        normals[p] = n
+        weights[:, p] = column
+
+
+def _refine(start, readings, lights, half):
+    """Normals (P, 3), ``f(1)`` (P,) and final weights (N, P) from unit ``start`` normals."""
+    normals = np.ascontiguousarray(start, dtype=np.float64).copy()
+    brightness = np.empty(len(normals))
+    weights = np.empty(readings.shape)
+    _refine_kernel(
+        normals, readings, np.ascontiguousarray(lights, dtype=np.float64), half, brightness, weights
+    )
+    return normals, brightness, weights
