@@ -42,6 +42,8 @@ _EXPORTS = {
     "integrate": "shadeform.integration",
     "photometric_stereo": "shadeform.photometric",
     "PhotometricStereo": "shadeform.photometric",
+    "calibrate_lights": "shadeform.light.sphere",
+    "LightCalibration": "shadeform.light.sphere",
 }
 _SUBMODULES = {
     "synth",

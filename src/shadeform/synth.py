@@ -233,6 +233,71 @@ def render(
     return np.clip(image, 0.0, 1.0)
 
 
+def chrome_sphere(
+    light,
+    *,
+    size: int = 128,
+    centre=None,
+    radius=None,
+    strength: float = 1.0,
+    sharpness: float = 2000.0,
+    background: float = 0.5,
+    noise: float = 0.0,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A mirror sphere on a matte table under one distant light, as light calibration sees it.
+
+    The table faces the camera and reads ``background * max(0, l_z)``; the sphere mirrors a dark
+    room and the light: ``strength * max(0, r . l)^sharpness``, ``r = 2 (n . v) n - v`` the
+    direction the pixel sees by reflection (``v = +z``), so the highlight sits where the normal
+    halves the angle between the viewer and the light. Orthographic, ``size x size``.
+
+    Parameters
+    ----------
+    light : (3,) array_like
+        Direction toward the light (normalised; z > 0).
+    size : int
+        Image side in pixels.
+    centre : (2,) array_like, optional
+        The sphere's centre (column, row); the image's centre by default.
+    radius : float, optional
+        The sphere's radius in pixels; ``0.3 size`` by default.
+    strength : float
+        The light's strength (scales the highlight; the table reads ``background`` at any
+        strength, as a camera's exposure would keep it).
+    sharpness : float
+        Phong exponent of the mirror's lobe: a light of small angular size.
+    background : float
+        The table's albedo.
+    noise : float
+        Gaussian noise's standard deviation, added everywhere; 0 for none.
+    seed : int
+        Seed of :func:`numpy.random.default_rng`.
+
+    Returns
+    -------
+    image : (size, size) float64
+        In [0, 1].
+    circle : (3,) float64
+        The sphere's centre column, centre row and radius.
+    """
+    size = _check_size(size)
+    direction = _unit_light(light)
+    column, row = (size / 2 - 0.5, size / 2 - 0.5) if centre is None else map(float, centre)
+    radius = 0.3 * size if radius is None else _finite_float(radius, "radius")
+    rows, cols = np.mgrid[0:size, 0:size].astype(np.float64)
+    nx, ny = (cols - column) / radius, -(rows - row) / radius
+    inside = nx * nx + ny * ny < 1.0
+    nz = np.sqrt(np.maximum(0.0, 1.0 - nx * nx - ny * ny))
+    # reflected view direction r = 2 (n . v) n - v with v = (0, 0, 1)
+    reflected = np.stack([2 * nz * nx, 2 * nz * ny, 2 * nz * nz - 1.0], axis=-1)
+    lobe = np.maximum(reflected @ direction, 0.0) ** _finite_float(sharpness, "sharpness")
+    image = np.where(inside, strength * lobe, background * max(direction[2], 0.0))
+    if noise > 0:
+        image = image + np.random.default_rng(seed).normal(0.0, noise, size=image.shape)
+    return np.clip(image, 0.0, 1.0), np.array([column, row, radius])
+
+
 def scene(
     name: str,
     *,

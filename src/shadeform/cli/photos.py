@@ -23,6 +23,7 @@ from shadeform.cli._shell import (
     StepOption,
     app,
     check_outputs,
+    check_suffix,
     describe_photo,
     format_seconds,
     format_vector,
@@ -38,6 +39,7 @@ from shadeform.cli._shell import (
     stdout_console,
     write_model,
 )
+from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet
 
@@ -207,6 +209,14 @@ def stereo(
         Path | None,
         typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
     ] = None,
+    sphere: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,R|auto",
+            help="Read the lights from a shiny sphere in the photos instead of a light file: its "
+            "centre column, row and radius in pixels, or auto to find it.",
+        ),
+    ] = None,
     method: Annotated[
         str,
         typer.Option(
@@ -247,9 +257,16 @@ def stereo(
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
+        circle = parse_sphere(sphere) if sphere is not None else None
         with stage(err, "loading the photos", timings, "load"):
             photos = load_photo_set(
-                sources, lights=lights, intensities=intensities, mask=mask, linear=linear, channel=channel
+                sources,
+                lights=lights,
+                intensities=intensities,
+                mask=mask,
+                linear=linear,
+                channel=channel,
+                sphere=circle,
             )
         with stage(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
             rec = reconstruct_stereo(
@@ -259,6 +276,7 @@ def stereo(
                 intensities=photos.intensities,
                 method=method,
                 integrator=integrator,
+                sphere=photos.sphere,
             )
         rec = replace(rec, info={**rec.info, "photo": photos.info})
         mesh, written, report = write_model(
@@ -300,6 +318,124 @@ def stereo(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def parse_sphere(text: str):
+    """``"X,Y,R"`` or ``"auto"`` -> what :func:`shadeform.io.photoset.load_photo_set` takes."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        values = [float(part) for part in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise InputError(
+            f"bad --sphere {text!r}: give X,Y,R (the sphere's centre column and row and its radius, "
+            "in pixels from the top left) or auto"
+        )
+    return values
+
+
+@app.command()
+def lights(
+    sources: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Photos with a shiny (chrome or black glossy) sphere in view, or one folder of them.",
+            show_default=False,
+        ),
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Light file to write: .lp (RTI: name x y z per photo) or .txt (x y z per photo).",
+        ),
+    ],
+    sphere: Annotated[
+        str,
+        typer.Option(
+            metavar="X,Y,R|auto",
+            help="The sphere's centre column, row and radius in pixels, or auto to find it.",
+        ),
+    ] = "auto",
+    intensities: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also write each light's strength, relative to the median photo's (one number per photo)."
+        ),
+    ] = None,
+    linear: LinearOption = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
+    ] = False,
+) -> None:
+    """Read each photo's light direction and strength from the highlight on a shiny sphere (light calibration, as for RTI)."""
+    from shadeform.io.atomic import atomic_write
+    from shadeform.io.photoset import photo_files, read_photos, write_lights
+    from shadeform.light import slant_tilt
+    from shadeform.light.sphere import calibrate_lights
+
+    check_suffix(output, (".lp", ".txt"), "lights to")
+    circle = parse_sphere(sphere)
+    paths = photo_files(sources)
+    if not paths:
+        raise InputError("no photos given; give the photos of the sphere, or their folder")
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    with stage(err, "loading the photos", timings, "load"):
+        images = read_photos(paths, linear=linear)[0]
+    with stage(err, "finding the sphere and its highlights", timings, "calibrate"):
+        found = calibrate_lights(images, sphere=None if circle == "auto" else circle)
+    with OutputSet() as outputs:
+        write_lights(outputs.temp(output), found.directions, names=[p.name for p in paths])
+        if intensities is not None:
+            with atomic_write(outputs.temp(intensities), mode="w") as handle:
+                handle.write("# each light's strength, relative to the median photo's\n")
+                handle.write("".join(f"{value:.6f}\n" for value in found.strengths))
+        outputs.commit()
+    column, row, radius = found.sphere
+    if as_json:
+        print_json(
+            {
+                "command": "lights",
+                "sphere": {"column": column, "row": row, "radius": radius},
+                "photos": [
+                    {"photo": str(p), "direction": d, "strength": k, "highlight": h, "saturated": bool(c)}
+                    for p, d, k, h, c in zip(
+                        paths, found.directions, found.strengths, found.highlights, found.saturated
+                    )
+                ],
+                "files": {"lights": output, "intensities": intensities},
+                "timings": timings,
+            }
+        )
+        return
+    out = stdout_console()
+    out.print(
+        f"[bold]read[/] {len(paths)} lights from the sphere at column {column:.1f}, row {row:.1f}, radius {radius:.1f} px"
+    )
+    table = Table(box=None, pad_edge=False)
+    for heading in ("photo", "x", "y", "z", "slant", "tilt", "strength"):
+        table.add_column(heading, justify="left" if heading == "photo" else "right")
+    for path, direction, strength, clipped in zip(paths, found.directions, found.strengths, found.saturated):
+        s, t = slant_tilt(direction)
+        table.add_row(
+            escape(path.name), *(f"{v:.3f}" for v in direction), f"{s:.1f}", f"{t:.1f}",
+            f"{strength:.3f}" + (" (clipped)" if clipped else ""),
+        )  # fmt: skip
+    out.print(table)
+    if found.saturated.any():
+        out.print(
+            f"  {int(found.saturated.sum())} highlight(s) reach the photo's top value: those strengths are lower bounds"
+        )
+    out.print("[bold]wrote[/]")
+    print_files(
+        out,
+        [(output, "light directions" + (" (RTI .lp)" if output.suffix.lower() == ".lp" else ""))]
+        + ([(intensities, "relative light strengths")] if intensities is not None else []),
+    )
 
 
 # --- batch -------------------------------------------------------------------------------------

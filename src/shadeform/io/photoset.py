@@ -2,7 +2,9 @@
 
 One folder in the DiLiGenT layout (``filenames.txt``, ``light_directions.txt``,
 ``light_intensities.txt``, ``mask.png``; all optional but the lights), or the photos themselves
-with a light file. Light and intensity files: ``docs/conventions.md`` ("Light").
+with a light file: the project's (``x y z`` per photo) or an RTI ``.lp`` file (a count, then
+``name x y z`` per photo; its names are matched to the photos'). Light and intensity files:
+``docs/conventions.md`` ("Light").
 
 Encoding: a folder that holds ``light_intensities.txt`` is radiometrically calibrated data, linear
 whatever its bit depth (light strengths divide only linear values), so its photos are kept as
@@ -52,6 +54,8 @@ class PhotoSet:
         ``light_intensities.txt`` beside the photos), or given by the caller (``linear=``).
     channel : str
         ``"rgb"`` (all three channels), ``"gray"`` (gray photos) or the channel asked for.
+    sphere : (3,) float64 or None
+        The shiny sphere the lights were read from (column, row, radius), when they were.
     """
 
     paths: tuple[Path, ...]
@@ -63,6 +67,7 @@ class PhotoSet:
     encoding: str
     encoding_from: str
     channel: str
+    sphere: np.ndarray | None = None
 
     @property
     def info(self) -> dict:
@@ -84,8 +89,9 @@ def load_photo_set(
     mask: str | os.PathLike | None = None,
     linear: bool | None = None,
     channel: str | None = None,
+    sphere=None,
 ) -> PhotoSet:
-    """Read photos and their light files.
+    """Read photos and their light files, or read their lights from a shiny sphere in them.
 
     Parameters
     ----------
@@ -103,6 +109,11 @@ def load_photo_set(
         None or ``"auto"``: keep the colour (photometric stereo solves colour photos on all three
         channels). Otherwise that one channel (:func:`shadeform.io.images.select_channel`), taken
         after dividing by per-channel light strengths.
+    sphere : "auto" or (3,) array_like, optional
+        Read the lights and their relative strengths from a shiny sphere in the photos
+        (:func:`shadeform.light.sphere.calibrate_lights`): ``"auto"`` finds it, or its circle
+        ``(column, row, radius)``. Not with ``lights`` or ``intensities``; a folder's light files
+        are then ignored, and its mask (or the caller's) is kept.
 
     Returns
     -------
@@ -122,35 +133,30 @@ def load_photo_set(
     if channel is not None:
         check_choice(channel, CHANNELS, "channel")  # before any photo is read
     sources = list(map(Path, sources))
-    photos, lights, intensities, mask = _find(sources, lights, intensities, mask)
-    directions = read_rows(lights, "lights", len(photos), (3,))
-    strengths = read_rows(intensities, "intensities", len(photos), (1, 3)) if intensities else None
+    if sphere is not None and (lights is not None or intensities is not None):
+        raise InputError("give the lights either as a file or as a sphere in the photos, not both")
+    photos, lights, intensities, mask = _find(sources, lights, intensities, mask, need_lights=sphere is None)
+    if sphere is not None:
+        directions = strengths = None  # read from the photos below
+    elif Path(lights).suffix.lower() == ".lp":
+        directions = _lp_for(photos, *read_lp(lights), lights)
+    else:
+        directions = read_rows(lights, "lights", len(photos), (3,))
+    if sphere is None:
+        strengths = read_rows(intensities, "intensities", len(photos), (1, 3)) if intensities else None
     decided = "user"
     if linear is None and len(sources) == 1 and (sources[0] / CALIBRATED_SET_FILE).is_file():
         linear, decided = True, "set"
-    images = None
-    colour = False
-    for i, photo in enumerate(photos):
-        read = read_photo(photo, linear=linear)
-        height, width, planes = read.pixels.shape
-        if images is None:
-            # the first photo decides for the set, and sets the size and bit depth of the rest
-            first, bits, encoding = read, read.bits, read.encoding
-            if linear is None:
-                linear, decided = encoding == "linear", read.encoding_from
-            images = np.empty((len(photos), height, width, 3), dtype=np.float32)
-        elif (height, width) != first.image.shape:
-            raise InputError(
-                f"photo '{photo}' is {width}x{height} but '{photos[0]}' is "
-                f"{first.image.shape[1]}x{first.image.shape[0]}; give photos from one still camera"
-            )
-        elif read.bits != bits:
-            raise InputError(
-                f"photo '{photo}' is {read.bits}-bit but '{photos[0]}' is {bits}-bit; give photos "
-                "from one camera, saved alike"
-            )
-        images[i] = read.pixels  # a gray photo fills all three channels
-        colour = colour or planes == 3
+    images, bits, encoding, read_from, colour = read_photos(photos, linear=linear)
+    decided = read_from if linear is None else decided
+    circle = None
+    if sphere is not None:
+        from shadeform.light.sphere import calibrate_lights
+
+        found = calibrate_lights(
+            images, sphere=None if isinstance(sphere, str) and sphere == "auto" else sphere
+        )
+        directions, strengths, circle = found.directions, found.strengths, found.sphere
     if channel is not None:
         if strengths is not None and strengths.ndim == 2:
             if not (np.isfinite(strengths).all() and (strengths > 0).all()):
@@ -171,7 +177,73 @@ def load_photo_set(
         encoding=encoding,
         encoding_from=decided,
         channel=channel or ("rgb" if colour else "gray"),
+        sphere=circle,
     )
+
+
+def read_photos(photos, *, linear: bool | None = None):
+    """Photos of one still camera as one (N, H, W, 3) float32 array (gray photos in all three
+    channels), linear: the first photo decides the encoding for all when ``linear`` is None
+    (:func:`shadeform.io.images.read_photo`), and sets the size and bit depth the rest must have.
+
+    Returns
+    -------
+    images : (N, H, W, 3) float32
+    bits : int
+    encoding : {"srgb", "linear"}
+        How the files hold their values.
+    encoding_from : {"file", "user"}
+    colour : bool
+        Whether any photo has colour.
+
+    Raises
+    ------
+    InputError
+        A photo that cannot be read, or one of another size or bit depth than the first.
+    """
+    images = None
+    colour = False
+    decided = "user"
+    for i, photo in enumerate(photos):
+        read = read_photo(photo, linear=linear)
+        height, width, planes = read.pixels.shape
+        if images is None:
+            first, bits, encoding = read, read.bits, read.encoding
+            if linear is None:
+                linear, decided = encoding == "linear", read.encoding_from
+            images = np.empty((len(photos), height, width, 3), dtype=np.float32)
+        elif (height, width) != first.image.shape:
+            raise InputError(
+                f"photo '{photo}' is {width}x{height} but '{photos[0]}' is "
+                f"{first.image.shape[1]}x{first.image.shape[0]}; give photos from one still camera"
+            )
+        elif read.bits != bits:
+            raise InputError(
+                f"photo '{photo}' is {read.bits}-bit but '{photos[0]}' is {bits}-bit; give photos "
+                "from one camera, saved alike"
+            )
+        images[i] = read.pixels  # a gray photo fills all three channels
+        colour = colour or planes == 3
+    return images, bits, encoding, decided, colour
+
+
+def photo_files(sources) -> list[Path]:
+    """The photos named by ``sources``: the files themselves, or one folder's photos (in
+    ``filenames.txt``'s order when it has one, else sorted by name; masks and normal maps left
+    out)."""
+    sources = list(map(Path, sources))
+    if len(sources) == 1 and sources[0].is_dir():
+        folder = sources[0]
+        listing = folder / "filenames.txt"
+        if listing.is_file():
+            return [folder / name for name in listing.read_text(encoding="utf-8").split()]
+        return sorted(
+            p
+            for p in folder.iterdir()
+            if p.suffix.lower() in PHOTO_SUFFIXES
+            and p.stem.lower() not in ("mask", "normal_gt", "normal_map")
+        )
+    return sources
 
 
 def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
@@ -200,34 +272,95 @@ def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int
     return values[:, 0] if values.shape[1] == 1 else values
 
 
-def _find(sources: list[Path], lights, intensities, mask):
+def read_lp(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
+    """An RTI light-position (``.lp``) file: its photo names and their light directions (N, 3),
+    normalised.
+
+    The format: the number of photos on the first line, then one line per photo, its file name
+    and ``x y z`` (x right, y up, z toward the camera, as in ``docs/conventions.md``); names may
+    hold a folder, which is ignored. Blank lines are skipped.
+
+    Raises
+    ------
+    InputError
+        A file that is missing or not in that format, or a direction that is zero or not finite.
+    """
+    path = Path(path)
+    try:
+        lines = [line.split() for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    except FileNotFoundError:
+        raise InputError(f"light file '{path}' does not exist; check the path") from None
+    except UnicodeDecodeError:
+        raise InputError(
+            f"light file '{path}' is not text; give an .lp file (a count, then 'name x y z' per photo)"
+        ) from None
+    usage = "an .lp file holds the number of photos, then one line 'name x y z' per photo"
+    try:
+        count = int(lines[0][0]) if lines and len(lines[0]) == 1 else -1
+        rows = [(line[0], [float(v) for v in line[1:4]]) for line in lines[1:] if len(line) == 4]
+    except ValueError:
+        raise InputError(f"light file '{path}' has a line that is not 'name x y z'; {usage}") from None
+    if count < 1 or len(rows) != count or len(lines) != count + 1:
+        raise InputError(f"light file '{path}' does not match its own count of photos; {usage}")
+    directions = np.array([row[1] for row in rows], dtype=np.float64)
+    lengths = np.linalg.norm(directions, axis=1)
+    if not (np.isfinite(directions).all() and (lengths > 0).all()):
+        raise InputError(f"light file '{path}' has a direction that is zero or not a number")
+    return [Path(row[0].replace("\\", "/")).name for row in rows], directions / lengths[:, None]
+
+
+def write_lights(path: str | os.PathLike, directions, *, names=None) -> None:
+    """Write light directions (N, 3), atomically: an RTI ``.lp`` file when ``path`` ends in
+    ``.lp`` (``names`` are the photos' file names, in order), else the project's light file (one
+    ``x y z`` row per photo)."""
+    from shadeform.io.atomic import atomic_write
+
+    directions = np.asarray(directions, dtype=np.float64)
+    if Path(path).suffix.lower() == ".lp":
+        if names is None or len(names) != len(directions):
+            raise InputError("an .lp file names each photo; give as many names as lights")
+        lines = [str(len(directions))] + [
+            f"{Path(name).name} {x:.6f} {y:.6f} {z:.6f}" for name, (x, y, z) in zip(names, directions)
+        ]
+    else:
+        lines = ["# direction toward each photo's light: x y z (x right, y up, z toward the camera)"]
+        lines += [f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in directions]
+    with atomic_write(path, mode="w") as handle:
+        handle.write("\n".join(lines) + "\n")
+
+
+def _lp_for(photos, names, directions, path):
+    """The ``.lp`` file's directions in the order of ``photos``: by file name where every photo
+    is named in it, else in the file's order when the counts agree."""
+    where = {name: i for i, name in enumerate(names)}
+    if all(photo.name in where for photo in photos):
+        return directions[[where[photo.name] for photo in photos]]
+    if len(names) == len(photos):
+        return directions
+    raise InputError(
+        f"light file '{path}' has {len(names)} lights for {len(photos)} photos and does not name them all; "
+        "give one line per photo"
+    )
+
+
+def _find(sources: list[Path], lights, intensities, mask, *, need_lights=True):
     """The photos and the files that describe them."""
+    photos = photo_files(sources)
     if len(sources) == 1 and sources[0].is_dir():
         folder = sources[0]
-        listing = folder / "filenames.txt"
-        if listing.is_file():
-            photos = [folder / name for name in listing.read_text(encoding="utf-8").split()]
-        else:
-            photos = sorted(
-                p
-                for p in folder.iterdir()
-                if p.suffix.lower() in PHOTO_SUFFIXES
-                and p.stem.lower() not in ("mask", "normal_gt", "normal_map")
-            )
         found = {
             name: folder / name
             for name in ("light_directions.txt", "light_intensities.txt", "mask.png")
             if (folder / name).is_file()
         }
-        lights = lights or found.get("light_directions.txt")
-        intensities = intensities or found.get("light_intensities.txt")
+        if need_lights:
+            lights = lights or found.get("light_directions.txt")
+            intensities = intensities or found.get("light_intensities.txt")
         mask = mask or found.get("mask.png")
-        if lights is None:
+        if lights is None and need_lights:
             raise InputError(f"folder '{folder}' has no light_directions.txt; give --lights FILE")
-    else:
-        photos = sources
-        if lights is None:
-            raise InputError("give --lights FILE: one direction toward the light per photo (x y z)")
+    elif lights is None and need_lights:
+        raise InputError("give --lights FILE: one direction toward the light per photo (x y z)")
     if len(photos) < 3:
         raise InputError(f"photometric stereo needs at least 3 photos, got {len(photos)}")
     return photos, lights, intensities, mask

@@ -1,0 +1,196 @@
+"""Lights from a shiny sphere (``shadeform.light.sphere``), RTI light files, and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from shadeform import synth
+from shadeform.errors import InputError
+from shadeform.light import light_from_slant_tilt
+from shadeform.light.sphere import calibrate_lights
+
+BALL = Path(__file__).resolve().parents[2] / "shared" / "data" / "diligent-ball"
+
+
+def angles(a, b):
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
+
+
+@pytest.fixture(scope="module")
+def rig():
+    """Thirty lights of random strength over a chrome sphere on a matte table, 0.5 % noise."""
+    rng = np.random.default_rng(0)
+    lights = np.array(
+        [light_from_slant_tilt(s, t) for s, t in zip(rng.uniform(5, 70, 30), rng.uniform(0, 360, 30))]
+    )
+    strengths = rng.uniform(0.4, 1.0, 30)
+    photos = np.stack(
+        [
+            synth.chrome_sphere(
+                light, size=320, centre=(200, 140), radius=80, strength=k, noise=0.005, seed=i
+            )[0]
+            for i, (light, k) in enumerate(zip(lights, strengths))
+        ]
+    )
+    return photos, lights, strengths
+
+
+def test_directions_and_strengths(rig):
+    photos, lights, strengths = rig
+    found = calibrate_lights(photos)
+    np.testing.assert_allclose(found.sphere, [200, 140, 80], atol=1.0)
+    assert angles(found.directions, lights).max() <= 1.0  # the issue's bar; 0.2-0.4 measured
+    # the noise summed over the highlight's disc limits them: within 3 % measured
+    np.testing.assert_allclose(found.strengths, strengths / np.median(strengths), rtol=0.04)
+    assert not found.saturated.any()
+    given = calibrate_lights(photos, sphere=(200, 140, 80))
+    assert angles(given.directions, lights).max() <= 1.0
+
+
+def test_highlight_positions_follow_the_mirror_law():
+    """A light straight behind the camera lights the sphere's centre; one 60 degrees to the right
+    (tilt 0) mirrors at 30 degrees along +x: sin(30) of the radius right of the centre."""
+    for light, expected in (((0, 0, 1), (64, 64)), (light_from_slant_tilt(60, 0), (64 + 40 * 0.5, 64))):
+        photo, circle = synth.chrome_sphere(light, size=129, radius=40)
+        found = calibrate_lights([photo], sphere=circle)
+        np.testing.assert_allclose(found.highlights[0], expected, atol=0.3)
+
+
+def test_errors(rig):
+    photos = rig[0]
+    with pytest.raises(InputError, match="blank"):
+        calibrate_lights(np.full((3, 64, 64), 0.3))
+    with pytest.raises(InputError, match="reaches beyond"):
+        calibrate_lights(photos[:2], sphere=(10, 10, 50))
+    with pytest.raises(InputError, match="X,Y,R"):
+        calibrate_lights(photos[:2], sphere=(10, 10))
+    dark = photos[:3].copy()
+    dark[1] = 0.2  # no highlight on the sphere in the second photo
+    with pytest.raises(InputError, match="photo 2 shows no highlight"):
+        calibrate_lights(dark, sphere=(200, 140, 80))
+    with pytest.raises(InputError, match="numeric images"):
+        calibrate_lights([["a"]])
+
+
+@pytest.mark.skipif(not BALL.is_dir(), reason=f"DiLiGenT ball photos not found at {BALL}")
+def test_real_glossy_ball():
+    """DiLiGenT's ball is a glossy painted sphere photographed under 96 calibrated lights: its
+    specular peak gives the lights to about a degree (1.07 mean, 2.22 worst measured) although the
+    camera is a perspective one and the ball not a mirror."""
+    from shadeform.io.photoset import load_photo_set
+
+    ball = load_photo_set([BALL])
+    found = calibrate_lights(ball.images)
+    rows, cols = np.nonzero(ball.mask)
+    np.testing.assert_allclose(found.sphere[:2], [cols.mean(), rows.mean()], atol=1.5)
+    assert abs(found.sphere[2] - np.sqrt(ball.mask.sum() / np.pi)) < 2
+    truth = ball.lights / np.linalg.norm(ball.lights, axis=1, keepdims=True)
+    errors = angles(found.directions, truth)
+    assert errors.mean() < 1.2 and errors.max() < 2.6
+
+
+class TestLightFiles:
+    def test_lp_round_trip_and_names(self, tmp_path):
+        from shadeform.io.photoset import read_lp, write_lights
+
+        directions = np.array([[0.1, 0.2, 0.97], [-0.3, 0.1, 0.95], [0.0, -0.4, 0.92]])
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        write_lights(tmp_path / "l.lp", directions, names=["a/x1.jpg", "x2.jpg", "x3.jpg"])
+        text = (tmp_path / "l.lp").read_text()
+        assert text.splitlines()[0] == "3" and text.splitlines()[1].startswith("x1.jpg ")
+        names, read = read_lp(tmp_path / "l.lp")
+        assert names == ["x1.jpg", "x2.jpg", "x3.jpg"]
+        np.testing.assert_allclose(read, directions, atol=1e-6)
+        write_lights(tmp_path / "l.txt", directions)
+        np.testing.assert_allclose(np.loadtxt(tmp_path / "l.txt"), directions, atol=1e-6)
+
+    @pytest.mark.parametrize(
+        ("text", "match"),
+        [
+            ("2\na.png 0 0 1\n", "count"),
+            ("x\na.png 0 0 1\n", "name x y z"),
+            ("1\na.png 0 zero 1\n", "not 'name x y z'"),
+            ("1\na.png 0 0 0\n", "zero"),
+        ],
+    )
+    def test_bad_lp(self, tmp_path, text, match):
+        from shadeform.io.photoset import read_lp
+
+        (tmp_path / "l.lp").write_text(text)
+        with pytest.raises(InputError, match=match):
+            read_lp(tmp_path / "l.lp")
+
+    def test_photo_set_takes_an_lp_file_in_any_order(self, tmp_path):
+        from shadeform.io.photoset import load_photo_set, write_lights
+
+        sphere = synth.scene("sphere", size=48)
+        lights = np.array([light_from_slant_tilt(25, t) for t in (0, 90, 180, 270)])
+        paths = []
+        for i, light in enumerate(lights):
+            image = synth.render(sphere.normals, sphere.mask, light=light)
+            paths.append(tmp_path / f"p{i}.png")
+            Image.fromarray((image * 65535).astype(np.uint16)).save(paths[-1])
+        order = [2, 0, 3, 1]
+        write_lights(tmp_path / "l.lp", lights[order], names=[paths[i].name for i in order])
+        photos = load_photo_set(paths, lights=tmp_path / "l.lp")
+        np.testing.assert_allclose(photos.lights, lights, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def scene_with_sphere(tmp_path_factory):
+    """Sixteen 16-bit photos of a matte sphere (the object) beside a chrome sphere on a matte
+    table, and the lights."""
+    folder = tmp_path_factory.mktemp("rig")
+    rng = np.random.default_rng(4)
+    lights = np.array(
+        [light_from_slant_tilt(s, t) for s, t in zip(rng.uniform(15, 50, 16), rng.uniform(0, 360, 16))]
+    )
+    obj = synth.scene("sphere", size=120)
+    for i, light in enumerate(lights):
+        photo, _ = synth.chrome_sphere(light, size=260, centre=(200, 55), radius=50, background=0.4)
+        photo[130:250, 10:130] = synth.render(obj.normals, obj.mask, light=light, albedo=0.8)
+        Image.fromarray((photo * 65535).astype(np.uint16)).save(folder / f"{i:02d}.png")
+    return folder, lights, obj
+
+
+def test_cli_lights_then_stereo(scene_with_sphere, tmp_path):
+    from typer.testing import CliRunner
+
+    from shadeform.cli import app
+    from shadeform.io.photoset import read_lp
+
+    folder, lights, obj = scene_with_sphere
+    runner = CliRunner()
+    lp = tmp_path / "lights.lp"
+    result = runner.invoke(app, ["lights", str(folder), "-o", str(lp), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    np.testing.assert_allclose(list(report["sphere"].values()), [200, 55, 50], atol=1.0)
+    names, directions = read_lp(lp)
+    assert names == [f"{i:02d}.png" for i in range(16)]
+    assert angles(directions, lights).max() < 1.0
+    # the light file, and the sphere read on the fly, give the same model
+    for extra in (["--lights", str(lp)], ["--sphere", "auto"]):
+        out = tmp_path / "m.ply"
+        normals = tmp_path / "n.png"
+        result = runner.invoke(
+            app, ["stereo", str(folder), "-o", str(out), "--normals", str(normals), *extra]
+        )
+        assert result.exit_code == 0, result.output
+        from shadeform.io.maps import load_normal_map
+
+        got = load_normal_map(normals)[130:250, 10:130]
+        inner = obj.mask & (obj.normals[..., 2] > 0.5)
+        assert np.nanmean(angles(got[inner], obj.normals[inner])) < 1.5
+        assert np.isnan(load_normal_map(normals)[55, 200]).all()  # the sphere is not the object
+    result = runner.invoke(app, ["stereo", str(folder), "-o", str(out), "--sphere", "1,2"])
+    assert result.exit_code == 2 and "X,Y,R" in result.output
+    result = runner.invoke(
+        app, ["stereo", str(folder), "-o", str(out), "--sphere", "auto", "--lights", str(lp)]
+    )
+    assert result.exit_code == 2 and "not both" in result.output
