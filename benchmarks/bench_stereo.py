@@ -124,8 +124,15 @@ def synthetic_rows(repeats):
     return rows, len(lights)
 
 
+#: The default method with the lights and their strengths unknown (read from the photos).
+UNKNOWN = "bivariate, unknown lights"
+
+
 def solve_set(photos, method, repeats):
-    """``timed`` photometric stereo of a loaded photo set with its calibrated lights."""
+    """``timed`` photometric stereo of a loaded photo set with its calibrated lights, or (the
+    method :data:`UNKNOWN`) with none."""
+    if method == UNKNOWN:
+        return timed(partial(photometric_stereo, photos.images, None, photos.mask), repeats)
     return timed(
         partial(
             photometric_stereo,
@@ -146,21 +153,26 @@ def real_rows(repeats):
 
     from shadeform.io.photoset import load_photo_set
 
-    rows = []
+    rows, light_errors = [], {}
     for name in OBJECTS:
         folder = REAL / name
         photos = load_photo_set([folder])
         truth = scipy.io.loadmat(folder / "Normal_gt.mat")["Normal_gt"]
-        for method in METHODS:
+        for method in (*METHODS, UNKNOWN):
             result, median, worst, peak = solve_set(photos, method, repeats)
             errors = angles(result.normals, truth, photos.mask)
+            if method == UNKNOWN:
+                given = photos.lights / np.linalg.norm(photos.lights, axis=1, keepdims=True)
+                light_errors[name] = float(
+                    np.median(angles(result.lights[None], given[None], np.ones((1, len(given)), bool)))
+                )
             holes = int(np.count_nonzero(~np.isfinite(result.normals[photos.mask][:, 0])))
             rows.append(
                 (name, method, float(np.nanmean(errors)), holes, len(result.photos_rescaled),
                  len(result.photos_dropped), median, worst, peak, int(photos.mask.sum()))
             )  # fmt: skip
             print(rows[-1], flush=True)
-    return rows
+    return rows, light_errors
 
 
 def ball_rows(repeats):
@@ -209,44 +221,47 @@ def main(argv=None) -> str:
         "",
     ]
     if REAL.is_dir():
-        rows = real_rows(args.repeats)
+        rows, light_errors = real_rows(args.repeats)
+        columns = (*METHODS, UNKNOWN)
         lines += [
             "## DiLiGenT, seven objects (8-bit crops, 96 calibrated photos each)",
             "",
-            'Mean angular error of the normals (degrees) over the mask; "holes": pixels of the mask '
+            'Mean angular error of the normals (degrees) over the mask; "unknown lights": the lights and '
+            "their strengths read from the photos (uncalibrated), with the median angle between those and "
+            'the calibrated lights; "holes": pixels of the mask '
             'without a normal; "rescaled" / "dropped": photos whose light strength was found '
             "wrong and corrected, or that nothing explained. Published: on the full-precision photos "
             "(DiLiGenT paper, Shi et al. TPAMI 2019).",
             "",
             "| object | "
-            + " | ".join(METHODS)
+            + " | ".join(columns)
             + " | "
             + " | ".join(f"published {k}" for k in PUBLISHED_OBJECTS)
-            + " | holes | rescaled / dropped | "
-            + " | ".join(f"{m} s (worst)" for m in METHODS)
+            + " | lights read, median error | holes | rescaled / dropped | "
+            + " | ".join(f"{m} s (worst)" for m in columns)
             + " |",
-            "|---|" + "---:|" * (2 * len(METHODS) + len(PUBLISHED_OBJECTS) + 2),
+            "|---|" + "---:|" * (2 * len(columns) + len(PUBLISHED_OBJECTS) + 3),
         ]
         table = {(name, method): row for row in rows for name, method in [row[:2]]}
-        means = {m: [] for m in METHODS}
+        means = {m: [] for m in columns}
         for name in OBJECTS:
             cells = []
-            for method in METHODS:
+            for method in columns:
                 means[method].append(table[name, method][2])
                 cells.append(f"{table[name, method][2]:.2f}")
             cells += [f"{PUBLISHED_OBJECTS[k][name]:.2f}" for k in PUBLISHED_OBJECTS]
-            holes = "/".join(str(table[name, m][3]) for m in METHODS)
+            holes = "/".join(str(table[name, m][3]) for m in columns)
             default = table[name, METHODS[0]]
-            cells += [holes, f"{default[4]} / {default[5]}"]
-            cells += [f"{table[name, m][6]:.2f} ({table[name, m][7]:.2f})" for m in METHODS]
+            cells += [f"{light_errors[name]:.1f}", holes, f"{default[4]} / {default[5]}"]
+            cells += [f"{table[name, m][6]:.2f} ({table[name, m][7]:.2f})" for m in columns]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
         lines.append(
             "| **mean** | "
-            + " | ".join(f"**{np.mean(means[m]):.2f}**" for m in METHODS)
+            + " | ".join(f"**{np.mean(means[m]):.2f}**" for m in columns)
             + " | "
             + " | ".join(f"{np.mean(list(PUBLISHED_OBJECTS[k].values())):.2f}" for k in PUBLISHED_OBJECTS)
-            + " | | |"
-            + " |" * len(METHODS)
+            + f" | {np.median(list(light_errors.values())):.1f} (median) | |"
+            + " |" * (len(columns) + 1)
         )
         peak = max(row[8] for row in rows)
         lines += [

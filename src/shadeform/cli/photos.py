@@ -217,6 +217,14 @@ def stereo(
             "centre column, row and radius in pixels, or auto to find it.",
         ),
     ] = None,
+    unknown_lights: Annotated[
+        bool,
+        typer.Option(
+            "--unknown-lights",
+            help="No light file and no sphere: read the lights from the object's own shading "
+            "(uncalibrated; far less accurate than known lights).",
+        ),
+    ] = False,
     method: Annotated[
         str,
         typer.Option(
@@ -257,7 +265,9 @@ def stereo(
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        circle = parse_sphere(sphere) if sphere is not None else None
+        if unknown_lights and (sphere is not None or lights is not None):
+            raise InputError("give --unknown-lights alone: not with --lights or --sphere")
+        circle = "unknown" if unknown_lights else parse_sphere(sphere) if sphere is not None else None
         with stage(err, "loading the photos", timings, "load"):
             photos = load_photo_set(
                 sources,

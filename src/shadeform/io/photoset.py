@@ -38,8 +38,8 @@ class PhotoSet:
     images : (N, H, W, 3) or (N, H, W) float32
         The photos, linear, in [0, 1]: all three channels (gray photos repeated in each), or the
         one channel asked for.
-    lights : (N, 3) float64
-        Direction toward each photo's light, as written in the file.
+    lights : (N, 3) float64 or None
+        Direction toward each photo's light, as written in the file (None: unknown).
     intensities : (N,) or (N, 3) float64 or None
         Each photo's light strength, if a file gave them; None also when one channel was asked
         for and the strengths were per channel (``R G B``): the photos were divided by them first.
@@ -109,11 +109,13 @@ def load_photo_set(
         None or ``"auto"``: keep the colour (photometric stereo solves colour photos on all three
         channels). Otherwise that one channel (:func:`shadeform.io.images.select_channel`), taken
         after dividing by per-channel light strengths.
-    sphere : "auto" or (3,) array_like, optional
+    sphere : "auto", "unknown" or (3,) array_like, optional
         Read the lights and their relative strengths from a shiny sphere in the photos
         (:func:`shadeform.light.sphere.calibrate_lights`): ``"auto"`` finds it, or its circle
-        ``(column, row, radius)``. Not with ``lights`` or ``intensities``; a folder's light files
-        are then ignored, and its mask (or the caller's) is kept.
+        ``(column, row, radius)``; ``"unknown"``: no light file and no sphere, the lights are left
+        to the photometric stereo (``lights`` is then None). Not with ``lights`` or
+        ``intensities``; a folder's light files are then ignored, and its mask (or the caller's)
+        is kept.
 
     Returns
     -------
@@ -150,7 +152,7 @@ def load_photo_set(
     images, bits, encoding, read_from, colour = read_photos(photos, linear=linear)
     decided = read_from if linear is None else decided
     circle = None
-    if sphere is not None:
+    if sphere is not None and not (isinstance(sphere, str) and sphere == "unknown"):
         from shadeform.light.sphere import calibrate_lights
 
         found = calibrate_lights(

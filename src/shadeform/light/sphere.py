@@ -103,7 +103,10 @@ def calibrate_lights(photos, *, sphere=None) -> LightCalibration:
     if sphere is None:
         circle = find_sphere(stack)
     else:
-        circle = np.asarray(sphere, dtype=np.float64).reshape(-1)
+        try:
+            circle = np.asarray(sphere, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            circle = np.zeros(0)
         if circle.shape != (3,) or not np.isfinite(circle).all() or circle[2] <= 1:
             raise InputError(
                 "the sphere must be given as X,Y,R: its centre column and row and its radius in pixels"

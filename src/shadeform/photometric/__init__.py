@@ -120,6 +120,8 @@ CHUNK = 1 << 15
 FAULTY = 3.0
 #: Object pixels (evenly spaced) the search for contradicting photos fits: enough for a median.
 SAMPLE = 4096
+#: Object pixels (a regular grid of them) from which unknown lights are read.
+UNCALIBRATED_PIXELS = 1 << 17
 #: A photo whose typical residual is under this share of the albedo agrees with the others,
 #: whatever theirs are (a noise-free set's residuals are rounding, and their ratios mean nothing).
 AGREE = 0.01
@@ -153,6 +155,8 @@ class PhotometricStereo:
     photos_rescaled : tuple of (int, float)
         Photos whose light was brighter (factor > 1) or dimmer than the given strength said, and
         the factor their readings were divided by.
+    lights : (N, 3) float64 or None
+        The light directions read from the photos when none were given (``lights=None``).
     """
 
     normals: np.ndarray
@@ -162,11 +166,12 @@ class PhotometricStereo:
     confidence: np.ndarray
     photos_dropped: tuple[int, ...] = ()
     photos_rescaled: tuple[tuple[int, float], ...] = ()
+    lights: np.ndarray | None = None
 
 
 def photometric_stereo(
     images,
-    lights,
+    lights=None,
     mask=None,
     *,
     intensities=None,
@@ -181,9 +186,10 @@ def photometric_stereo(
     ----------
     images : (N, H, W) or (N, H, W, C) array_like
         ``N >= 3`` photos, linear intensities (not gamma-encoded), same camera and object.
-    lights : (N, 3) array_like
+    lights : (N, 3) array_like, optional
         Direction toward each photo's light in the camera frame (``docs/conventions.md``: x right,
-        y up, z toward the viewer); normalised here.
+        y up, z toward the viewer); normalised here. None: unknown, read from the photos
+        (:mod:`.uncalibrated`, at least four photos; far less accurate than known lights).
     mask : (H, W) array_like of bool, optional
         Object pixels. Default: every pixel that is non-zero in some photo.
     intensities : (N,) or (N, C) array_like, optional
@@ -246,7 +252,7 @@ def photometric_stereo(
     h, w = mask.shape
     channels = stack.shape[3] if stack.ndim == 4 else 0
     where = np.flatnonzero(mask)
-    flat = stack.reshape(len(lights), h * w, -1)
+    flat = stack.reshape(len(stack), h * w, -1)
 
     def readings_of(pixels, photos=slice(None)):
         """The object's readings at ``pixels``, divided by the lights' strengths: (N, P, C or 1)."""
@@ -256,6 +262,17 @@ def photometric_stereo(
         return values
 
     highlight_cos = np.cos(np.radians(highlight_angle))
+    estimated = lights is None
+    if estimated:
+        from shadeform.photometric.uncalibrated import estimate_lights
+
+        # the lights are global: a grid of at most UNCALIBRATED_PIXELS object pixels reads them
+        stride = max(1, int(np.ceil(np.sqrt(where.size / UNCALIBRATED_PIXELS))))
+        coarse = np.zeros_like(mask)
+        coarse[::stride, ::stride] = mask[::stride, ::stride]
+        small = coarse[::stride, ::stride]
+        lights, found = estimate_lights(readings_of(np.flatnonzero(coarse)).mean(axis=2), small)
+        scale = scale * found[:, None]
 
     fit = _fit_function(method)
 
@@ -331,6 +348,7 @@ def photometric_stereo(
         photos_rescaled=tuple(
             (int(i), float(factors[i])) for i in np.flatnonzero(np.isfinite(factors) & (factors != 1.0))
         ),
+        lights=lights if estimated else None,
     )
 
 
@@ -439,7 +457,7 @@ def _fill(g, mask, where, pixels, outer, moment):
 def _check(images, lights, mask, intensities):
     try:
         stack = np.asarray(images)  # kept as given: only the object's readings are converted
-        lights = np.asarray(lights, dtype=np.float64)
+        lights = None if lights is None else np.asarray(lights, dtype=np.float64)
     except (TypeError, ValueError):
         stack = None
     if stack is None or not (
@@ -457,19 +475,22 @@ def _check(images, lights, mask, intensities):
     count = stack.shape[0]
     if count < 3:
         raise InputError(f"photometric stereo needs at least 3 photos under different lights, got {count}")
-    if lights.shape != (count, 3):
+    if lights is None:
+        pass  # read from the photos once the mask is known
+    elif lights.shape != (count, 3):
         raise InputError(f"lights must be (N, 3) with N = {count} (one per photo), got shape {lights.shape}")
-    if not np.isfinite(lights).all():
+    elif not np.isfinite(lights).all():
         raise InputError("lights contain NaN or inf; give a direction toward each photo's light")
-    lengths = np.linalg.norm(lights, axis=1)
-    if (lengths == 0).any():
-        raise InputError(f"light {int(np.argmin(lengths)) + 1} is the zero vector; give a direction")
-    lights = lights / lengths[:, None]
-    if np.linalg.matrix_rank(lights, tol=1e-3) < 3:
-        raise InputError(
-            "the lights all lie in one plane, so they cannot fix a normal; photograph "
-            "the object under lights from at least three non-coplanar directions"
-        )
+    if lights is not None:
+        lengths = np.linalg.norm(lights, axis=1)
+        if (lengths == 0).any():
+            raise InputError(f"light {int(np.argmin(lengths)) + 1} is the zero vector; give a direction")
+        lights = lights / lengths[:, None]
+        if np.linalg.matrix_rank(lights, tol=1e-3) < 3:
+            raise InputError(
+                "the lights all lie in one plane, so they cannot fix a normal; photograph "
+                "the object under lights from at least three non-coplanar directions"
+            )
     scale = np.ones((count, 1))
     if intensities is not None:
         strength = np.asarray(intensities, dtype=np.float64)
@@ -493,7 +514,7 @@ def _check(images, lights, mask, intensities):
 
 def reconstruct_stereo(
     images,
-    lights,
+    lights=None,
     mask=None,
     *,
     intensities=None,
@@ -507,7 +528,7 @@ def reconstruct_stereo(
     Parameters
     ----------
     images, lights, intensities, method
-        As for :func:`photometric_stereo`.
+        As for :func:`photometric_stereo` (``lights=None``: read from the photos).
     mask : (H, W) array_like of bool, optional
         Object pixels. Default: found in the brightest reading of each pixel over the photos, as
         :func:`shadeform.preprocess.object_mask` finds an object on a dark background.
@@ -560,7 +581,7 @@ def reconstruct_stereo(
     normals_time = time.perf_counter()
     depth = integrate(result.normals, solved, method=integrator)
     done = time.perf_counter()
-    directions = np.asarray(lights, dtype=np.float64)
+    directions = np.asarray(result.lights if lights is None else lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
     albedo = result.albedo if result.albedo.ndim == 2 else result.albedo.mean(axis=2)
     return Reconstruction(
@@ -576,6 +597,7 @@ def reconstruct_stereo(
             "lights_used": float(np.median(result.lights_used[solved])),
             "photos_rescaled": [[i, round(f, 4)] for i, f in result.photos_rescaled],
             "photos_dropped": list(result.photos_dropped),
+            "lights": "read from the photos" if lights is None else "given",
             "timings": {"normals": normals_time - start, "depth": done - normals_time},
         },
         confidence=np.where(solved, result.confidence, np.nan),
