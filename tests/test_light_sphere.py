@@ -188,6 +188,19 @@ def test_cli_lights_then_stereo(scene_with_sphere, tmp_path):
         inner = obj.mask & (obj.normals[..., 2] > 0.5)
         assert np.nanmean(angles(got[inner], obj.normals[inner])) < 1.5
         assert np.isnan(load_normal_map(normals)[55, 200]).all()  # the sphere is not the object
+    # the albedo and confidence maps, written with the mesh
+    albedo, confidence = tmp_path / "albedo.png", tmp_path / "confidence.png"
+    args = ["stereo", str(folder), "-o", str(out), "--lights", str(lp), "--albedo", str(albedo)]
+    result = runner.invoke(app, [*args, "--confidence", str(confidence)])
+    assert result.exit_code == 0, result.output
+    albedo_map, confidence_map = (
+        np.asarray(Image.open(p), dtype=np.float64) / 65535 for p in (albedo, confidence)
+    )
+    on_object = obj.mask & (obj.normals[..., 2] > 0.5)
+    assert np.median(albedo_map[130:250, 10:130][on_object]) > 0.9  # uniform albedo: near the white point
+    assert np.median(confidence_map[130:250, 10:130][on_object]) > 0.5 and confidence_map[0, 0] == 0
+    result = runner.invoke(app, [*args[:-1], str(tmp_path / "albedo.jpg")])
+    assert result.exit_code == 2 and ".png" in result.output
     result = runner.invoke(app, ["stereo", str(folder), "-o", str(out), "--sphere", "1,2"])
     assert result.exit_code == 2 and "X,Y,R" in result.output
     result = runner.invoke(

@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -247,6 +248,14 @@ def stereo(
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    albedo: Annotated[
+        Path | None,
+        typer.Option(help="Also write the albedo (16-bit grey .png, linear, its 99.5th percentile white)."),
+    ] = None,
+    confidence: Annotated[
+        Path | None,
+        typer.Option(help="Also write each normal's confidence (16-bit grey .png, 0 to 1)."),
+    ] = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
     ] = False,
@@ -258,13 +267,16 @@ def stereo(
 
     # everything the user typed is checked before the photos are read
     check_outputs(output, depth, normals)
+    for path, what in ((albedo, "an albedo map to"), (confidence, "a confidence map to")):
+        if path is not None:
+            check_suffix(path, (".png",), what)
     check_choice(method, METHODS, "method")
     check_choice(integrator, tuple(available_integrators()), "integrator")
     err = stderr_console()
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with OutputSet() as outputs:
-        temps = output_temps(outputs, output, depth, normals)
+        temps = output_temps(outputs, output, depth, normals, albedo, confidence)
         if unknown_lights and (sphere is not None or lights is not None):
             raise InputError("give --unknown-lights alone: not with --lights or --sphere")
         circle = "unknown" if unknown_lights else parse_sphere(sphere) if sphere is not None else None
@@ -289,9 +301,12 @@ def stereo(
                 sphere=photos.sphere,
             )
         rec = replace(rec, info={**rec.info, "photo": photos.info})
+        maps = _stereo_maps(rec, temps, albedo, confidence)
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
+        written += maps
+        report["files"].update(albedo=albedo, confidence=confidence)
     timings["total"] = time.perf_counter() - total
 
     height, width = rec.shape
@@ -328,6 +343,23 @@ def stereo(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def _stereo_maps(rec, temps, albedo, confidence):
+    """Write the albedo and confidence maps asked for to their temporaries (committed with the
+    mesh); the (file, description) rows to print."""
+    from shadeform.io.maps import save_gray
+
+    rows = []
+    if albedo is not None:
+        values = np.where(rec.mask, rec.albedo, 0.0)
+        top = float(np.percentile(values[rec.mask], 99.5)) if rec.mask.any() else 0.0
+        save_gray(values / top if top > 0 else values, temps[albedo])
+        rows.append((albedo, f"albedo, 16-bit, linear, white = {top:.4g} (99.5th percentile)"))
+    if confidence is not None:
+        save_gray(np.nan_to_num(rec.confidence), temps[confidence])
+        rows.append((confidence, "confidence of each normal, 16-bit, 0 to 1"))
+    return rows
 
 
 def parse_sphere(text: str):
