@@ -285,10 +285,10 @@ def photometric_stereo(
     if _REGISTRY[method].drops_photos and len(lights) > 3:
         sample = where[np.linspace(0, where.size - 1, min(where.size, SAMPLE)).astype(np.int64)]
         gray = readings_of(sample).mean(axis=2)
-        start, usable = lambertian.robust(
+        first, usable = lambertian.robust(
             lights, gray, min_shading=min_shading, highlight_cos=highlight_cos, iterations=int(iterations)
         )
-        factors = _audit(lights, gray, start, usable)
+        factors = _audit(lights, gray, first, usable)
         kept = np.flatnonzero(np.isfinite(factors))
         scale = scale * np.where(np.isfinite(factors), factors, 1.0)[:, None]
     use = lights[kept]
@@ -307,13 +307,8 @@ def photometric_stereo(
         lost = ~(np.isfinite(length) & (length > 0))
         if lost.any():
             lit = (gray[:, lost] > 0).astype(np.float64)
-            holes.append(
-                (
-                    np.arange(start, start + gray.shape[1])[lost],
-                    lambertian.outer(lit, use),
-                    (lit * gray[:, lost]).T @ use,
-                )
-            )
+            pixels = np.arange(start, start + gray.shape[1])[lost]
+            holes.append((pixels, lambertian.outer(lit, use), (lit * gray[:, lost]).T @ use))
             usable[:, lost] = lit > 0
         normals[part] = g
         albedo[part] = _albedo(g, usable, use, readings) if channels else length[:, None]
