@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -207,3 +208,50 @@ def test_cli_lights_then_stereo(scene_with_sphere, tmp_path):
         app, ["stereo", str(folder), "-o", str(out), "--sphere", "auto", "--lights", str(lp)]
     )
     assert result.exit_code == 2 and "not both" in result.output
+
+
+@pytest.mark.parametrize(
+    ("case", "match"),
+    [
+        ("sizes", "is 40x32 but"),
+        ("two photos", "at least 3 photos"),
+        ("count", "must have 4 rows"),
+        ("horizon", "below the horizon"),
+        ("no sphere", "no shiny sphere found|blank"),
+        ("lp count", "does not match its own count"),
+    ],
+)
+def test_cli_bad_input_is_one_line(tmp_path, case, match):
+    """The issue's list of bad input for several photos: one line, exit code 2."""
+    from typer.testing import CliRunner
+
+    from shadeform.cli import app
+
+    sphere = synth.scene("sphere", size=32)
+    lights = np.array([light_from_slant_tilt(25, t) for t in (0, 90, 180, 270)])
+    paths = []
+    for i, light in enumerate(lights):
+        image = synth.render(sphere.normals, sphere.mask, light=light)
+        paths.append(tmp_path / f"{i}.png")
+        Image.fromarray((image * 65535).astype(np.uint16)).save(paths[-1])
+    light_file = tmp_path / "lights.txt"
+    np.savetxt(light_file, lights)
+    command = ["stereo", *map(str, paths), "--lights", str(light_file), "-o", str(tmp_path / "m.ply")]
+    if case == "sizes":
+        Image.fromarray(np.zeros((32, 40), np.uint16)).save(paths[2])
+    elif case == "two photos":
+        command = ["stereo", *map(str, paths[:2]), "--lights", str(light_file), "-o", str(tmp_path / "m.ply")]
+    elif case == "count":
+        np.savetxt(light_file, lights[:3])
+    elif case == "horizon":
+        np.savetxt(light_file, np.vstack([lights[:3], [0.5, 0.0, -0.3]]))
+    elif case == "no sphere":
+        command = ["lights", *map(str, paths), "-o", str(tmp_path / "l.lp")]
+        for path in paths:
+            Image.fromarray(np.full((32, 32), 9000, np.uint16)).save(path)
+    elif case == "lp count":
+        (tmp_path / "l.lp").write_text("5\n0.png 0 0 1\n")
+        command[command.index(str(light_file))] = str(tmp_path / "l.lp")
+    result = CliRunner().invoke(app, command)
+    assert result.exit_code == 2, result.output
+    assert re.search(match, result.output) and len(result.output.strip().splitlines()) == 1, result.output

@@ -331,6 +331,7 @@ class TestPhotometricStereoErrors:
                 "one plane",
             ),
             (lambda i, l, m: (i, np.vstack([l[:3], [0, 0, 0]]), m), "zero vector"),
+            (lambda i, l, m: (i, np.vstack([l[:3], [0.3, 0.1, -0.2]]), m), "light 4 is below the horizon"),
             (lambda i, l, m: (i, np.where(l > 0.5, np.nan, l), m), "NaN or inf"),
             (lambda i, l, m: (np.where(i > 0, np.inf, i), l, m), "finite intensities"),
             (lambda i, l, m: (i, l, m[:4]), "mask has shape"),

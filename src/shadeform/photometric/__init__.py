@@ -481,6 +481,13 @@ def _check(images, lights, mask, intensities):
         if (lengths == 0).any():
             raise InputError(f"light {int(np.argmin(lengths)) + 1} is the zero vector; give a direction")
         lights = lights / lengths[:, None]
+        if (lights[:, 2] <= 0).any():
+            below = int(np.argmax(lights[:, 2] <= 0))
+            raise InputError(
+                f"light {below + 1} is below the horizon (z = {lights[below, 2]:.3g}: it lights the "
+                "object from behind as the camera sees it); give each direction toward its light "
+                "with z > 0 (x right, y up, z toward the camera)"
+            )
         if np.linalg.matrix_rank(lights, tol=1e-3) < 3:
             raise InputError(
                 "the lights all lie in one plane, so they cannot fix a normal; photograph "
