@@ -163,9 +163,8 @@ def real_rows(repeats):
             errors = angles(result.normals, truth, photos.mask)
             if method == UNKNOWN:
                 given = photos.lights / np.linalg.norm(photos.lights, axis=1, keepdims=True)
-                light_errors[name] = float(
-                    np.median(angles(result.lights[None], given[None], np.ones((1, len(given)), bool)))
-                )
+                cosines = np.clip(np.sum(result.lights * given, axis=1), -1, 1)
+                light_errors[name] = float(np.median(np.degrees(np.arccos(cosines))))
             holes = int(np.count_nonzero(~np.isfinite(result.normals[photos.mask][:, 0])))
             rows.append(
                 (name, method, float(np.nanmean(errors)), holes, len(result.photos_rescaled),

@@ -22,6 +22,18 @@ def angles(a, b):
     return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
 
 
+def four_photos(folder, *, size, prefix=""):
+    """A Lambertian sphere under four lights at 25 degrees, as 16-bit PNGs: (paths, lights)."""
+    sphere = synth.scene("sphere", size=size)
+    lights = np.array([light_from_slant_tilt(25, t) for t in (0, 90, 180, 270)])
+    paths = []
+    for i, light in enumerate(lights):
+        image = synth.render(sphere.normals, sphere.mask, light=light)
+        paths.append(folder / f"{prefix}{i}.png")
+        Image.fromarray((image * 65535).astype(np.uint16)).save(paths[-1])
+    return paths, lights
+
+
 @pytest.fixture(scope="module")
 def rig():
     """Thirty lights of random strength over a chrome sphere on a matte table, 0.5 % noise."""
@@ -129,13 +141,7 @@ class TestLightFiles:
     def test_photo_set_takes_an_lp_file_in_any_order(self, tmp_path):
         from shadeform.io.photoset import load_photo_set, write_lights
 
-        sphere = synth.scene("sphere", size=48)
-        lights = np.array([light_from_slant_tilt(25, t) for t in (0, 90, 180, 270)])
-        paths = []
-        for i, light in enumerate(lights):
-            image = synth.render(sphere.normals, sphere.mask, light=light)
-            paths.append(tmp_path / f"p{i}.png")
-            Image.fromarray((image * 65535).astype(np.uint16)).save(paths[-1])
+        paths, lights = four_photos(tmp_path, size=48, prefix="p")
         order = [2, 0, 3, 1]
         write_lights(tmp_path / "l.lp", lights[order], names=[paths[i].name for i in order])
         photos = load_photo_set(paths, lights=tmp_path / "l.lp")
@@ -227,13 +233,7 @@ def test_cli_bad_input_is_one_line(tmp_path, case, match):
 
     from shadeform.cli import app
 
-    sphere = synth.scene("sphere", size=32)
-    lights = np.array([light_from_slant_tilt(25, t) for t in (0, 90, 180, 270)])
-    paths = []
-    for i, light in enumerate(lights):
-        image = synth.render(sphere.normals, sphere.mask, light=light)
-        paths.append(tmp_path / f"{i}.png")
-        Image.fromarray((image * 65535).astype(np.uint16)).save(paths[-1])
+    paths, lights = four_photos(tmp_path, size=32)
     light_file = tmp_path / "lights.txt"
     np.savetxt(light_file, lights)
     command = ["stereo", *map(str, paths), "--lights", str(light_file), "-o", str(tmp_path / "m.ply")]

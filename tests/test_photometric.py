@@ -227,7 +227,7 @@ class TestBivariate:
         assert bivariate.mean() < 1.5 and robust.mean() > 3 * bivariate.mean()  # 1.25 and 5.5 measured
 
     def test_compiled_search_matches_the_reference(self, sphere, lights):
-        from shadeform.photometric import bivariate
+        from shadeform.photometric import bivariate, lambertian
 
         images = photos(sphere, lights, albedo=0.5, specular=0.4, shininess=30, noise=0.01, seed=2)
         rows, cols = np.nonzero(sphere.mask)
@@ -236,7 +236,7 @@ class TestBivariate:
         start = sphere.normals[rows[pick], cols[pick]] + 0.05  # off the truth, so the search moves
         start /= np.linalg.norm(start, axis=1, keepdims=True)
         normals, brightness, weights = bivariate._refine(
-            start, readings, lights, bivariate._half_vectors(lights)
+            start, readings, lights, lambertian.half_vectors(lights)
         )
         for p in range(len(pick)):
             n, f1, w = bivariate.search_reference(start[p], lights, readings[:, p])
@@ -246,7 +246,7 @@ class TestBivariate:
         # and the model's non-negative least squares at one normal, term by term
         work = np.empty((6, 25))
         fit = bivariate._model_fit(
-            *start[0], lights, bivariate._half_vectors(lights), readings[:, 0], weights[:, 0], work
+            *start[0], lights, lambertian.half_vectors(lights), readings[:, 0], weights[:, 0], work
         )
         reference, coefficients = bivariate.model_fit_reference(
             start[0], lights, readings[:, 0], weights[:, 0]

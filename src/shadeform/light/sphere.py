@@ -31,6 +31,8 @@ import numpy as np
 
 from shadeform.errors import InputError
 
+#: The constants below were set once (round values), not swept; the rendered spheres of the tests
+#: and DiLiGenT's ball are what they were checked on.
 #: The sphere search runs on a copy of the photos' mean at most this many pixels across.
 SEARCH_SIZE = 512
 #: Share of the radius left out at the sphere's rim when looking for the highlight.

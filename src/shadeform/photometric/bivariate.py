@@ -96,7 +96,7 @@ def fit(lights, readings, *, min_shading, highlight_cos, iterations):
     lit = (lights @ start.T > 0) & (readings > 0)
     modelled = solved & (lit.sum(axis=0) >= READINGS_PER_UNKNOWN * (POWERS + LOBES + 2))
     normals, brightness, weights = _refine(
-        start[modelled], np.ascontiguousarray(readings[:, modelled]), lights, _half_vectors(lights)
+        start[modelled], np.ascontiguousarray(readings[:, modelled]), lights, lambertian.half_vectors(lights)
     )
     result = g.copy()  # where the model is not fitted: the robust Lambertian g
     # a fit whose diffuse part is not positive keeps the Lambertian albedo
@@ -104,11 +104,6 @@ def fit(lights, readings, *, min_shading, highlight_cos, iterations):
     result[modelled] = normals * albedo[:, None]
     usable[:, modelled] = (weights > 0) & (lights @ normals.T > 0)
     return result, usable
-
-
-def _half_vectors(lights):
-    half = lights + np.array([0.0, 0.0, 1.0])
-    return half / np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-12)
 
 
 def _basis(n, light, half):
@@ -128,7 +123,7 @@ def model_fit_reference(n, lights, values, weights):
     kernel is tested against it."""
     from scipy.optimize import lsq_linear
 
-    half = _half_vectors(lights)
+    half = lambertian.half_vectors(lights)
     basis = np.array([_basis(n, light, h) for light, h in zip(lights, half)])
     lit = basis.any(axis=1)
     ridge = np.r_[[1e-12] * POWERS, [RIDGE + 1e-12] * LOBES]
@@ -147,7 +142,7 @@ def search_reference(n, lights, values):
     correct: the compiled search is tested against it): the unit normal (3,), ``f(1)`` and the
     final weights (N,) from the unit start ``n``."""
     n = np.asarray(n, dtype=np.float64)
-    half = _half_vectors(lights)
+    half = lambertian.half_vectors(lights)
     weights = np.ones(len(values))
     for round_ in range(ROUNDS):
         _, coefficients = model_fit_reference(n, lights, values, weights)
@@ -374,21 +369,28 @@ def _search_pixel(n, lights, half, values, weights, residuals, lit, work):
     return 0.5 * (coefficients[0] + coefficients[1])  # f(1)
 
 
+#: Pixels a thread takes at once in :func:`_refine_kernel`.
+_BLOCK = 256
+
+
 @numba.njit(cache=True, parallel=True)
 def _refine_kernel(normals, readings, lights, half, brightness, weights):
     """:func:`_search_pixel` over the pixels (columns of ``readings``), each independent of the
     others (the result does not depend on the number of threads)."""
     count, pixels = readings.shape
     size = POWERS + LOBES
-    for p in prange(pixels):
+    blocks = (pixels + _BLOCK - 1) // _BLOCK
+    for block in prange(blocks):
+        # scratch space once per block of pixels, not once per pixel
         work = np.empty((6, size * size))
-        residuals = np.empty(count)
-        values = readings[:, p].copy()
-        column = np.empty(count)
-        n = normals[p].copy()
-        brightness[p] = _search_pixel(n, lights, half, values, column, residuals, np.empty(count), work)
-        normals[p] = n
-        weights[:, p] = column
+        residuals, lit, values, column = np.empty(count), np.empty(count), np.empty(count), np.empty(count)
+        n = np.empty(3)
+        for p in range(block * _BLOCK, min(pixels, (block + 1) * _BLOCK)):
+            values[:] = readings[:, p]
+            n[:] = normals[p]
+            brightness[p] = _search_pixel(n, lights, half, values, column, residuals, lit, work)
+            normals[p] = n
+            weights[:, p] = column
 
 
 def _refine(start, readings, lights, half):

@@ -55,9 +55,8 @@ def robust(lights, readings, *, min_shading, highlight_cos, iterations):
     # pixels whose middle readings do not span 3-D start from all of their lit readings
     lost = ~np.isfinite(g[:, 0])
     if lost.any():
-        g[lost], usable[:, lost] = fit(lights, readings[:, lost], (readings[:, lost] > 0).astype(np.float64))
-    half = lights + np.array([0.0, 0.0, 1.0])
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
+        g[lost], usable[:, lost] = fit(lights, readings[:, lost], lit[:, lost].astype(np.float64))
+    half = half_vectors(lights)
     for _ in range(iterations):
         solved = np.isfinite(g[:, 0])
         n = np.where(solved[:, None], g, 0.0)
@@ -78,6 +77,12 @@ def robust(lights, readings, *, min_shading, highlight_cos, iterations):
     shadowed = np.any(usable & (lights @ np.nan_to_num(g).T <= 0), axis=0)
     g[shadowed] = np.nan
     return g, usable
+
+
+def half_vectors(lights):
+    """(N, 3) unit half vectors between each light (N, 3) and the viewer ``v = (0, 0, 1)``."""
+    half = lights + np.array([0.0, 0.0, 1.0])
+    return half / np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-12)
 
 
 def outer(weights, lights):

@@ -39,10 +39,8 @@ from __future__ import annotations
 import numpy as np
 
 from shadeform.errors import InputError
+from shadeform.photometric.lambertian import DROP_BRIGHT, DROP_DARK  # the readings left out
 
-#: Fractions of each pixel's darkest and brightest readings the factorisation leaves out (those of
-#: the robust Lambertian start, :data:`shadeform.photometric.lambertian.DROP_DARK`).
-DROP_DARK, DROP_BRIGHT = 0.3, 0.2
 #: Alternating least-squares rounds of the factorisation.
 ROUNDS = 10
 #: The bas-relief transform's depths (log-spaced) and slopes on the grid the search starts from,
