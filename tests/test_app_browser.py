@@ -813,3 +813,123 @@ def test_unsure_areas_are_outlined_and_one_click_marks_them_concave(page):
         marked = area["axis"] == "y" and area["polygon"] == neck["polygon"]
         assert page.locator("#unsure li button").nth(i).is_enabled() == (not marked)
     page.screenshot(path=str(ARTIFACTS / "unsure-marked.png"))
+
+
+# --------------------------------------------------------------------- photo sets
+
+
+def srgb8(linear: float) -> float:
+    linear = min(max(linear, 0.0), 1.0)
+    encoded = 12.92 * linear if linear <= 0.0031308 else 1.055 * linear ** (1 / 2.4) - 0.055
+    return 255 * encoded
+
+
+def stereo(page, what: str):
+    return page.evaluate(f"window.shadeform.stereo.{what}")
+
+
+def wait_for_stereo(page, after: int) -> None:
+    page.wait_for_function(
+        f"window.shadeform.stereo.applied() > {after} || window.shadeform.stereo.error() !== null",
+        timeout=FIRST_RESULT_MS,
+    )
+    assert stereo(page, "error()") is None, stereo(page, "error()")
+
+
+def relit_matches_the_maps(page, row: int, col: int) -> None:
+    """The pane's pixel is the albedo times the cosine to the user's light, sRGB-encoded."""
+    maps = stereo(page, f"mapsAt({row}, {col})")
+    light = np.array(stereo(page, "light()"))
+    shade = max(0.0, float(np.dot(maps["normal"], light)))
+    expected = [srgb8(a * shade) for a in maps["albedo"]]
+    np.testing.assert_allclose(stereo(page, f"shownAt({row}, {col})"), expected, atol=2.5)
+
+
+def test_photo_set_relights_live_under_a_dragged_light_and_exports(page, tmp_path):
+    page.click("#examples-menu > button")
+    page.click('#examples-menu [data-photo-set="stereo:vase"]')
+    wait_for_stereo(page, 0)
+    assert page.evaluate("document.body.classList.contains('stereo-mode')")
+    assert page.is_visible("#stereo-group") and not page.is_visible("#mask-group")
+    assert stereo(page, "info().count") == 12 and "12 lights from the light file" in stereo(page, "note()")
+    result = stereo(page, "lastResult()")
+    assert len(shown_mesh(page).vertices) == result["vertex_count"]
+    # the vase's left and right flanks at mid height; the light the pane starts with
+    row = 150
+    on = [col for col in range(256) if stereo(page, f"mapsAt({row}, {col})")]
+    left, right = on[3], on[-4]
+    page.wait_for_timeout(100)  # one animation frame
+    for col in (left, right, (left + right) // 2):
+        relit_matches_the_maps(page, row, col)
+    # drag the light far to the left over the image: the left flank lights up, the right goes dark
+    start = stereo(page, f"pagePoint({row}, {(left + right) // 2})")
+    end = stereo(page, f"pagePoint({row}, 0)")
+    page.mouse.move(start["x"], start["y"])
+    page.mouse.down()
+    page.mouse.move(end["x"], end["y"], steps=5)
+    page.mouse.up()
+    page.wait_for_timeout(100)
+    light = stereo(page, "light()")
+    assert light[0] < -0.9 and abs(light[1]) < 0.3 and light[2] > 0
+    for col in (left, right):
+        relit_matches_the_maps(page, row, col)
+    assert (
+        sum(stereo(page, f"shownAt({row}, {left})")) > 3 * 100 > sum(stereo(page, f"shownAt({row}, {right})"))
+    )
+    # the normals view shows (n + 1) / 2
+    page.click('#stereo-show [data-show="normals"]')
+    page.wait_for_timeout(100)
+    normal = np.array(stereo(page, f"mapsAt({row}, {left})")["normal"])
+    np.testing.assert_allclose(stereo(page, f"shownAt({row}, {left})"), (normal + 1) / 2 * 255, atol=1.5)
+    # the photos themselves: photo 4's light is the fourth of the set
+    page.click('#stereo-show [data-show="photo"]')
+    page.wait_for_function("document.getElementById('stereo-photo-out').textContent === '1 / 12'")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.click('#stereo-show [data-show="relight"]')
+    page.screenshot(path=str(ARTIFACTS / "app-photo-set.png"))
+    # export: the mesh on screen, as a file
+    path = download(page, '#export-menu [data-format=".obj"]', "#export-menu", tmp_path)
+    assert path.name == "stereo_vase.obj"
+    vertices = sum(1 for line in path.read_text().splitlines() if line.startswith("v "))
+    assert vertices == result["vertex_count"]
+
+
+def test_photos_opened_with_their_light_file_and_errors_that_stay(page, tmp_path):
+    from PIL import Image
+
+    from shadeform import synth
+    from shadeform.light import light_from_slant_tilt
+
+    scene = synth.scene("sphere", size=96)
+    lights = np.array([light_from_slant_tilt(30, t) for t in range(0, 360, 60)])
+    files = []
+    for i, light in enumerate(lights):
+        image = synth.render(scene.normals, scene.mask, light=light, albedo=0.8)
+        files.append(tmp_path / f"shot{i + 1}.png")
+        Image.fromarray(np.rint(image * 65535).astype(np.uint16)).save(files[-1])
+    light_file = tmp_path / "lights.txt"
+    light_file.write_text("\n".join(" ".join(f"{v:.8f}" for v in row) for row in lights))
+    # too few photos: said at once, nothing sent
+    page.set_input_files("#file-photos", [str(p) for p in files[:2]])
+    page.wait_for_selector("#toast:not([hidden])")
+    assert "at least 3 photos" in page.inner_text("#toast")
+    page.set_input_files("#file-photos", [str(p) for p in files] + [str(light_file)])
+    wait_for_stereo(page, 0)
+    result = stereo(page, "lastResult()")
+    np.testing.assert_allclose(result["lights"], lights, atol=1e-6)
+    normal = np.array(stereo(page, "mapsAt(48, 48)")["normal"])
+    assert np.degrees(np.arccos(min(1.0, normal[2]))) < 2  # the sphere's centre faces the camera
+    # the same photos without the light file: unknown lights; asking for the file says why not,
+    # and the message stays
+    page.set_input_files("#file-photos", [str(p) for p in files])
+    wait_for_stereo(page, 1)
+    assert stereo(page, "params().lights") == "unknown"
+    page.click('#stereo-lights [data-lights="file"]')
+    page.wait_for_timeout(300)
+    assert "without a light file" in stereo(page, "error()")
+    assert page.get_attribute("#stereo-error", "role") == "alert" and page.is_visible("#stereo-error")
+    # one photo again: back to the one-photo app, the photo-set panel gone
+    page.set_input_files("#file-image", str(files[0]))
+    page.wait_for_function("window.shadeform.state().image !== null", timeout=RESULT_MS)
+    assert not page.evaluate("document.body.classList.contains('stereo-mode')")
+    assert page.is_visible("#mask-group") and not page.is_visible("#stereo-group")

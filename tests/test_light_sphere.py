@@ -150,9 +150,12 @@ class TestLightFiles:
 
 @pytest.fixture(scope="module")
 def scene_with_sphere(tmp_path_factory):
+    return sphere_rig(tmp_path_factory.mktemp("rig"))
+
+
+def sphere_rig(folder):
     """Sixteen 16-bit photos of a matte sphere (the object) beside a chrome sphere on a matte
-    table, and the lights."""
-    folder = tmp_path_factory.mktemp("rig")
+    table, in ``folder``: (folder, lights, object scene)."""
     rng = np.random.default_rng(4)
     lights = np.array(
         [light_from_slant_tilt(s, t) for s, t in zip(rng.uniform(15, 50, 16), rng.uniform(0, 360, 16))]

@@ -24,7 +24,7 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.synth import SCENES
 
-__all__ = ["EXAMPLES", "load_example"]
+__all__ = ["EXAMPLES", "PHOTO_SET_EXAMPLES", "load_example", "load_photo_set_example"]
 
 # (rows, cols) of the coin in skimage.data.coins() (303 x 384): the large helmeted head on the
 # right of the third row, with a few pixels of dark background all round.
@@ -37,6 +37,14 @@ EXAMPLES: dict[str, str] = {
         "scikit-image's coins() sample, light near the camera (estimated), dark background"
     ),
     **{f"synth:{name}": f"synthetic: Lambertian {name}, light (0, 0, 1), true mask" for name in SCENES},
+}
+
+#: Photo-set example name -> one-line description (several photos, for photometric stereo).
+PHOTO_SET_EXAMPLES: dict[str, str] = {
+    "stereo:vase": (
+        "synthetic: a painted Lambertian vase under 12 known lights (slant 45 degrees all "
+        "round), with attached shadows, for photometric stereo and relighting"
+    ),
 }
 
 _SYNTH_SIZE = 256
@@ -125,3 +133,39 @@ def _synthetic(scene_name: str, size: int | None, info: dict[str, Any]) -> tuple
         method="auto",
     )
     return rendered.image.astype(np.float32), info
+
+
+def load_photo_set_example(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Load a shipped photo-set example (:data:`PHOTO_SET_EXAMPLES`).
+
+    Returns
+    -------
+    images : (N, H, W, 3) float32
+        Linear colour photos in ``[0, 1]``.
+    lights : (N, 3) float64
+        Unit directions toward each photo's light.
+    mask : (H, W) bool
+        The object.
+
+    Raises
+    ------
+    InputError
+        If ``name`` is not a photo-set example.
+    """
+    from shadeform.synth import render, surface
+
+    if not isinstance(name, str) or name not in PHOTO_SET_EXAMPLES:
+        raise InputError(f"unknown photo set {name!r}; choose one of: {', '.join(PHOTO_SET_EXAMPLES)}")
+    _, normals, mask = surface("vase", size=_SYNTH_SIZE)
+    # painted bands: three colours by height, so that relighting shows albedo and shading apart
+    rows = np.arange(_SYNTH_SIZE)[:, None] * np.ones((1, _SYNTH_SIZE))
+    band = (rows // 32).astype(int) % 3
+    paint = np.array([[0.85, 0.55, 0.3], [0.35, 0.6, 0.8], [0.8, 0.8, 0.75]])[band]
+    tilts = np.radians(np.arange(12) * 30.0)
+    slant = np.radians(45.0)
+    lights = np.stack(
+        [np.sin(slant) * np.cos(tilts), np.sin(slant) * np.sin(tilts), np.full(12, np.cos(slant))], axis=1
+    )
+    shading = np.stack([render(normals, mask, light=light) for light in lights])
+    images = (shading[..., None] * paint[None]).astype(np.float32)
+    return images, lights, mask

@@ -23,8 +23,9 @@ class Reconstruction:
         Object pixels.
     light : (3,) float64
         Unit vector toward the light.
-    albedo : float or (H, W) float64
-        ``k * albedo`` of the image model ``I = k * albedo * max(0, N . L)``.
+    albedo : float or (H, W) float64 or (H, W, C) float64
+        ``k * albedo`` of the image model ``I = k * albedo * max(0, N . L)``; per channel for
+        colour photos in photometric stereo.
     info : dict
         What ran: method, integrator, references, iterations, timings in seconds per stage;
         ``info["unsure"]``: the areas whose convexity the photo cannot settle

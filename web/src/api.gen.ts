@@ -9,6 +9,8 @@ export type FilterKind = "none" | "gaussian" | "mean" | "median" | "minimum";
 
 export type LightMode = "z" | "slant_tilt" | "estimate";
 
+export type StereoLights = "file" | "sphere" | "unknown";
+
 /** Smoothing before the solve (:func:`shadeform.preprocess.parse_filter`). */
 export interface FilterParams {
   kind: FilterKind;
@@ -110,6 +112,10 @@ export interface Options {
   filters: string[];
   formats: FormatInfo[];
   examples: ExampleInfo[];
+  /** Photometric stereo's methods, the default first. */
+  stereo_methods: MethodInfo[];
+  photo_set_examples: ExampleInfo[];
+  stereo_defaults: StereoParams;
   limits: Limits;
   defaults: ReconstructParams;
   /** The image the server was started with (``shadeform app IMAGE``), else null. */
@@ -147,6 +153,82 @@ export interface ReconstructResult {
   /** Seconds per stage: the library's stages, then mesh, encode, total. */
   timings: Record<string, number>;
   /** What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused). */
+  info: Record<string, unknown>;
+}
+
+/** Everything the user sets for photometric stereo on a photo set. */
+export interface StereoParams {
+  /** Where the lights come from: "file" (the set's light file), "sphere" (a shiny sphere in the photos) or "unknown" (read from the photos alone). */
+  lights: StereoLights;
+  /** The sphere's circle ``[column, row, radius]`` in pixels; null to find it (lights "sphere" only). */
+  sphere: [number, number, number] | null;
+  /** One of ``Options.stereo_methods``. */
+  method: string;
+  /** One of ``Options.integrators``. */
+  integrator: string;
+  /** Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve. */
+  step: number;
+}
+
+/** Photometric stereo (or its export) on a stored photo set with these parameters. */
+export interface StereoRequest {
+  photoset_id: string;
+  params: StereoParams;
+  /** Chosen by the client, echoed in the result: a response older than the newest is stale. */
+  request_id: number;
+}
+
+/** A photo set the server holds (several photos of one still object, lights moving). */
+export interface PhotoSetInfo {
+  photoset_id: string;
+  name: string;
+  /** How many photos. */
+  count: number;
+  width: number;
+  height: number;
+  /** Whether the photos have colour. */
+  colour: boolean;
+  /** The photos' file names, in the set's order. */
+  names: string[];
+  /** Whether a light file came with the photos. */
+  lights_file: boolean;
+  /** Whether a file of the lights' strengths came with them. */
+  intensities_file: boolean;
+  /** Whether a mask came with them. */
+  mask: boolean;
+  /** Settings to start from. */
+  suggested: StereoParams;
+}
+
+/** Photometric stereo's result: the mesh, the maps to view and relight, what was found. */
+export interface StereoResult {
+  request_id: number;
+  mesh: MeshData;
+  /** The object mask as a base64 8-bit grey PNG (255 = object). */
+  mask_png: string;
+  /** Normals as a base64 8-bit RGB PNG, ``(n + 1) / 2`` per channel (x right, y up, z toward the viewer), black off the object. */
+  normals_png: string;
+  /** Albedo as a base64 8-bit RGB PNG, sRGB-encoded, white = ``albedo_white``. */
+  albedo_png: string;
+  /** The linear albedo shown as white (its 99.5th percentile). */
+  albedo_white: number;
+  /** Each normal's confidence in [0, 1] as a base64 8-bit grey PNG. */
+  confidence_png: string;
+  /** The unit direction toward each photo's light that was used (given, from the sphere or read from the photos). */
+  lights: [number, number, number][];
+  /** The sphere's circle ``[column, row, radius]`` the lights were read from, if they were. */
+  sphere: [number, number, number] | null;
+  /** Photos (0-based) left out: they contradict the others. */
+  photos_dropped: number[];
+  /** Photos whose light was brighter (factor > 1) or dimmer than said, and the factor. */
+  photos_rescaled: [number, number][];
+  /** The lights' mean direction (to shade the model). */
+  light: [number, number, number];
+  /** Smallest and largest depth on the object, pixel units. */
+  depth_range: [number, number];
+  /** Seconds per stage. */
+  timings: Record<string, number>;
+  /** What ran (the library's ``Reconstruction.info`` plus ``cached``). */
   info: Record<string, unknown>;
 }
 

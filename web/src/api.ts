@@ -8,11 +8,16 @@ import type {
   MaskResult,
   MeshData,
   Options,
+  PhotoSetInfo,
   ReconstructParams,
   ReconstructRequest,
   ReconstructResult,
   SeedMaskRequest,
+  StereoRequest,
+  StereoResult,
 } from './api.gen';
+
+export type StereoRequestBody = StereoRequest;
 
 export type FilterSpec = ReconstructParams['filter'];
 
@@ -120,12 +125,45 @@ export async function maskFile(imageId: string, file: Blob): Promise<MaskResult>
 }
 
 /** The exported file and the name the server gave it (Content-Disposition). */
-export async function exportMesh(
+export function exportMesh(
   request: ReconstructRequest,
   suffix: string,
   signal?: AbortSignal,
 ): Promise<{ blob: Blob; filename: string }> {
-  const response = await postJson(`/api/export?format=${encodeURIComponent(suffix)}`, request, signal);
+  return downloaded(postJson(`/api/export?format=${encodeURIComponent(suffix)}`, request, signal), suffix);
+}
+
+// ------------------------------------------------------------------------- photo sets
+
+/** Upload three or more photos, with their light file, strengths and mask when there are. */
+export function uploadPhotoSet(
+  photos: File[],
+  extra: { lights: File | null; intensities: File | null; mask: File | null },
+): Promise<PhotoSetInfo> {
+  const form = new FormData();
+  for (const photo of photos) form.append('photos', photo, photo.name);
+  for (const [field, file] of Object.entries(extra)) if (file) form.append(field, file, file.name);
+  return json<PhotoSetInfo>(fetch('/api/photosets', { method: 'POST', body: form }));
+}
+
+export function openPhotoSetExample(name: string): Promise<PhotoSetInfo> {
+  return json<PhotoSetInfo>(fetch(`/api/photosets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+}
+
+export function photoSetPhotoUrl(photosetId: string, index: number): string {
+  return `/api/photosets/${encodeURIComponent(photosetId)}/photos/${index}.png`;
+}
+
+export function stereo(request: StereoRequest, signal?: AbortSignal): Promise<StereoResult> {
+  return json<StereoResult>(postJson('/api/stereo', request, signal));
+}
+
+export function exportStereo(request: StereoRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson(`/api/stereo/export?format=${encodeURIComponent(suffix)}`, request), suffix);
+}
+
+async function downloaded(pending: Promise<Response>, suffix: string): Promise<{ blob: Blob; filename: string }> {
+  const response = await pending;
   if (!response.ok) throw await failure(response);
   const disposition = response.headers.get('Content-Disposition') ?? '';
   const named = /filename="?([^";]+)"?/i.exec(disposition);

@@ -29,6 +29,7 @@ import {
   type Region,
   type ViewSettings,
 } from './state';
+import { StereoSession } from './stereo';
 import { Viewer } from './viewer';
 
 const DRAG_DEBOUNCE_MS = 40;
@@ -74,6 +75,7 @@ class App {
   private readonly viewer: Viewer;
   private readonly panel: Panel;
   private readonly maskTool: MaskTool;
+  private readonly stereo: StereoSession;
 
   constructor(private readonly options: Options) {
     const session = loadSession();
@@ -102,6 +104,25 @@ class App {
       stem: () => this.stem(),
     });
     this.pane.maskEditor = this.maskTool;
+    this.stereo = new StereoSession(options, {
+      showMesh: (result, mesh, refit) => {
+        this.mesh = mesh;
+        this.viewer.setMesh(mesh, { refit });
+        this.viewer.setLight(result.light);
+        this.viewer.setPhoto(`data:image/png;base64,${result.albedo_png}`);
+        $('view-empty').hidden = true;
+        $('view-host').classList.add('has-model');
+        $<HTMLButtonElement>('export-button').disabled = false;
+        const [low, high] = result.depth_range;
+        $('mesh-info').textContent =
+          `${mesh.vertexCount.toLocaleString()} vertices · ${mesh.triangleCount.toLocaleString()} triangles · ` +
+          `depth ${low.toFixed(1)} … ${high.toFixed(1)} px`;
+        $('timing').textContent = `server ${((result.timings.total ?? 0) * 1000).toFixed(0)} ms${result.info.cached ? ' (cached solve)' : ''}`;
+      },
+      busy: (text, work) => this.busy(text, work),
+      solving: (on) => this.setSolving(on),
+      toast: (message, kind) => this.toast(message, kind),
+    });
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
       axis: (axis) => this.setAxis(axis),
@@ -226,6 +247,7 @@ class App {
 
   /** Make ``info`` the current image, with ``params`` or else its suggested settings. */
   private showImage(info: ImageInfo, source: ImageSource, params: Params | null): void {
+    this.setStereoMode(false);
     this.image = info;
     this.source = source;
     this.result = null;
@@ -248,6 +270,37 @@ class App {
     this.showRegions();
     this.persist();
     this.solve();
+  }
+
+  /** Photo-set mode (photometric stereo) or one photo: the pane, the panel and exports follow. */
+  private setStereoMode(on: boolean): void {
+    document.body.classList.toggle('stereo-mode', on);
+    if (!on) return;
+    this.inFlight?.abort();
+    this.image = null;
+    this.source = null;
+    this.result = null;
+    this.mesh = null;
+    $('image-empty').hidden = true;
+    $('view-empty').hidden = false;
+    $('view-host').classList.remove('has-model');
+    $<HTMLButtonElement>('export-button').disabled = true;
+    $('mesh-info').textContent = '';
+    $('timing').textContent = '';
+    const info = this.stereo.info!;
+    $('image-title').innerHTML = '';
+    const name = document.createElement('b');
+    name.textContent = info.name;
+    $('image-title').append(name, ` ${info.count} photos · ${info.width} × ${info.height}`);
+    this.persist();
+  }
+
+  async openPhotos(files: File[]): Promise<void> {
+    if (await this.stereo.openFiles(files)) this.setStereoMode(true);
+  }
+
+  async openPhotoSetExample(name: string): Promise<void> {
+    if (await this.stereo.openExample(name)) this.setStereoMode(true);
   }
 
   private sources() {
@@ -449,6 +502,12 @@ class App {
   // --------------------------------------------------------------------------- files
 
   private async exportFormat(suffix: string): Promise<void> {
+    if (document.body.classList.contains('stereo-mode')) {
+      return this.busy(`Exporting ${suffix}…`, async () => {
+        const { blob, filename } = await this.stereo.exportFormat(suffix);
+        download(blob, filename);
+      });
+    }
     if (!this.image) return this.toast('Open an image first, then export its model');
     await this.busy(`Exporting ${suffix}…`, async () => {
       const { blob, filename } = await api.exportMesh(this.request(++this.requestCounter), suffix);
@@ -572,6 +631,22 @@ class App {
     };
     group('Photographs', photos);
     group('Synthetic scenes (known shape)', synthetic);
+    if (this.options.photo_set_examples.length) {
+      const title = document.createElement('div');
+      title.className = 'heading';
+      title.textContent = 'Photo sets (several lights)';
+      examples.append(title);
+      for (const example of this.options.photo_set_examples) {
+        const button = document.createElement('button');
+        button.dataset.photoSet = example.name;
+        button.className = 'example';
+        button.innerHTML = '<b></b><small></small>';
+        button.querySelector('b')!.textContent = example.name.replace(/^stereo:/, '') + ' (photo set)';
+        button.querySelector('small')!.textContent = example.title;
+        button.addEventListener('click', () => this.openPhotoSetExample(example.name));
+        examples.append(button);
+      }
+    }
     for (const example of this.options.examples) {
       const button = document.createElement('button');
       button.className = 'btn small';
@@ -655,6 +730,13 @@ class App {
     };
     $('open-image').addEventListener('click', () => $<HTMLInputElement>('file-image').click());
     picked('file-image', (file) => this.openFile(file));
+    $('open-photos').addEventListener('click', () => $<HTMLInputElement>('file-photos').click());
+    const photos = $<HTMLInputElement>('file-photos');
+    photos.addEventListener('change', () => {
+      const files = Array.from(photos.files ?? []);
+      photos.value = '';
+      if (files.length) this.openPhotos(files);
+    });
     picked('file-project', (file) => this.openJson(file));
     picked('file-regions', (file) => this.openJson(file));
 
@@ -676,8 +758,10 @@ class App {
       event.preventDefault();
       depth = 0;
       overlay.hidden = true;
-      const file = event.dataTransfer?.files[0];
-      if (file) this.openFile(file);
+      const files = Array.from(event.dataTransfer?.files ?? []);
+      // several images at once are a photo set; one file opens as before
+      if (files.filter((f) => f.type.startsWith('image/') || /\.tiff?$/i.test(f.name)).length > 1) this.openPhotos(files);
+      else if (files[0]) this.openFile(files[0]);
     });
   }
 
@@ -697,7 +781,8 @@ class App {
         return;
       }
       if (event.ctrlKey || event.metaKey || event.altKey) return;
-      if (this.pane.key(event)) {
+      const stereo = document.body.classList.contains('stereo-mode');
+      if (!stereo && this.pane.key(event)) {
         event.preventDefault();
         return;
       }
@@ -725,7 +810,8 @@ class App {
         '-': () => this.viewer.zoom(1 / 1.2),
         '?': () => $<HTMLDialogElement>('help-dialog').showModal(),
       };
-      const act = actions[event.key] ?? actions[event.key.toLowerCase()];
+      if (stereo) for (const key of 'vpfkxybm') delete actions[key];
+      const act = event.key === 'O' ? () => $<HTMLInputElement>('file-photos').click() : (actions[event.key] ?? actions[event.key.toLowerCase()]);
       if (act) {
         event.preventDefault();
         act();
@@ -782,6 +868,8 @@ class App {
       mask: () => this.maskTool.state(),
       /** Whether pixel (row, col) is object in the mask the pane shows. */
       maskAt: (row: number, col: number) => this.maskTool.at(row, col),
+      /** The photo set's session (photometric stereo): what it shows and found. */
+      stereo: this.stereo.hook(),
     };
   }
 }

@@ -121,7 +121,7 @@ class Guard:
     - ``Host`` (and ``Origin``, when a browser sends one) must name an allowed host: a page from
       another site, or a DNS name rebound to 127.0.0.1, cannot use the app.
     - Request bodies are read here up to their limit (the upload limit plus form overhead for
-      ``/api/images``, the JSON limit elsewhere) and refused with 413 beyond it, before any parser
+      ``/api/images`` and, for all photos together, ``/api/photosets``; the JSON limit elsewhere) and refused with 413 beyond it, before any parser
       runs or anything is spooled to disk.
     """
 
@@ -143,10 +143,15 @@ class Guard:
             return await self.app(scope, receive, send)
 
         limit = self.limits.max_json_bytes
-        if scope["path"] == "/api/images":
+        if scope["path"] in ("/api/images", "/api/photosets"):
             limit = self.limits.max_upload_bytes + self._FORM_OVERHEAD
         if scope["path"] == "/api/images":
             too_large = file_too_large(self.limits)
+        elif scope["path"] == "/api/photosets":
+            too_large = (
+                f"the photos together are larger than {size_text(self.limits.max_upload_bytes)}; "
+                "open fewer or smaller photos"
+            )
         else:
             too_large = f"the request body is larger than {size_text(limit)}; send fewer or simpler regions"
         declared = headers.get("content-length", "")

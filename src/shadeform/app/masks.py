@@ -20,13 +20,13 @@ from __future__ import annotations
 import base64
 import binascii
 import hashlib
-import io
 from typing import Any
 
 import numpy as np
 from fastapi import APIRouter, FastAPI
 from fastapi.responses import Response
 
+from shadeform.app.encoding import png_base64
 from shadeform.app.schema import AutoMaskRequest, MaskFileRequest, MaskResult, SeedMaskRequest
 from shadeform.errors import InputError
 
@@ -114,7 +114,7 @@ def user_mask(state: Any, text: str, shape: tuple[int, ...]) -> tuple[np.ndarray
     known = state.masks.get(key)
     if known is None:
         mask = _decode(text, shape, state.limits.max_pixels)
-        known = (mask, _png(mask))
+        known = (mask, png_base64(mask.astype(np.float32)))
         state.masks.put(key, known, mask.nbytes)
     mask, png = known
     _check_shape(mask, shape)
@@ -167,18 +167,9 @@ def _check_shape(mask: np.ndarray, shape: tuple[int, ...]) -> None:
         )
 
 
-def _png(mask: np.ndarray) -> str:
-    """A mask as base64 of an 8-bit grey PNG, 255 on the object."""
-    from PIL import Image
-
-    buffer = io.BytesIO()
-    Image.fromarray(np.where(mask, 255, 0).astype(np.uint8)).save(buffer, format="PNG")
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
-
-
 def _result(mask: np.ndarray, *, threshold: float | None, dark: bool, note: str) -> Response:
     result = MaskResult(
-        mask_png=_png(mask),
+        mask_png=png_base64(mask.astype(np.float32)),
         pixels=int(np.count_nonzero(mask)),
         threshold=None if threshold is None else float(threshold),
         dark=bool(dark),

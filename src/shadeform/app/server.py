@@ -29,10 +29,6 @@ live in :mod:`shadeform.app.guard`.
 from __future__ import annotations
 
 import asyncio
-import base64
-import io
-import re
-import tempfile
 import threading
 import time
 from collections.abc import Sequence
@@ -48,6 +44,17 @@ from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
+from shadeform.app.encoding import (
+    display_name,
+    download,
+    format_suffix,
+    json_response,
+    mesh_data,
+    mesh_file,
+    plain,
+    png,
+    png_base64,
+)
 from shadeform.app.guard import AppLimits, Guard, add_error_handlers, file_too_large
 from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.schema import (
@@ -57,13 +64,13 @@ from shadeform.app.schema import (
     ImageInfo,
     LightParams,
     Limits,
-    MeshData,
     MethodInfo,
     Options,
     ReconstructParams,
     ReconstructRequest,
     ReconstructResult,
 )
+from shadeform.app.stereo import add_stereo_routes
 from shadeform.app.store import LRU, StoredImage, new_image_id
 from shadeform.errors import InputError
 
@@ -79,14 +86,6 @@ _NO_CLIENT_PAGE = (
     "<!doctype html><title>shadeform</title><p>The web client is not built: run "
     "<code>make web</code> in the shadeform source folder, then reload this page.</p>"
 )
-
-# media types of the exported formats; anything else is sent as bytes
-_MEDIA_TYPES = {
-    ".wrl": "model/vrml",
-    ".obj": "model/obj",
-    ".stl": "model/stl",
-    ".glb": "model/gltf-binary",
-}
 
 
 def create_app(
@@ -144,7 +143,7 @@ def create_app(
 
     @app.get("/api/options", response_model=Options)
     def get_options() -> Response:
-        return _json(options)
+        return json_response(options)
 
     @app.post("/api/images", response_model=ImageInfo, status_code=201)
     def post_image(file: UploadFile = File(..., description="The image file.")) -> Response:
@@ -162,24 +161,26 @@ def create_app(
             raise HTTPException(413, str(err)) from None
         except InputError as err:
             raise HTTPException(415, str(err)) from None
-        entry = state.add(_display_name(file.filename), photo.pixels, photo=_read_as(photo))
-        return _json(_image_info(entry), status_code=201)
+        entry = state.add(display_name(file.filename), photo.pixels, photo=_read_as(photo))
+        return json_response(_image_info(entry), status_code=201)
 
     @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
     def post_example(
         name: str, size: int | None = Query(None, description="Side of a synth: example.")
     ) -> Response:
         entry = state.example(name, size)
-        return _json(_image_info(entry), status_code=201)
+        return json_response(_image_info(entry), status_code=201)
 
     @app.get("/api/images/{image_id}/photo.png", response_class=Response)
     def get_photo(image_id: str) -> Response:
         entry = state.image(image_id)
-        png = state.pngs.get((image_id, "photo"))
-        if png is None:
-            png = _png(_shown(entry, entry.pixels[:, :, 0] if entry.pixels.shape[2] == 1 else entry.pixels))
-            state.pngs.put((image_id, "photo"), png, len(png))
-        return Response(png, media_type="image/png", headers={"Cache-Control": "no-cache"})
+        encoded = state.pngs.get((image_id, "photo"))
+        if encoded is None:
+            encoded = png(
+                _shown(entry, entry.pixels[:, :, 0] if entry.pixels.shape[2] == 1 else entry.pixels)
+            )
+            state.pngs.put((image_id, "photo"), encoded, len(encoded))
+        return Response(encoded, media_type="image/png", headers={"Cache-Control": "no-cache"})
 
     @app.get("/api/images/{image_id}/channel.png", response_class=Response)
     def get_channel(
@@ -195,7 +196,7 @@ def create_app(
         if spec.kind != "none":
             image = apply_filter(image, mask, spec)
         return Response(
-            _png(_shown(entry, image)), media_type="image/png", headers={"Cache-Control": "no-cache"}
+            png(_shown(entry, image)), media_type="image/png", headers={"Cache-Control": "no-cache"}
         )
 
     @app.post("/api/reconstruct", response_model=ReconstructResult)
@@ -215,18 +216,14 @@ def create_app(
     ) -> Response:
         from shadeform.io.exporters import available_formats
 
-        suffix = _format_suffix(format, available_formats())
+        suffix = format_suffix(format, available_formats())
         entry = state.image(body.image_id)
         async with state.solve_lock:
             data = await run_in_threadpool(_export_bytes, state, entry, body.params, suffix)
-        filename = _safe_stem(entry.name) + suffix
-        return Response(
-            data,
-            media_type=_MEDIA_TYPES.get(suffix, "application/octet-stream"),
-            headers={"Content-Disposition": f'attachment; filename="{filename}"'},
-        )
+        return download(data, entry.name, suffix)
 
     add_mask_routes(app, state)
+    add_stereo_routes(app, state)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index() -> Response:
@@ -285,7 +282,7 @@ class _State:
 
     def image(self, image_id: str) -> StoredImage:
         entry = self.images.get(image_id)
-        if entry is None:
+        if not isinstance(entry, StoredImage):
             shown = image_id if len(image_id) <= 40 else image_id[:37] + "..."
             raise HTTPException(
                 404,
@@ -328,9 +325,9 @@ def _shown(entry: StoredImage, image: np.ndarray) -> np.ndarray:
     looks as the file did (what is solved on stays linear)."""
     if entry.photo is None or entry.photo["encoding"] != "srgb":
         return image
-    from shadeform.io.images import _srgb_encode
+    from shadeform.io.images import srgb_encode
 
-    return _srgb_encode(np.clip(image, 0.0, 1.0).astype(np.float32))
+    return srgb_encode(np.clip(image, 0.0, 1.0).astype(np.float32))
 
 
 def _store_initial(state: _State, source: str | Path) -> StoredImage:
@@ -339,7 +336,7 @@ def _store_initial(state: _State, source: str | Path) -> StoredImage:
         from shadeform.io.images import read_photo
 
         photo = read_photo(source, max_pixels=state.limits.max_pixels)
-        return state.add(_display_name(source.name), photo.pixels, pinned=True, photo=_read_as(photo))
+        return state.add(display_name(source.name), photo.pixels, pinned=True, photo=_read_as(photo))
     try:
         return state.example(source, None, pinned=True)
     except HTTPException as err:
@@ -447,7 +444,7 @@ def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarra
     known = state.masks.get(key)
     if known is None:
         mask = entry.mask if entry.mask is not None else object_mask(image)
-        known = (mask, base64.b64encode(_png(mask.astype(np.float32))).decode("ascii"))
+        known = (mask, png_base64(mask.astype(np.float32)))
         state.masks.put(key, known, mask.nbytes)
     return image, *known
 
@@ -464,71 +461,28 @@ def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequ
     mesh = to_mesh(rec, step=rec.info.get("preview_step", body.params.step))
     timings["mesh"] = time.perf_counter() - lap
     lap = time.perf_counter()
-    mesh_data = MeshData(
-        vertex_count=mesh.n_vertices,
-        triangle_count=mesh.n_faces,
-        positions=_base64(mesh.vertices, "<f4"),
-        normals=_base64(mesh.normals, "<f4"),
-        uvs=_base64(mesh.uv, "<f4"),
-        indices=_base64(mesh.faces, "<u4"),
-    )
+    encoded = mesh_data(mesh)
     timings["encode"] = time.perf_counter() - lap
     timings["total"] = time.perf_counter() - start
     return ReconstructResult(
         request_id=body.request_id,
         preview="preview_step" in rec.info,
-        mesh=mesh_data,
+        mesh=encoded,
         mask_png=solved.mask_png,
         light=tuple(float(v) for v in rec.light),
         references=[(int(r), int(c)) for r, c in rec.info["references"]],
         depth_range=solved.depth_range,
         timings=timings,
-        info={**_plain(rec.info), "cached": cached, **({"photo": entry.photo} if entry.photo else {})},
+        info={**plain(rec.info), "cached": cached, **({"photo": entry.photo} if entry.photo else {})},
     )
 
 
 def _export_bytes(state: _State, entry: StoredImage, params: ReconstructParams, suffix: str) -> bytes:
-    from shadeform import export, to_mesh
-
     solved, _ = _solve(state, entry, params)
-    mesh = to_mesh(solved.reconstruction, step=params.step)
-    with tempfile.TemporaryDirectory(prefix="shadeform-export-") as folder:
-        # the file name is ours: a fixed stem and a suffix from the registry
-        path = export(mesh, Path(folder) / f"model{suffix}")
-        return path.read_bytes()
+    return mesh_file(solved.reconstruction, params.step, suffix)
 
 
 # --- encoding ----------------------------------------------------------------------------------
-
-
-def _json(model, status_code: int = 200) -> Response:
-    return Response(model.model_dump_json(), status_code=status_code, media_type="application/json")
-
-
-def _base64(array: np.ndarray, dtype: str) -> str:
-    """An array's values as base64 of the packed little-endian ``dtype`` (a typed array's bytes)."""
-    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
-
-
-def _png(image: np.ndarray) -> bytes:
-    """An (H, W) or (H, W, 3) image in [0, 1] as an 8-bit PNG (fast compression: it is local)."""
-    from PIL import Image
-
-    samples = np.rint(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
-    buffer = io.BytesIO()
-    Image.fromarray(samples).save(buffer, format="PNG", compress_level=1)
-    return buffer.getvalue()
-
-
-def _plain(value: Any) -> Any:
-    """JSON types only (numpy scalars and arrays, tuples -> numbers and lists)."""
-    if isinstance(value, dict):
-        return {str(key): _plain(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(item) for item in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 # --- the parameters ----------------------------------------------------------------------------
@@ -570,10 +524,12 @@ def _image_info(entry: StoredImage) -> ImageInfo:
 
 
 def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
-    from shadeform.examples import EXAMPLES
+    from shadeform.app.schema import StereoParams
+    from shadeform.examples import EXAMPLES, PHOTO_SET_EXAMPLES
     from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
+    from shadeform.photometric import available_methods as stereo_methods
     from shadeform.preprocess import FILTER_KINDS
     from shadeform.solvers import available_methods
 
@@ -586,30 +542,12 @@ def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
         filters=list(FILTER_KINDS),
         formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],
         examples=[ExampleInfo(name=name, title=title) for name, title in EXAMPLES.items()],
+        stereo_methods=[MethodInfo(name=name, description=text) for name, text in stereo_methods().items()],
+        photo_set_examples=[
+            ExampleInfo(name=name, title=title) for name, title in PHOTO_SET_EXAMPLES.items()
+        ],
+        stereo_defaults=StereoParams(),
         limits=Limits(max_upload_bytes=limits.max_upload_bytes, max_pixels=limits.max_pixels),
         defaults=ReconstructParams(),
         initial_image=None if initial is None else _image_info(initial),
     )
-
-
-def _format_suffix(text: str, formats: dict[str, str]) -> str:
-    suffix = text.strip().lower()
-    suffix = suffix if suffix.startswith(".") else "." + suffix
-    if suffix not in formats:
-        shown = text if len(text) <= 20 else text[:17] + "..."
-        raise HTTPException(422, f"unknown export format {shown!r}; choose one of: {', '.join(formats)}")
-    return suffix
-
-
-def _display_name(filename: str | None) -> str:
-    """A file name to show: no folders, no control characters, at most 100 characters."""
-    name = re.split(r"[/\\]", filename or "")[-1]
-    name = "".join(ch for ch in name if ch.isprintable()).strip()
-    return name[:100] or "image"
-
-
-def _safe_stem(name: str) -> str:
-    """A download's file stem: letters, digits, ``-`` and ``_`` only, never empty."""
-    stem = name.rsplit(".", 1)[0] if "." in name.lstrip(".") else name
-    stem = re.sub(r"[^A-Za-z0-9_-]+", "_", stem).strip("_")
-    return stem[:60] or "model"

@@ -250,7 +250,9 @@ def stereo(
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     albedo: Annotated[
         Path | None,
-        typer.Option(help="Also write the albedo (16-bit grey .png, linear, its 99.5th percentile white)."),
+        typer.Option(
+            help="Also write the albedo (16-bit .png, colour for colour photos, linear, its 99.5th percentile white)."
+        ),
     ] = None,
     confidence: Annotated[
         Path | None,
@@ -301,7 +303,7 @@ def stereo(
                 sphere=photos.sphere,
             )
         rec = replace(rec, info={**rec.info, "photo": photos.info})
-        maps = _stereo_maps(rec, temps, albedo, confidence)
+        maps = _stereo_maps(rec, temps, albedo, confidence, gray=photos.channel != "rgb")
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
@@ -345,17 +347,20 @@ def stereo(
     print_files(out, written)
 
 
-def _stereo_maps(rec, temps, albedo, confidence):
+def _stereo_maps(rec, temps, albedo, confidence, *, gray):
     """Write the albedo and confidence maps asked for to their temporaries (committed with the
-    mesh); the (file, description) rows to print."""
+    mesh); the (file, description) rows to print. ``gray``: the photos were (or were made) one
+    channel, so the albedo is written grey."""
     from shadeform.io.maps import save_gray
 
     rows = []
     if albedo is not None:
-        values = np.where(rec.mask, rec.albedo, 0.0)
+        values = rec.albedo[..., 0] if gray and np.ndim(rec.albedo) == 3 else rec.albedo
+        values = np.where(rec.mask if values.ndim == 2 else rec.mask[..., None], values, 0.0)
         top = float(np.percentile(values[rec.mask], 99.5)) if rec.mask.any() else 0.0
         save_gray(values / top if top > 0 else values, temps[albedo])
-        rows.append((albedo, f"albedo, 16-bit, linear, white = {top:.4g} (99.5th percentile)"))
+        kind = "grey" if values.ndim == 2 else "colour"
+        rows.append((albedo, f"albedo, 16-bit {kind}, linear, white = {top:.4g} (99.5th percentile)"))
     if confidence is not None:
         save_gray(np.nan_to_num(rec.confidence), temps[confidence])
         rows.append((confidence, "confidence of each normal, 16-bit, 0 to 1"))

@@ -92,7 +92,7 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
 
 #: What a file's content, given as bytes instead of a path, is called in messages.
-_MEMORY_NAME = "image data"
+MEMORY_NAME = "image data"
 _EXIF_ORIENTATION = 0x0112
 
 # TIFF photometric interpretations the TIFF decoder understands.
@@ -435,7 +435,7 @@ def _srgb_decode(values: np.ndarray) -> np.ndarray:
     return np.where(values <= number(0.04045), values / number(12.92), encoded)
 
 
-def _srgb_encode(values: np.ndarray) -> np.ndarray:
+def srgb_encode(values: np.ndarray) -> np.ndarray:
     """Linear values in [0, 1] -> sRGB-encoded, the inverse of :func:`_srgb_decode` (to show a
     decoded photo as it looked: 8-bit values come back exactly)."""
     number = values.dtype.type
@@ -490,7 +490,7 @@ class _Memory:
         self.data = data
 
     def __str__(self) -> str:
-        return _MEMORY_NAME
+        return MEMORY_NAME
 
 
 _Source = Path | _Memory
@@ -522,7 +522,7 @@ def _decode(path: str | PathLike | bytes, max_pixels: int) -> tuple[np.ndarray, 
 def _existing_file(path: str | PathLike | bytes) -> _Source:
     if isinstance(path, (bytes, bytearray, memoryview)):
         if len(path) == 0:
-            raise InputError(f"empty file: the {_MEMORY_NAME} has 0 bytes; give an image file")
+            raise InputError(f"empty file: the {MEMORY_NAME} has 0 bytes; give an image file")
         return _Memory(bytes(path))
     path = Path(path)
     if not path.exists():

@@ -85,12 +85,14 @@ def save_normal_map(normals: np.ndarray, path: str | os.PathLike[str]) -> Path:
 
 
 def save_gray(image: np.ndarray, path: str | os.PathLike[str], *, bitdepth: int = 16) -> Path:
-    """Write a one-channel image in [0, 1] (a photo, a mask) as an 8- or 16-bit grey PNG.
+    """Write a one-channel image in [0, 1] (a photo, a mask), or a colour one, as an 8- or 16-bit
+    PNG.
 
     Parameters
     ----------
-    image : (H, W) float
+    image : (H, W) or (H, W, 3) float
         Values in [0, 1]; outside that range they are clipped. A bool mask gives 0 and full white.
+        Three channels give an RGB PNG (a colour albedo).
     path : str or path-like
         A ``.png`` file, written atomically.
     bitdepth : {8, 16}, keyword-only
@@ -106,11 +108,13 @@ def save_gray(image: np.ndarray, path: str | os.PathLike[str], *, bitdepth: int 
     if bitdepth not in (8, 16):
         raise InputError(f"bitdepth must be 8 or 16, got {bitdepth!r}")
     image = np.asarray(image, dtype=np.float64)
-    if image.ndim != 2:
-        raise InputError(f"a grey image must be (H, W), got shape {image.shape}")
+    if image.ndim != 2 and image.shape[2:] != (3,):
+        raise InputError(f"an image to save must be (H, W) or (H, W, 3), got shape {image.shape}")
     top = 2**bitdepth - 1
     samples = np.rint(np.clip(image, 0.0, 1.0) * top).astype(">u2" if bitdepth == 16 else np.uint8)
-    writer = png.Writer(width=image.shape[1], height=image.shape[0], greyscale=True, bitdepth=bitdepth)
+    writer = png.Writer(
+        width=image.shape[1], height=image.shape[0], greyscale=image.ndim == 2, bitdepth=bitdepth
+    )
     with atomic_write(path) as file_obj:
         writer.write_packed(file_obj, (row.tobytes() for row in samples))
     return path

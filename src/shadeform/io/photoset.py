@@ -141,7 +141,7 @@ def load_photo_set(
     if sphere is not None:
         directions = strengths = None  # read from the photos below
     elif Path(lights).suffix.lower() == ".lp":
-        directions = _lp_for(photos, *read_lp(lights), lights)
+        directions = match_lp(photos, *read_lp(lights), lights)
     else:
         directions = read_rows(lights, "lights", len(photos), (3,))
     if sphere is None:
@@ -183,7 +183,7 @@ def load_photo_set(
     )
 
 
-def read_photos(photos, *, linear: bool | None = None):
+def read_photos(photos, *, linear: bool | None = None, names=None, max_pixels: int | None = None):
     """Photos of one still camera as one (N, H, W, 3) float32 array (gray photos in all three
     channels), linear: the first photo decides the encoding for all when ``linear`` is None
     (:func:`shadeform.io.images.read_photo`), and sets the size and bit depth the rest must have.
@@ -198,16 +198,28 @@ def read_photos(photos, *, linear: bool | None = None):
     colour : bool
         Whether any photo has colour.
 
+    ``photos`` are paths, or files' contents (bytes) named in messages by ``names``;
+    ``max_pixels`` is :func:`shadeform.io.images.read_photo`'s (its default when None).
+
     Raises
     ------
     InputError
         A photo that cannot be read, or one of another size or bit depth than the first.
     """
+    from shadeform.io.images import MEMORY_NAME
+
+    limit = {} if max_pixels is None else {"max_pixels": max_pixels}
+    shown = list(photos) if names is None else list(names)
     images = None
     colour = False
     decided = "user"
     for i, photo in enumerate(photos):
-        read = read_photo(photo, linear=linear)
+        try:
+            read = read_photo(photo, linear=linear, **limit)
+        except InputError as err:
+            if names is None:
+                raise
+            raise type(err)(str(err).replace(MEMORY_NAME, f"photo {names[i]}")) from None
         height, width, planes = read.pixels.shape
         if images is None:
             first, bits, encoding = read, read.bits, read.encoding
@@ -216,12 +228,12 @@ def read_photos(photos, *, linear: bool | None = None):
             images = np.empty((len(photos), height, width, 3), dtype=np.float32)
         elif (height, width) != first.image.shape:
             raise InputError(
-                f"photo '{photo}' is {width}x{height} but '{photos[0]}' is "
+                f"photo '{shown[i]}' is {width}x{height} but '{shown[0]}' is "
                 f"{first.image.shape[1]}x{first.image.shape[0]}; give photos from one still camera"
             )
         elif read.bits != bits:
             raise InputError(
-                f"photo '{photo}' is {read.bits}-bit but '{photos[0]}' is {bits}-bit; give photos "
+                f"photo '{shown[i]}' is {read.bits}-bit but '{shown[0]}' is {bits}-bit; give photos "
                 "from one camera, saved alike"
             )
         images[i] = read.pixels  # a gray photo fills all three channels
@@ -253,23 +265,31 @@ def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int
     lines skipped) as ``(count, columns)``, or ``(count,)`` for one column."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8").replace(",", " ")
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{what} file '{path}' does not exist; check the path") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{what} file '{path}' must hold numbers only, one row per photo") from None
+    return parse_rows(text, what, str(path), count, columns)
+
+
+def parse_rows(text: str, what: str, name: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
+    """:func:`read_rows` on a file's text; ``name`` is the file's name for messages."""
+    try:
         values = np.array(
             [
                 [float(v) for v in line.split()]
-                for line in text.splitlines()
+                for line in text.replace(",", " ").splitlines()
                 if line.strip() and not line.lstrip().startswith("#")
             ]
         )
-    except FileNotFoundError:
-        raise InputError(f"{what} file '{path}' does not exist; check the path") from None
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(f"{what} file '{path}' must hold numbers only, one row per photo") from None
+    except ValueError:
+        raise InputError(f"{what} file '{name}' must hold numbers only, one row per photo") from None
     if values.ndim != 2 or values.shape[0] != count or values.shape[1] not in columns:
         shape = "x".join(str(n) for n in values.shape) or "empty"
         wanted = " or ".join(str(c) for c in columns)
         raise InputError(
-            f"{what} file '{path}' must have {count} rows (one per photo) of {wanted} numbers, found {shape}"
+            f"{what} file '{name}' must have {count} rows (one per photo) of {wanted} numbers, found {shape}"
         )
     return values[:, 0] if values.shape[1] == 1 else values
 
@@ -289,25 +309,31 @@ def read_lp(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
     """
     path = Path(path)
     try:
-        lines = [line.split() for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"light file '{path}' does not exist; check the path") from None
     except UnicodeDecodeError:
         raise InputError(
             f"light file '{path}' is not text; give an .lp file (a count, then 'name x y z' per photo)"
         ) from None
+    return parse_lp(text, str(path))
+
+
+def parse_lp(text: str, name: str) -> tuple[list[str], np.ndarray]:
+    """:func:`read_lp` on a file's text; ``name`` is the file's name for messages."""
+    lines = [line.split() for line in text.splitlines() if line.strip()]
     usage = "an .lp file holds the number of photos, then one line 'name x y z' per photo"
     try:
         count = int(lines[0][0]) if lines and len(lines[0]) == 1 else -1
         rows = [(line[0], [float(v) for v in line[1:4]]) for line in lines[1:] if len(line) == 4]
     except ValueError:
-        raise InputError(f"light file '{path}' has a line that is not 'name x y z'; {usage}") from None
+        raise InputError(f"light file '{name}' has a line that is not 'name x y z'; {usage}") from None
     if count < 1 or len(rows) != count or len(lines) != count + 1:
-        raise InputError(f"light file '{path}' does not match its own count of photos; {usage}")
+        raise InputError(f"light file '{name}' does not match its own count of photos; {usage}")
     directions = np.array([row[1] for row in rows], dtype=np.float64)
     lengths = np.linalg.norm(directions, axis=1)
     if not (np.isfinite(directions).all() and (lengths > 0).all()):
-        raise InputError(f"light file '{path}' has a direction that is zero or not a number")
+        raise InputError(f"light file '{name}' has a direction that is zero or not a number")
     return [Path(row[0].replace("\\", "/")).name for row in rows], directions / lengths[:, None]
 
 
@@ -331,9 +357,10 @@ def write_lights(path: str | os.PathLike, directions, *, names=None) -> None:
         handle.write("\n".join(lines) + "\n")
 
 
-def _lp_for(photos, names, directions, path):
-    """The ``.lp`` file's directions in the order of ``photos``: by file name where every photo
-    is named in it, else in the file's order when the counts agree."""
+def match_lp(photos, names, directions, path) -> np.ndarray:
+    """The ``.lp`` file's directions in the order of ``photos`` (paths, or file names): by file
+    name where every photo is named in it, else in the file's order when the counts agree."""
+    photos = [Path(photo) for photo in photos]
     where = {name: i for i, name in enumerate(names)}
     if all(photo.name in where for photo in photos):
         return directions[[where[photo.name] for photo in photos]]

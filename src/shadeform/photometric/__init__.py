@@ -66,6 +66,7 @@ __all__ = [
     "METHODS",
     "PhotometricStereo",
     "StereoMethod",
+    "available_methods",
     "photometric_stereo",
     "reconstruct_stereo",
     "register",
@@ -102,6 +103,11 @@ _REGISTRY: dict[str, StereoMethod] = {}
 def register(method: StereoMethod) -> None:
     """Add a method (its module is imported when first used)."""
     _REGISTRY[method.name] = method
+
+
+def available_methods() -> dict[str, str]:
+    """The registered methods, the default first: name -> one-line description."""
+    return {name: method.description for name, method in _REGISTRY.items()}
 
 
 def _fit_function(name):
@@ -547,11 +553,13 @@ def reconstruct_stereo(
     -------
     shadeform.Reconstruction
         ``mask`` is the object (every pixel of it has a normal); ``light`` the mean of the
-        lights' directions (for shading a view), ``albedo`` the gray albedo (H, W),
+        lights' directions (for shading a view), ``albedo`` (H, W), or (H, W, C) for colour
+        photos,
         ``confidence`` the fit's (:class:`PhotometricStereo`, NaN off the mask); ``info`` holds
         ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel),
-        ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped`` and ``timings`` in
-        seconds.
+        ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``lights`` (given or
+        read), ``light_directions`` (the unit directions used, a list of ``[x, y, z]``) and
+        ``timings`` in seconds.
 
     Raises
     ------
@@ -587,13 +595,12 @@ def reconstruct_stereo(
     done = time.perf_counter()
     directions = np.asarray(result.lights if lights is None else lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
-    albedo = result.albedo if result.albedo.ndim == 2 else result.albedo.mean(axis=2)
     return Reconstruction(
         normals=result.normals,
         depth=depth,
         mask=solved,
         light=mean / np.linalg.norm(mean),
-        albedo=albedo,
+        albedo=result.albedo,
         info={
             "method": f"photometric stereo ({method})",
             "integrator": integrator,
@@ -602,6 +609,7 @@ def reconstruct_stereo(
             "photos_rescaled": [[i, round(f, 4)] for i, f in result.photos_rescaled],
             "photos_dropped": list(result.photos_dropped),
             "lights": "read from the photos" if lights is None else "given",
+            "light_directions": (directions / np.linalg.norm(directions, axis=1, keepdims=True)).tolist(),
             "timings": {"normals": normals_time - start, "depth": done - normals_time},
         },
         confidence=np.where(solved, result.confidence, np.nan),

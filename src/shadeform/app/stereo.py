@@ -1,0 +1,385 @@
+"""The app's photo-set routes: several photos of one still object under moving lights, solved by
+photometric stereo, with the maps a relighting viewer needs.
+
+==============================================  =================================================
+``POST /api/photosets`` (multipart)             ``photos`` (three or more), optional ``lights``
+                                                (the project's file or an RTI ``.lp``),
+                                                ``intensities`` and ``mask`` -> ``PhotoSetInfo``
+``POST /api/photosets/examples/{name}``         a shipped photo set -> ``PhotoSetInfo``
+``GET  /api/photosets/{id}/photos/{i}.png``     photo ``i`` (0-based), 8-bit PNG
+``POST /api/stereo``                            ``StereoRequest`` -> ``StereoResult``
+``POST /api/stereo/export?format=.glb``         ``StereoRequest`` -> the mesh file
+==============================================  =================================================
+
+As for one photo, every endpoint is input checking, a library call
+(:func:`shadeform.photometric.reconstruct_stereo`, :func:`shadeform.calibrate_lights`) and
+encoding. Uploads are decoded from memory (the light files as text); nothing a client sends is
+written to disk. The normals travel as an 8-bit RGB PNG of ``(n + 1) / 2`` and the albedo as an
+sRGB-encoded 8-bit PNG: enough for the client to relight the object at any light it is given
+(``albedo * max(0, n . l)``), at a quarter of a degree and a 255th of the albedo's range.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, FastAPI, File, Query, Request, UploadFile
+from fastapi.responses import Response
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+
+from shadeform.app.encoding import (
+    display_name,
+    download,
+    format_suffix,
+    json_response,
+    mesh_data,
+    mesh_file,
+    plain,
+    png,
+    png_base64,
+)
+from shadeform.app.guard import size_text
+from shadeform.app.schema import PhotoSetInfo, StereoParams, StereoRequest, StereoResult
+from shadeform.app.store import new_image_id
+from shadeform.errors import InputError
+
+__all__ = ["StoredPhotoSet", "add_stereo_routes"]
+
+#: Most photos in one set (DiLiGenT has 96; RTI domes 50 to 100).
+MAX_PHOTOS = 256
+
+
+@dataclass(frozen=True, eq=False)
+class StoredPhotoSet:
+    """A photo set the client opened.
+
+    Attributes
+    ----------
+    photoset_id, name : str
+        The client's name for it, and what to show.
+    images : (N, H, W, 3) float32
+        The photos, linear.
+    names : tuple of str
+        The photos' file names.
+    lights, intensities : (N, 3) and (N,) or (N, 3) float64, or None
+        From the files that came with the photos.
+    mask : (H, W) bool or None
+        The mask that came with them.
+    encoding : {"srgb", "linear"}
+        How the files held their values.
+    """
+
+    photoset_id: str
+    name: str
+    images: np.ndarray
+    names: tuple[str, ...]
+    lights: np.ndarray | None = None
+    intensities: np.ndarray | None = None
+    mask: np.ndarray | None = None
+    encoding: str = "linear"
+
+    @property
+    def nbytes(self) -> int:
+        return self.images.nbytes
+
+
+@dataclass(frozen=True, eq=False)
+class _SolvedSet:
+    """A cached photometric stereo result with what every response about it repeats."""
+
+    reconstruction: Any
+    maps: dict[str, Any]
+
+
+def add_stereo_routes(app: FastAPI, state: Any) -> None:
+    """Add the photo-set endpoints to an app (before its catch-all route).
+
+    Parameters
+    ----------
+    app : fastapi.FastAPI
+        The app :func:`shadeform.app.server.create_app` builds.
+    state : shadeform.app.server._State
+        The app's store: it keeps photo sets beside images, and their results.
+    """
+    router = APIRouter()
+
+    @router.post("/api/photosets", response_model=PhotoSetInfo, status_code=201)
+    def post_photoset(
+        photos: list[UploadFile] = File(..., description="Three or more photos, in order."),
+        lights: UploadFile | None = File(
+            None, description="Light file: x y z per photo, or an RTI .lp file."
+        ),
+        intensities: UploadFile | None = File(
+            None, description="Each light's strength: one number or R G B per photo."
+        ),
+        mask: UploadFile | None = File(None, description="The object's mask, the photos' size."),
+    ) -> Response:
+        entry = _read_set(state, photos, lights, intensities, mask)
+        state.images.put(entry.photoset_id, entry, entry.nbytes)
+        return json_response(_info(entry), status_code=201)
+
+    @router.post("/api/photosets/examples/{name}", response_model=PhotoSetInfo, status_code=201)
+    def post_photoset_example(name: str) -> Response:
+        from shadeform.examples import PHOTO_SET_EXAMPLES, load_photo_set_example
+
+        if name not in PHOTO_SET_EXAMPLES:
+            shown = name if len(name) <= 40 else name[:37] + "..."
+            raise HTTPException(
+                404, f"unknown photo set {shown!r}; choose one of: {', '.join(PHOTO_SET_EXAMPLES)}"
+            )
+        images, directions, object_mask = load_photo_set_example(name)
+        names = tuple(f"{name.split(':')[-1]}-{i + 1:02d}.png" for i in range(len(images)))
+        entry = StoredPhotoSet(new_image_id(), name, images, names, directions, None, object_mask)
+        state.images.put(entry.photoset_id, entry, entry.nbytes)
+        return json_response(_info(entry), status_code=201)
+
+    @router.get("/api/photosets/{photoset_id}/photos/{index}.png", response_class=Response)
+    def get_photoset_photo(photoset_id: str, index: int) -> Response:
+        entry = _photoset(state, photoset_id)
+        if not 0 <= index < len(entry.images):
+            raise HTTPException(
+                404, f"photo {index} is not in this set: it has photos 0 to {len(entry.images) - 1}"
+            )
+        photo = entry.images[index]
+        if entry.encoding == "srgb":  # shown as the file looked
+            from shadeform.io.images import srgb_encode
+
+            photo = srgb_encode(np.clip(photo, 0.0, 1.0))
+        return Response(png(photo), media_type="image/png", headers={"Cache-Control": "no-cache"})
+
+    @router.post("/api/stereo", response_model=StereoResult)
+    async def post_stereo(body: StereoRequest, request: Request) -> Response:
+        entry = _photoset(state, body.photoset_id)
+        async with state.solve_lock:
+            if await request.is_disconnected():
+                return Response(status_code=204)
+            result = await run_in_threadpool(_result, state, entry, body)
+        return Response(result.model_dump_json(), media_type="application/json")
+
+    @router.post("/api/stereo/export", response_class=Response)
+    async def post_stereo_export(
+        body: StereoRequest,
+        format: str = Query(..., description="A suffix from Options.formats, e.g. .glb."),
+    ) -> Response:
+        from shadeform.io.exporters import available_formats
+
+        suffix = format_suffix(format, available_formats())
+        entry = _photoset(state, body.photoset_id)
+        async with state.solve_lock:
+            solved, _ = await run_in_threadpool(_solve, state, entry, body.params)
+            data = await run_in_threadpool(mesh_file, solved.reconstruction, body.params.step, suffix)
+        return download(data, entry.name, suffix)
+
+    app.include_router(router)
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+
+def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
+    """The uploads as a :class:`StoredPhotoSet`; every failure a one-line 4xx."""
+    from shadeform.io.images import ImageTooLargeError, load_mask, read_photo
+    from shadeform.io.photoset import match_lp, parse_lp, parse_rows, read_photos
+
+    limits = state.limits
+    if not 3 <= len(photos) <= MAX_PHOTOS:
+        raise HTTPException(
+            422, f"photometric stereo needs 3 to {MAX_PHOTOS} photos of one still object, got {len(photos)}"
+        )
+    names = tuple(display_name(photo.filename) for photo in photos)
+    contents = [photo.file.read() for photo in photos]
+    for name, data in zip(names, contents):
+        if not data:
+            raise HTTPException(400, f"photo {name} is empty (0 bytes); choose image files")
+    try:
+        # the whole set must fit in memory: judge it by its first photo before decoding the rest
+        first = read_photo(contents[0], max_pixels=limits.max_pixels)
+        height, width = first.image.shape
+        need = len(contents) * height * width * 3 * 4
+        if need > limits.max_image_bytes:
+            raise HTTPException(
+                413,
+                f"{len(contents)} photos of {width}x{height} need {size_text(need)}, more than the "
+                f"{size_text(limits.max_image_bytes)} this server keeps; open fewer or smaller photos",
+            )
+        directions = strengths = object_mask = None
+        if intensities is not None:
+            label = display_name(intensities.filename)
+            text = _text(intensities, label, "intensities")
+            strengths = parse_rows(text, "intensities", label, len(names), (1, 3))
+        # light strengths divide only linear values: a set that has them is radiometrically
+        # calibrated whatever its bit depth (as for a folder, shadeform.io.photoset)
+        linear = True if strengths is not None else None
+        images, _, encoding, _, _ = read_photos(
+            contents, linear=linear, names=names, max_pixels=limits.max_pixels
+        )
+        if lights is not None:
+            label = display_name(lights.filename)
+            text = _text(lights, label, "light")
+            if label.lower().endswith(".lp"):
+                directions = match_lp(names, *parse_lp(text, label), label)
+            else:
+                directions = parse_rows(text, "lights", label, len(names), (3,))
+        if mask is not None:
+            data = mask.file.read(limits.max_upload_bytes + 1)
+            object_mask = load_mask(data, shape=(height, width))
+    except ImageTooLargeError as err:
+        raise HTTPException(413, str(err)) from None
+    except InputError as err:
+        raise HTTPException(422, str(err)) from None
+    return StoredPhotoSet(
+        new_image_id(),
+        f"{names[0]} … {names[-1]}",
+        images,
+        names,
+        directions,
+        strengths,
+        object_mask,
+        encoding,
+    )
+
+
+def _text(upload: UploadFile, label: str, what: str) -> str:
+    data = upload.file.read(1 << 20)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise HTTPException(422, f"{what} file {label} is not text; give a text file of numbers") from None
+
+
+def _photoset(state, photoset_id: str) -> StoredPhotoSet:
+    entry = state.images.get(photoset_id)
+    if not isinstance(entry, StoredPhotoSet):
+        shown = photoset_id if len(photoset_id) <= 40 else photoset_id[:37] + "..."
+        raise HTTPException(
+            404,
+            f"unknown photo set {shown!r}: the server does not have it (it was restarted or "
+            "forgot older sets); open the photos again",
+        )
+    return entry
+
+
+def _info(entry: StoredPhotoSet) -> PhotoSetInfo:
+    count, height, width, _ = entry.images.shape
+    colour = bool(np.any(entry.images[..., 0] != entry.images[..., 1]))
+    lights = "file" if entry.lights is not None else "unknown"
+    return PhotoSetInfo(
+        photoset_id=entry.photoset_id,
+        name=entry.name,
+        count=count,
+        width=width,
+        height=height,
+        colour=colour,
+        names=list(entry.names),
+        lights_file=entry.lights is not None,
+        intensities_file=entry.intensities is not None,
+        mask=entry.mask is not None,
+        suggested=StereoParams(lights=lights),
+    )
+
+
+# --- solving -----------------------------------------------------------------------------------
+
+
+def _solve(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedSet, bool]:
+    """The photometric stereo result for these parameters, from the cache when only ``step``
+    changed."""
+    from shadeform.integration import available_integrators
+    from shadeform.photometric import METHODS, reconstruct_stereo
+
+    key = (entry.photoset_id, params.model_dump_json(exclude={"step"}))
+    solved = state.results.get(key)
+    if solved is not None:
+        return solved, True
+    if params.method not in METHODS:
+        raise InputError(
+            f"unknown photometric stereo method {params.method!r}; choose one of: {', '.join(METHODS)}"
+        )
+    if params.integrator not in available_integrators():
+        raise InputError(
+            f"unknown integrator {params.integrator!r}; choose one of: {', '.join(available_integrators())}"
+        )
+    lights, strengths, circle = entry.lights, entry.intensities, None
+    if params.lights == "file" and lights is None:
+        raise InputError(
+            "this photo set came without a light file; choose Sphere or Unknown lights, or open the "
+            "photos again with their light file"
+        )
+    if params.lights == "sphere":
+        from shadeform.light.sphere import calibrate_lights
+
+        found = calibrate_lights(entry.images, sphere=params.sphere)
+        lights, strengths, circle = found.directions, found.strengths, found.sphere
+        behind = np.flatnonzero(lights[:, 2] <= 0)
+        if behind.size:
+            column, row, radius = circle
+            raise InputError(
+                f"the circle at column {column:.0f}, row {row:.0f} (radius {radius:.0f}) puts light "
+                f"{behind[0] + 1} behind the object: it is probably not a shiny sphere; give the "
+                "sphere's circle, or choose another source of lights"
+            )
+    elif params.lights == "unknown":
+        lights = None
+    rec = reconstruct_stereo(
+        entry.images,
+        lights,
+        entry.mask,
+        intensities=strengths,
+        method=params.method,
+        integrator=params.integrator,
+        sphere=circle,
+    )
+    solved = _SolvedSet(rec, _maps(rec, circle))
+    state.results.put(key, solved, rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes)
+    return solved, False
+
+
+def _maps(rec, circle) -> dict[str, Any]:
+    """What the client shows and relights with, encoded once per solve."""
+    from shadeform.io.images import srgb_encode
+
+    mask = rec.mask
+    normals = np.where(mask[..., None], (np.nan_to_num(rec.normals) + 1.0) / 2.0, 0.0)
+    albedo = rec.albedo if rec.albedo.ndim == 3 else np.repeat(rec.albedo[..., None], 3, axis=2)
+    albedo = np.where(mask[..., None], np.nan_to_num(albedo), 0.0)
+    white = float(np.percentile(albedo[mask], 99.5)) if mask.any() else 0.0
+    shown = srgb_encode(np.clip(albedo / white if white > 0 else albedo, 0.0, 1.0).astype(np.float32))
+    depth = rec.depth[mask]
+    return {
+        "mask_png": png_base64(mask.astype(np.float32)),
+        "normals_png": png_base64(normals),
+        "albedo_png": png_base64(shown),
+        "albedo_white": white,
+        "confidence_png": png_base64(np.nan_to_num(rec.confidence)),
+        "lights": [tuple(row) for row in rec.info["light_directions"]],
+        "sphere": None if circle is None else tuple(float(v) for v in circle),
+        "depth_range": (float(np.nanmin(depth)), float(np.nanmax(depth))),
+    }
+
+
+def _result(state, entry: StoredPhotoSet, body: StereoRequest) -> StereoResult:
+    from shadeform import to_mesh
+
+    start = time.perf_counter()
+    solved, cached = _solve(state, entry, body.params)
+    rec = solved.reconstruction
+    timings = {} if cached else dict(rec.info["timings"])
+    lap = time.perf_counter()
+    mesh = to_mesh(rec, step=body.params.step)
+    timings["mesh"] = time.perf_counter() - lap
+    timings["total"] = time.perf_counter() - start
+    info = {key: value for key, value in rec.info.items() if key != "light_directions"}
+    return StereoResult(
+        request_id=body.request_id,
+        mesh=mesh_data(mesh),
+        photos_dropped=list(rec.info["photos_dropped"]),
+        photos_rescaled=[(int(i), float(f)) for i, f in rec.info["photos_rescaled"]],
+        light=tuple(float(v) for v in rec.light),
+        timings=timings,
+        info={**plain(info), "cached": cached},
+        **solved.maps,
+    )

@@ -1,0 +1,554 @@
+// Photo sets: several photos of one still object under moving lights, solved by photometric
+// stereo on the server. This module owns the pane that shows what it found (the object relit
+// under a light the user drags, its normals, albedo, confidence, and the photos themselves),
+// the panel group of its settings, and its requests; the App gives it the 3D view and the
+// busy/toast helpers.
+//
+// Relighting is done here, per pixel, from the normals and albedo the server sends as PNGs:
+// shown = encode(albedo * max(0, n . l) * brightness), linear albedo, sRGB on screen. A drag
+// redraws at most once per animation frame.
+import * as api from './api';
+import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
+
+export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
+
+export interface StereoHost {
+  /** Show a solved mesh in the 3D view (refit the camera when asked). */
+  showMesh(result: StereoResult, mesh: api.DecodedMesh, refit: boolean): void;
+  busy(text: string, work: () => Promise<void>): Promise<void>;
+  solving(on: boolean): void;
+  toast(message: string, kind?: 'error' | 'info'): void;
+}
+
+const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+
+/** sRGB decoding (8-bit code -> linear) and encoding (linear, 4096 steps -> 8-bit code). */
+const SRGB_TO_LINEAR = Float32Array.from({ length: 256 }, (_, i) => {
+  const v = i / 255;
+  return v <= 0.04045 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4;
+});
+const ENCODE_STEPS = 4096;
+const LINEAR_TO_SRGB = Uint8ClampedArray.from({ length: ENCODE_STEPS + 1 }, (_, i) => {
+  const v = i / ENCODE_STEPS;
+  return Math.round(255 * (v <= 0.0031308 ? 12.92 * v : 1.055 * v ** (1 / 2.4) - 0.055));
+});
+
+/** The decoded maps of one result, per pixel (row-major, the photos' size). */
+interface Maps {
+  width: number;
+  height: number;
+  mask: Uint8Array;
+  normals: Float32Array; // 3 per pixel, unit
+  albedo: Float32Array; // 3 per pixel, linear, 1 = the server's albedo_white
+  normalsImage: ImageData;
+  albedoImage: ImageData;
+  confidenceImage: ImageData;
+  /** The object's centre and half-size in pixels: where a drag over the image points the light. */
+  centre: [number, number];
+  radius: number;
+}
+
+async function decodePng(base64: string): Promise<ImageData> {
+  const image = new Image();
+  image.src = `data:image/png;base64,${base64}`;
+  await image.decode();
+  const canvas = document.createElement('canvas');
+  canvas.width = image.naturalWidth;
+  canvas.height = image.naturalHeight;
+  const context = canvas.getContext('2d', { willReadFrequently: true })!;
+  context.drawImage(image, 0, 0);
+  return context.getImageData(0, 0, canvas.width, canvas.height);
+}
+
+async function decodeMaps(result: StereoResult): Promise<Maps> {
+  const [maskImage, normalsImage, albedoImage, confidenceImage] = await Promise.all(
+    [result.mask_png, result.normals_png, result.albedo_png, result.confidence_png].map(decodePng),
+  );
+  const { width, height } = normalsImage;
+  const count = width * height;
+  const mask = new Uint8Array(count);
+  const normals = new Float32Array(3 * count);
+  const albedo = new Float32Array(3 * count);
+  let top = height, bottom = -1, left = width, right = -1;
+  for (let i = 0; i < count; i++) {
+    if (maskImage.data[4 * i] < 128) continue;
+    mask[i] = 1;
+    const nx = normalsImage.data[4 * i] / 127.5 - 1;
+    const ny = normalsImage.data[4 * i + 1] / 127.5 - 1;
+    const nz = normalsImage.data[4 * i + 2] / 127.5 - 1;
+    const length = Math.hypot(nx, ny, nz) || 1;
+    normals[3 * i] = nx / length;
+    normals[3 * i + 1] = ny / length;
+    normals[3 * i + 2] = nz / length;
+    for (let c = 0; c < 3; c++) albedo[3 * i + c] = SRGB_TO_LINEAR[albedoImage.data[4 * i + c]];
+    const row = Math.floor(i / width), col = i - row * width;
+    top = Math.min(top, row);
+    bottom = Math.max(bottom, row);
+    left = Math.min(left, col);
+    right = Math.max(right, col);
+  }
+  if (bottom < 0) [top, bottom, left, right] = [0, height - 1, 0, width - 1];
+  // the maps shown as they are, off the object dark
+  for (const shown of [normalsImage, albedoImage, confidenceImage]) {
+    for (let i = 0; i < count; i++) {
+      if (!mask[i]) shown.data.set([24, 26, 31, 255], 4 * i);
+    }
+  }
+  return {
+    width,
+    height,
+    mask,
+    normals,
+    albedo,
+    normalsImage,
+    albedoImage,
+    confidenceImage,
+    centre: [(left + right) / 2, (top + bottom) / 2],
+    radius: Math.max(right - left, bottom - top, 2) / 2,
+  };
+}
+
+/** A light direction from a point on the unit disc (the hemisphere seen from the camera). */
+export function lightFromDisc(x: number, y: number): [number, number, number] {
+  const r = Math.hypot(x, y);
+  const limit = 0.985; // at most 80 degrees from the camera: a grazing light shows nothing
+  if (r > limit) [x, y] = [(x / r) * limit, (y / r) * limit];
+  return [x, y, Math.sqrt(Math.max(0, 1 - x * x - y * y))];
+}
+
+export class StereoSession {
+  info: PhotoSetInfo | null = null;
+  params: StereoParams;
+  result: StereoResult | null = null;
+  show: StereoShow = 'relight';
+  light: [number, number, number] = [0.4, 0.4, Math.sqrt(1 - 0.32)];
+  brightness = 1;
+  photoIndex = 0;
+  appliedCount = 0;
+  private maps: Maps | null = null;
+  private photo: ImageData | null = null;
+  private requestCounter = 0;
+  private inFlight: AbortController | null = null;
+  private frame = 0;
+  private refitNext = true;
+  private readonly canvas: HTMLCanvasElement;
+  private readonly dome: HTMLCanvasElement;
+
+  constructor(
+    private readonly options: Options,
+    private readonly host: StereoHost,
+  ) {
+    this.params = structuredClone(options.stereo_defaults);
+    this.canvas = $<HTMLCanvasElement>('stereo-canvas');
+    this.dome = $<HTMLCanvasElement>('light-dome');
+    this.buildPanel();
+    this.bindPane();
+  }
+
+  // ----------------------------------------------------------------------- opening
+
+  async openFiles(files: File[]): Promise<boolean> {
+    const images = files.filter((f) => !/\.(txt|lp|json|csv)$/i.test(f.name) && !/^mask\./i.test(f.name));
+    const texts = files.filter((f) => /\.(txt|lp|csv)$/i.test(f.name));
+    const intensities = texts.find((f) => /intensit/i.test(f.name)) ?? null;
+    const lights = texts.find((f) => f !== intensities) ?? null;
+    const mask = files.find((f) => /^mask\./i.test(f.name)) ?? null;
+    if (images.length < 3) {
+      this.host.toast(
+        `Photometric stereo needs at least 3 photos of one still object; ${images.length} chosen — select all the photos (and their light file) at once`,
+      );
+      return false;
+    }
+    const total = files.reduce((sum, f) => sum + f.size, 0);
+    const limit = this.options.limits.max_upload_bytes;
+    if (total > limit) {
+      this.host.toast(`The photos together are ${(total / 1e6).toFixed(1)} MB; the limit is ${(limit / 1e6).toFixed(1)} MB — open fewer or smaller photos`);
+      return false;
+    }
+    images.sort((a, b) => a.name.localeCompare(b.name, undefined, { numeric: true }));
+    let opened = false;
+    await this.host.busy(`Uploading ${images.length} photos…`, async () => {
+      const info = await api.uploadPhotoSet(images, { lights, intensities, mask });
+      this.open(info);
+      opened = true;
+    });
+    return opened;
+  }
+
+  async openExample(name: string): Promise<boolean> {
+    let opened = false;
+    await this.host.busy('Opening photo set…', async () => {
+      this.open(await api.openPhotoSetExample(name));
+      opened = true;
+    });
+    return opened;
+  }
+
+  private open(info: PhotoSetInfo): void {
+    this.info = info;
+    this.params = { ...structuredClone(this.options.stereo_defaults), ...info.suggested };
+    this.result = null;
+    this.maps = null;
+    this.photo = null;
+    this.photoIndex = 0;
+    this.refitNext = true;
+    this.canvas.width = info.width;
+    this.canvas.height = info.height;
+    $<HTMLInputElement>('stereo-photo').max = String(info.count);
+    $<HTMLInputElement>('stereo-photo').value = '1';
+    const parts = [`${info.count} photos`, `${info.width} × ${info.height}`, info.colour ? 'colour' : 'grey'];
+    parts.push(info.lights_file ? 'light file' : 'no light file');
+    if (info.intensities_file) parts.push('light strengths');
+    if (info.mask) parts.push('mask');
+    $('stereo-summary').textContent = parts.join(' · ');
+    this.showParams();
+    this.setError(null);
+    this.draw();
+    this.solve();
+  }
+
+  // ----------------------------------------------------------------------- solving
+
+  request(): api.StereoRequestBody {
+    return { photoset_id: this.info!.photoset_id, params: structuredClone(this.params), request_id: ++this.requestCounter };
+  }
+
+  async solve(): Promise<void> {
+    if (!this.info) return;
+    this.inFlight?.abort();
+    const controller = new AbortController();
+    this.inFlight = controller;
+    const body = this.request();
+    this.host.solving(true);
+    try {
+      const result = await api.stereo(body, controller.signal);
+      if (!result || result.request_id !== this.requestCounter) return;
+      const mesh = api.decodeMesh(result.mesh);
+      const maps = await decodeMaps(result);
+      if (result.request_id !== this.requestCounter) return;
+      this.result = result;
+      this.maps = maps;
+      this.host.showMesh(result, mesh, this.refitNext);
+      this.refitNext = false;
+      this.appliedCount += 1;
+      this.setError(null);
+      this.showNote(result);
+      this.draw();
+    } catch (err) {
+      if ((err as Error).name === 'AbortError') return;
+      this.setError((err as Error).message);
+    } finally {
+      if (this.inFlight === controller) {
+        this.inFlight = null;
+        this.host.solving(false);
+      }
+    }
+  }
+
+  async exportFormat(suffix: string): Promise<{ blob: Blob; filename: string }> {
+    return api.exportStereo(this.request(), suffix);
+  }
+
+  private change(patch: Partial<StereoParams>): void {
+    const onlyStep = Object.keys(patch).every((key) => key === 'step');
+    this.params = { ...this.params, ...patch };
+    this.showParams();
+    if (!onlyStep) this.refitNext = true;
+    this.solve();
+  }
+
+  // ------------------------------------------------------------------------- panel
+
+  private buildPanel(): void {
+    const method = $<HTMLSelectElement>('stereo-method');
+    for (const entry of this.options.stereo_methods) method.add(new Option(entry.name.replace('_', ' '), entry.name));
+    const integrator = $<HTMLSelectElement>('stereo-integrator');
+    for (const entry of this.options.integrators) integrator.add(new Option(entry.name, entry.name));
+    method.addEventListener('change', () => this.change({ method: method.value }));
+    integrator.addEventListener('change', () => this.change({ integrator: integrator.value }));
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-lights button')) {
+      button.addEventListener('click', () => {
+        const lights = button.dataset.lights as StereoParams['lights'];
+        if (lights === 'file' && !this.info?.lights_file) {
+          this.setError('This photo set came without a light file: open the photos again together with their light file (.txt or .lp), or choose Sphere or Unknown');
+          return;
+        }
+        this.change({ lights });
+      });
+    }
+    const sphere = $<HTMLInputElement>('stereo-sphere');
+    sphere.addEventListener('change', () => {
+      const text = sphere.value.trim();
+      if (!text || text.toLowerCase() === 'auto') return this.change({ sphere: null });
+      const numbers = text.split(/[\s,]+/).map(Number);
+      if (numbers.length !== 3 || !numbers.every(Number.isFinite) || numbers[2] <= 0) {
+        this.setError(`"${text}" is not a circle: give the sphere's column, row and radius in pixels (e.g. 120, 80, 40), or leave it empty to find it`);
+        return;
+      }
+      this.change({ sphere: numbers as [number, number, number] });
+    });
+    const step = $<HTMLInputElement>('stereo-step');
+    step.addEventListener('input', () => ($('stereo-step-out').textContent = step.value));
+    step.addEventListener('change', () => this.change({ step: Number(step.value) }));
+  }
+
+  private showParams(): void {
+    $<HTMLSelectElement>('stereo-method').value = this.params.method;
+    $<HTMLSelectElement>('stereo-integrator').value = this.params.integrator;
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-lights button')) {
+      button.classList.toggle('on', button.dataset.lights === this.params.lights);
+      if (button.dataset.lights === 'file') button.classList.toggle('unavailable', !this.info?.lights_file);
+    }
+    $('stereo-sphere-row').hidden = this.params.lights !== 'sphere';
+    const sphere = this.params.sphere;
+    $<HTMLInputElement>('stereo-sphere').value = sphere ? sphere.map((v) => Math.round(v * 10) / 10).join(', ') : '';
+    $<HTMLInputElement>('stereo-step').value = String(this.params.step);
+    $('stereo-step-out').textContent = String(this.params.step);
+  }
+
+  private showNote(result: StereoResult): void {
+    const notes: string[] = [];
+    const lights = { file: 'from the light file', sphere: 'read from the sphere', unknown: 'read from the photos' }[this.params.lights];
+    notes.push(`${result.lights.length} lights ${lights}.`);
+    if (result.sphere) {
+      const [x, y, r] = result.sphere;
+      notes.push(`Sphere at column ${x.toFixed(0)}, row ${y.toFixed(0)}, radius ${r.toFixed(0)}.`);
+    }
+    if (result.photos_dropped.length) {
+      notes.push(`Left out (they contradict the others): photo ${result.photos_dropped.map((i) => i + 1).join(', ')}.`);
+    }
+    if (result.photos_rescaled.length) {
+      const shown = result.photos_rescaled.slice(0, 6).map(([i, f]) => `${i + 1} ×${f.toFixed(2)}`);
+      notes.push(`Light strength corrected: photo ${shown.join(', ')}${result.photos_rescaled.length > 6 ? ', …' : ''}.`);
+    }
+    const normals = result.timings.normals, depth = result.timings.depth;
+    if (normals !== undefined) notes.push(`Normals ${normals.toFixed(2)} s, depth ${(depth ?? 0).toFixed(2)} s.`);
+    $('stereo-note').textContent = notes.join(' ');
+  }
+
+  /** A message that stays until the next result (or the next error). */
+  private setError(message: string | null): void {
+    const box = $('stereo-error');
+    box.hidden = message === null;
+    box.textContent = message ?? '';
+  }
+
+  // -------------------------------------------------------------------------- pane
+
+  private bindPane(): void {
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-show button')) {
+      button.addEventListener('click', () => this.setShow(button.dataset.show as StereoShow));
+    }
+    const photo = $<HTMLInputElement>('stereo-photo');
+    photo.addEventListener('input', () => this.showPhoto(Number(photo.value) - 1));
+    const brightness = $<HTMLInputElement>('stereo-brightness');
+    brightness.addEventListener('input', () => {
+      this.brightness = Number(brightness.value);
+      $('stereo-brightness-out').textContent = this.brightness.toFixed(2);
+      if (this.show !== 'relight') this.setShow('relight');
+      else this.draw();
+    });
+    const dragOn = (element: HTMLCanvasElement, toDisc: (event: PointerEvent) => [number, number]) => {
+      const move = (event: PointerEvent) => {
+        if (!this.maps) return;
+        this.setLight(lightFromDisc(...toDisc(event)));
+      };
+      element.addEventListener('pointerdown', (event) => {
+        if (event.button !== 0) return;
+        element.setPointerCapture(event.pointerId);
+        if (this.show !== 'relight') this.setShow('relight');
+        move(event);
+      });
+      element.addEventListener('pointermove', (event) => {
+        if (element.hasPointerCapture(event.pointerId)) move(event);
+      });
+    };
+    dragOn(this.canvas, (event) => {
+      const [row, col] = this.pixelAt(event.clientX, event.clientY);
+      const maps = this.maps!;
+      return [(col - maps.centre[0]) / maps.radius, -(row - maps.centre[1]) / maps.radius];
+    });
+    dragOn(this.dome, (event) => {
+      const rect = this.dome.getBoundingClientRect();
+      const half = rect.width / 2;
+      return [(event.clientX - rect.left - half) / (half - 6), -(event.clientY - rect.top - half) / (half - 6)];
+    });
+  }
+
+  setShow(show: StereoShow): void {
+    this.show = show;
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-show button')) {
+      button.classList.toggle('on', button.dataset.show === show);
+    }
+    $('stereo-photo-row').hidden = show !== 'photo';
+    if (show === 'photo') this.showPhoto(this.photoIndex);
+    else this.draw();
+  }
+
+  setLight(light: [number, number, number]): void {
+    this.light = light;
+    this.draw();
+  }
+
+  /** Where the image lies on the page: the canvas shows it fitted and centred. */
+  private placement(): { left: number; top: number; scale: number } {
+    const rect = this.canvas.getBoundingClientRect();
+    const scale = Math.min(rect.width / this.canvas.width, rect.height / this.canvas.height);
+    const left = rect.left + (rect.width - scale * this.canvas.width) / 2;
+    const top = rect.top + (rect.height - scale * this.canvas.height) / 2;
+    return { left, top, scale };
+  }
+
+  /** (row, col) of the image under a page point. */
+  pixelAt(clientX: number, clientY: number): [number, number] {
+    const { left, top, scale } = this.placement();
+    return [(clientY - top) / scale - 0.5, (clientX - left) / scale - 0.5];
+  }
+
+  private async showPhoto(index: number): Promise<void> {
+    if (!this.info) return;
+    this.photoIndex = Math.max(0, Math.min(this.info.count - 1, index));
+    $('stereo-photo-out').textContent = `${this.photoIndex + 1} / ${this.info.count}`;
+    const id = this.info.photoset_id;
+    try {
+      const response = await fetch(api.photoSetPhotoUrl(id, this.photoIndex));
+      if (!response.ok) throw new Error((await response.json()).detail ?? response.statusText);
+      const image = await createImageBitmap(await response.blob());
+      const canvas = document.createElement('canvas');
+      canvas.width = image.width;
+      canvas.height = image.height;
+      const context = canvas.getContext('2d')!;
+      context.drawImage(image, 0, 0);
+      if (this.info?.photoset_id !== id || this.show !== 'photo') return;
+      this.photo = context.getImageData(0, 0, image.width, image.height);
+      this.draw();
+    } catch (err) {
+      this.setError(`Cannot show photo ${this.photoIndex + 1}: ${(err as Error).message}`);
+    }
+  }
+
+  /** Redraw the pane (at most once per frame). */
+  draw(): void {
+    if (this.frame) return;
+    this.frame = requestAnimationFrame(() => {
+      this.frame = 0;
+      this.render();
+    });
+  }
+
+  private render(): void {
+    const context = this.canvas.getContext('2d')!;
+    const maps = this.maps;
+    this.drawDome();
+    $('stereo-empty').hidden = maps !== null;
+    if (!maps) {
+      context.clearRect(0, 0, this.canvas.width, this.canvas.height);
+      return;
+    }
+    if (this.show === 'normals') return context.putImageData(maps.normalsImage, 0, 0);
+    if (this.show === 'albedo') return context.putImageData(maps.albedoImage, 0, 0);
+    if (this.show === 'confidence') return context.putImageData(maps.confidenceImage, 0, 0);
+    if (this.show === 'photo') {
+      if (this.photo) context.putImageData(this.photo, 0, 0);
+      return;
+    }
+    context.putImageData(relight(maps, this.light, this.brightness), 0, 0);
+    const [x, y, z] = this.light;
+    const slant = (Math.acos(z) * 180) / Math.PI;
+    const tilt = (Math.atan2(y, x) * 180) / Math.PI;
+    $('stereo-light-out').textContent = `light slant ${slant.toFixed(0)}°, tilt ${tilt.toFixed(0)}°`;
+  }
+
+  private drawDome(): void {
+    const size = this.dome.width;
+    const half = size / 2;
+    const r = half - 6;
+    const context = this.dome.getContext('2d')!;
+    context.clearRect(0, 0, size, size);
+    context.fillStyle = 'rgba(15, 23, 42, 0.72)';
+    context.beginPath();
+    context.arc(half, half, r, 0, 2 * Math.PI);
+    context.fill();
+    context.strokeStyle = 'rgba(148, 163, 184, 0.6)';
+    context.stroke();
+    context.beginPath();
+    context.arc(half, half, r * Math.sin(Math.PI / 4), 0, 2 * Math.PI);
+    context.stroke();
+    context.fillStyle = 'rgba(148, 163, 184, 0.9)';
+    for (const [x, y] of this.result?.lights ?? []) {
+      context.beginPath();
+      context.arc(half + x * r, half - y * r, 2, 0, 2 * Math.PI);
+      context.fill();
+    }
+    const [x, y] = this.light;
+    context.fillStyle = '#facc15';
+    context.beginPath();
+    context.arc(half + x * r, half - y * r, 5, 0, 2 * Math.PI);
+    context.fill();
+  }
+
+  // ------------------------------------------------------------------------ hook
+
+  hook() {
+    return {
+      info: () => (this.info ? structuredClone(this.info) : null),
+      params: () => structuredClone(this.params),
+      show: () => this.show,
+      light: () => [...this.light],
+      applied: () => this.appliedCount,
+      error: () => ($('stereo-error').hidden ? null : $('stereo-error').textContent),
+      note: () => $('stereo-note').textContent,
+      lastResult: () => {
+        const r = this.result;
+        if (!r) return null;
+        return {
+          request_id: r.request_id,
+          vertex_count: r.mesh.vertex_count,
+          lights: r.lights,
+          sphere: r.sphere,
+          photos_dropped: r.photos_dropped,
+          photos_rescaled: r.photos_rescaled,
+          albedo_white: r.albedo_white,
+          depth_range: r.depth_range,
+          info: r.info,
+        };
+      },
+      /** The pane's pixels at (row, col) as drawn now: [r, g, b]. */
+      shownAt: (row: number, col: number) => Array.from(this.canvas.getContext('2d')!.getImageData(col, row, 1, 1).data.slice(0, 3)),
+      /** The decoded normal and linear albedo at (row, col), or null off the object. */
+      mapsAt: (row: number, col: number) => {
+        const maps = this.maps;
+        const i = row * (maps?.width ?? 0) + col;
+        if (!maps || !maps.mask[i]) return null;
+        return { normal: Array.from(maps.normals.slice(3 * i, 3 * i + 3)), albedo: Array.from(maps.albedo.slice(3 * i, 3 * i + 3)) };
+      },
+      /** The page point over image pixel (row, col), for a test's mouse. */
+      pagePoint: (row: number, col: number) => {
+        const { left, top, scale } = this.placement();
+        return { x: left + (col + 0.5) * scale, y: top + (row + 0.5) * scale };
+      },
+    };
+  }
+}
+
+/** The object under light ``l``: albedo * max(0, n . l) * brightness, sRGB-encoded. */
+export function relight(maps: Maps, light: [number, number, number], brightness: number): ImageData {
+  const { width, height, mask, normals, albedo } = maps;
+  const out = new ImageData(width, height);
+  const data = out.data;
+  const [lx, ly, lz] = light;
+  const scale = brightness * ENCODE_STEPS;
+  for (let i = 0, count = width * height; i < count; i++) {
+    const p = 4 * i;
+    data[p + 3] = 255;
+    if (!mask[i]) {
+      data[p] = 24;
+      data[p + 1] = 26;
+      data[p + 2] = 31;
+      continue;
+    }
+    const shade = Math.max(0, normals[3 * i] * lx + normals[3 * i + 1] * ly + normals[3 * i + 2] * lz) * scale;
+    for (let c = 0; c < 3; c++) data[p + c] = LINEAR_TO_SRGB[Math.min(ENCODE_STEPS, Math.round(albedo[3 * i + c] * shade))];
+  }
+  return out;
+}
