@@ -933,3 +933,30 @@ def test_photos_opened_with_their_light_file_and_errors_that_stay(page, tmp_path
     page.wait_for_function("window.shadeform.state().image !== null", timeout=RESULT_MS)
     assert not page.evaluate("document.body.classList.contains('stereo-mode')")
     assert page.is_visible("#mask-group") and not page.is_visible("#stereo-group")
+
+
+def test_a_reload_shows_the_photo_set_again_with_its_settings(page, server):
+    page.click("#examples-menu > button")
+    page.click('#examples-menu [data-photo-set="stereo:vase"]')
+    wait_for_stereo(page, 0)
+    page.select_option("#stereo-method", "robust")
+    page.wait_for_function("window.shadeform.stereo.applied() >= 2", timeout=RESULT_MS)
+    page.wait_for_timeout(300)  # the session is saved a moment after a change
+    page.reload()
+    page.evaluate("window.shadeform.ready")
+    wait_for_stereo(page, 0)
+    assert stereo(page, "params().method") == "robust"
+    assert stereo(page, "lastResult().info.method") == "photometric stereo (robust)"
+    assert page.input_value("#stereo-method") == "robust"
+    # a server that forgot the set: the page says so, and stays usable
+    page.evaluate(
+        """() => {
+        const session = JSON.parse(localStorage.getItem('shadeform.session.v1'));
+        session.photoSet.info.photoset_id = 'forgotten';
+        localStorage.setItem('shadeform.session.v1', JSON.stringify(session));
+    }"""
+    )
+    page.reload()
+    page.evaluate("window.shadeform.ready")
+    page.wait_for_function("window.shadeform.stereo.error() !== null", timeout=RESULT_MS)
+    assert "open them again" in stereo(page, "error()")

@@ -1,15 +1,21 @@
-"""Take the app's picture for the docs (``docs/app.png``) in headless Chromium.
+"""Take the app's pictures for the docs (``docs/app.png``, ``docs/app-photo-set.png``) in
+headless Chromium.
 
 Opens the coin photo in a running ``shadeform app`` (its light estimated from the photo, the
-example's own settings), turns the 3D view a little and saves the window. ``make web`` first, then::
+example's own settings), turns the 3D view a little and saves the window; or, given a folder of
+photos (DiLiGenT's layout: the photos, ``light_directions.txt``, ``light_intensities.txt``,
+``mask.png``), opens them as a photo set and drags the light to the upper left. ``make web``
+first, then::
 
     .venv/bin/shadeform app --no-browser --port 8765 &
     .venv/bin/python web/screenshot.py http://127.0.0.1:8765/ docs/app.png
+    .venv/bin/python web/screenshot.py http://127.0.0.1:8765/ docs/app-photo-set.png ../shared/data/real/diligent/cat
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
@@ -37,5 +43,45 @@ def main(url: str, out: str) -> None:
         browser.close()
 
 
+def photo_set(url: str, out: str, folder: str) -> None:
+    files = sorted(
+        str(p) for p in Path(folder).iterdir() if p.suffix in (".png", ".txt") and p.stem != "filenames"
+    )
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path="/usr/bin/chromium", headless=True, args=["--no-sandbox"]
+        )
+        page = browser.new_page(viewport={"width": 1440, "height": 860}, device_scale_factor=1)
+        page.goto(url)
+        page.evaluate("window.shadeform.ready")
+        page.set_input_files("#file-photos", files)
+        page.wait_for_function(
+            "window.shadeform.stereo.applied() >= 1 || window.shadeform.stereo.error() !== null",
+            timeout=300_000,
+        )
+        assert page.evaluate("window.shadeform.stereo.error()") is None, page.evaluate(
+            "window.shadeform.stereo.error()"
+        )
+        info = page.evaluate("window.shadeform.stereo.info()")
+        start = page.evaluate(
+            f"window.shadeform.stereo.pagePoint({info['height'] // 2}, {info['width'] // 2})"
+        )
+        end = page.evaluate(f"window.shadeform.stereo.pagePoint({info['height'] // 5}, {info['width'] // 4})")
+        page.mouse.move(start["x"], start["y"])
+        page.mouse.down()
+        page.mouse.move(end["x"], end["y"], steps=8)
+        page.mouse.up()
+        page.click("#view-host canvas")
+        for key in ("ArrowLeft", "ArrowUp"):
+            page.keyboard.press(key)
+        page.mouse.move(5, 300)
+        page.wait_for_timeout(500)
+        page.screenshot(path=out)
+        browser.close()
+
+
 if __name__ == "__main__":
-    main(*sys.argv[1:3])
+    if len(sys.argv) > 3:
+        photo_set(*sys.argv[1:4])
+    else:
+        main(*sys.argv[1:3])

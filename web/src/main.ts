@@ -122,6 +122,7 @@ class App {
       busy: (text, work) => this.busy(text, work),
       solving: (on) => this.setSolving(on),
       toast: (message, kind) => this.toast(message, kind),
+      changed: () => this.persist(),
     });
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
@@ -157,6 +158,11 @@ class App {
     if (initial && initial.image_id !== session.initialId) {
       this.initialId = initial.image_id;
       return this.showImage(initial, { kind: 'initial', name: initial.name }, null);
+    }
+    if (session.photoSet) {
+      this.stereo.reopen(session.photoSet.info, session.photoSet.params);
+      this.setStereoMode(true);
+      return;
     }
     if (!session.image || !session.source) return;
     try {
@@ -275,7 +281,10 @@ class App {
   /** Photo-set mode (photometric stereo) or one photo: the pane, the panel and exports follow. */
   private setStereoMode(on: boolean): void {
     document.body.classList.toggle('stereo-mode', on);
-    if (!on) return;
+    if (!on) {
+      this.stereo.close();
+      return;
+    }
     this.inFlight?.abort();
     this.image = null;
     this.source = null;
@@ -567,6 +576,7 @@ class App {
           params: this.image ? this.params : null,
           view: this.view,
           initialId: this.initialId,
+          photoSet: this.stereo.session(),
         }),
       150,
     );

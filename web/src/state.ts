@@ -5,7 +5,7 @@
 // keeps a bounded number, and none across a restart) can be uploaded again. A project file is
 // the same session as one JSON document with the image inline as base64.
 import { base64ToBytes, bytesToBase64 } from './api';
-import type { ImageInfo, ReconstructParams } from './api.gen';
+import type { ImageInfo, PhotoSetInfo, ReconstructParams, StereoParams } from './api.gen';
 
 export type Params = ReconstructParams;
 export type Region = Params['concave']['regions'][number];
@@ -32,6 +32,8 @@ export interface Session {
   view: ViewSettings;
   /** The server's start-up image last shown: a server started anew with an image shows it. */
   initialId: string | null;
+  /** The photo set open (photometric stereo) and its settings, when one is. */
+  photoSet?: { info: PhotoSetInfo; params: StereoParams } | null;
 }
 
 export const DEFAULT_VIEW: ViewSettings = {
@@ -59,6 +61,7 @@ export function loadSession(): Session {
       params: saved.params ?? null,
       view: { ...DEFAULT_VIEW, ...(saved.view ?? {}) },
       initialId: saved.initialId ?? null,
+      photoSet: saved.photoSet ?? null,
     };
   } catch {
     return empty; // storage disabled or a corrupt entry: start afresh

@@ -18,6 +18,8 @@ export interface StereoHost {
   busy(text: string, work: () => Promise<void>): Promise<void>;
   solving(on: boolean): void;
   toast(message: string, kind?: 'error' | 'info'): void;
+  /** The settings changed: keep them for a reload. */
+  changed(): void;
 }
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -148,7 +150,11 @@ export class StereoSession {
   // ----------------------------------------------------------------------- opening
 
   async openFiles(files: File[]): Promise<boolean> {
-    const images = files.filter((f) => !/\.(txt|lp|json|csv)$/i.test(f.name) && !/^mask\./i.test(f.name));
+    // as a DiLiGenT-style folder is read: a mask, ground-truth normal maps and the list of file
+    // names are not photos (the photos are ordered by their names, numbers as numbers)
+    const ignored = /^(normal_gt|normal_map)\.|^filenames\.txt$/i;
+    files = files.filter((f) => !ignored.test(f.name));
+    const images = files.filter((f) => !/\.(txt|lp|json|csv|mat)$/i.test(f.name) && !/^mask\./i.test(f.name));
     const texts = files.filter((f) => /\.(txt|lp|csv)$/i.test(f.name));
     const intensities = texts.find((f) => /intensit/i.test(f.name)) ?? null;
     const lights = texts.find((f) => f !== intensities) ?? null;
@@ -184,9 +190,27 @@ export class StereoSession {
     return opened;
   }
 
-  private open(info: PhotoSetInfo): void {
+  /** The photo set a reloaded page had open, with its settings (the server may have forgotten it). */
+  reopen(info: PhotoSetInfo, params: StereoParams): void {
+    this.open(info, params);
+  }
+
+  /** Back to one photo: nothing of the set is shown or solved any more. */
+  close(): void {
+    this.inFlight?.abort();
+    this.info = null;
+    this.result = null;
+    this.maps = null;
+  }
+
+  /** What a reload needs to show the set again. */
+  session(): { info: PhotoSetInfo; params: StereoParams } | null {
+    return this.info ? { info: structuredClone(this.info), params: structuredClone(this.params) } : null;
+  }
+
+  private open(info: PhotoSetInfo, params?: StereoParams): void {
     this.info = info;
-    this.params = { ...structuredClone(this.options.stereo_defaults), ...info.suggested };
+    this.params = { ...structuredClone(this.options.stereo_defaults), ...(params ?? info.suggested) };
     this.result = null;
     this.maps = null;
     this.photo = null;
@@ -236,6 +260,10 @@ export class StereoSession {
       this.draw();
     } catch (err) {
       if ((err as Error).name === 'AbortError') return;
+      if (err instanceof api.ApiError && err.status === 404) {
+        this.setError(`The server no longer has these photos (it was restarted or forgot them): open them again with Open photos`);
+        return;
+      }
       this.setError((err as Error).message);
     } finally {
       if (this.inFlight === controller) {
@@ -253,6 +281,7 @@ export class StereoSession {
     const onlyStep = Object.keys(patch).every((key) => key === 'step');
     this.params = { ...this.params, ...patch };
     this.showParams();
+    this.host.changed();
     if (!onlyStep) this.refitNext = true;
     this.solve();
   }
