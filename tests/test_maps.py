@@ -243,12 +243,21 @@ class TestSaveGray:
         stored = np.asarray(Image.open(save_gray(mask, tmp_path / "m.png", bitdepth=8)))
         np.testing.assert_array_equal(stored, [[255, 0], [0, 255]])
 
+    def test_colour_round_trip(self, tmp_path):
+        import png
+
+        colour = np.random.default_rng(1).random((5, 7, 3))
+        width, height, rows, info = png.Reader(filename=str(save_gray(colour, tmp_path / "c.png"))).read()
+        assert (width, height, info["planes"], info["bitdepth"]) == (7, 5, 3, 16)
+        stored = np.array([list(row) for row in rows], dtype=np.float64).reshape(5, 7, 3) / 65535
+        np.testing.assert_allclose(stored, colour, atol=0.5 / 65535)
+
     @pytest.mark.parametrize(
         ("image", "name", "bitdepth", "message"),
         [
             (np.zeros((4, 4)), "x.jpg", 8, ".png"),
             (np.zeros((4, 4)), "x.png", 12, "bitdepth must be 8 or 16"),
-            (np.zeros((4, 4, 3)), "x.png", 8, "must be (H, W)"),
+            (np.zeros((4, 4, 2)), "x.png", 8, "must be (H, W) or (H, W, 3)"),
         ],
     )
     def test_bad_input_writes_nothing(self, tmp_path, image, name, bitdepth, message):
