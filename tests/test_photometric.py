@@ -593,3 +593,37 @@ def test_cli_unknown_lights(tmp_path):
     assert json.loads(result.output)["info"]["lights"] == "read from the photos" and out.is_file()
     result = CliRunner().invoke(app, ["stereo", str(tmp_path), "-o", str(out)])
     assert result.exit_code == 2 and "--lights" in result.output
+
+
+def test_cli_writes_a_colour_albedo_for_colour_photos(tmp_path, sphere):
+    import png
+    from typer.testing import CliRunner
+
+    from shadeform.cli import app
+    from shadeform.io.maps import save_gray
+    from shadeform.io.photoset import write_lights
+
+    lights = ring(6, 30)
+    paint = np.array([0.3, 0.6, 0.9])
+    for i, image in enumerate(photos(sphere, lights, albedo=0.9)):
+        save_gray(image[..., None] * paint, tmp_path / f"c{i}.png")  # 16-bit RGB
+        save_gray(image * paint[1], tmp_path / f"g{i}.png")  # and a grey copy
+    write_lights(tmp_path / "lights.txt", lights)
+    colour = [str(tmp_path / f"c{i}.png") for i in range(6)]
+    albedo = tmp_path / "albedo.png"
+    args = ["stereo", *colour, "--lights", str(tmp_path / "lights.txt"), "-o", str(tmp_path / "m.ply")]
+    result = CliRunner().invoke(app, [*args, "--albedo", str(albedo)])
+    assert result.exit_code == 0, result.output
+    width, height, rows, info = png.Reader(filename=str(albedo)).read()
+    stored = np.array([list(row) for row in rows], dtype=np.float64).reshape(96, 96, 3)
+    assert info["planes"] == 3 and "colour" in result.output
+    centre = stored[40:56, 40:56].reshape(-1, 3)
+    np.testing.assert_allclose(
+        centre / centre[:, 2:], np.broadcast_to(paint / paint[2], centre.shape), atol=0.01
+    )
+    # grey photos: a grey albedo
+    grey = [str(tmp_path / f"g{i}.png") for i in range(6)]
+    args = ["stereo", *grey, "--lights", str(tmp_path / "lights.txt"), "-o", str(tmp_path / "g.ply")]
+    result = CliRunner().invoke(app, [*args, "--albedo", str(albedo)])
+    assert result.exit_code == 0, result.output
+    assert png.Reader(filename=str(albedo)).read()[3]["planes"] == 1
