@@ -44,6 +44,7 @@ _EXPORTS = {
     "PhotometricStereo": "shadeform.photometric",
     "calibrate_lights": "shadeform.light.sphere",
     "LightCalibration": "shadeform.light.sphere",
+    "fuse": "shadeform.fusion",
 }
 _SUBMODULES = {
     "synth",
@@ -59,6 +60,7 @@ _SUBMODULES = {
     "render",
     "examples",
     "photometric",
+    "fusion",
 }
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])

@@ -11,9 +11,17 @@ References
 .. [2] B. Shi, Z. Mo, Z. Wu, D. Duan, S.-K. Yeung and P. Tan, "A benchmark dataset and
    evaluation for non-Lambertian and uncalibrated photometric stereo", IEEE Trans. PAMI
    41(2), 271-284, 2019 (DiLiGenT: mean angular error, and mean absolute depth error).
+.. [3] A. Knapitsch, J. Park, Q.-Y. Zhou and V. Koltun, "Tanks and Temples: benchmarking
+   large-scale scene reconstruction", ACM Trans. Graphics 36(4), 2017 (F-score of surfaces).
+
+Surfaces (complete models fused from several views) are compared as point sets sampled on them:
+:func:`chamfer` and :func:`f_score` in percent of the true bounding-box diagonal, after the
+translation a reconstruction cannot fix; :func:`volume_error` for closed meshes.
 """
 
 from __future__ import annotations
+
+import numbers
 
 import numpy as np
 
@@ -227,3 +235,261 @@ def _fitted(estimate, truth, fit):
         coef, *_ = np.linalg.lstsq(design, truth, rcond=None)
         return design @ coef
     return estimate
+
+
+def chamfer(points, points_true, *, translate: bool = True) -> float:
+    """Symmetric Chamfer distance between two point sets, in % of the true bounding-box diagonal.
+
+    The mean distance from each point to its nearest true point and the mean distance from each
+    true point to its nearest point, averaged: ``(mean_i d(a_i, B) + mean_j d(b_j, A)) / 2``.
+    With ``translate`` the points are first moved by the translation found by translation-only
+    ICP [2]_ (least squares over both directions' nearest-neighbour pairs), started from no shift
+    and from the offset of the centroids, keeping the better end: a reconstruction from
+    orthographic views fixes no depth offset, and the result should not punish it.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Reconstructed surface samples (e.g. a mesh's vertices or points sampled on it).
+    points_true : (M, 3) array_like
+        Ground-truth surface samples (e.g. :meth:`shadeform.synth.ClosedObject.surface_points`),
+        not all equal.
+    translate : bool, optional
+        Fit the free translation first (default), or compare in place.
+
+    Returns
+    -------
+    float
+        ``100 * chamfer / diagonal``, the diagonal of the axis-aligned box of ``points_true``.
+
+    Raises
+    ------
+    InputError
+        Arrays not (N, 3), empty or not finite, or true points that span no box.
+
+    References
+    ----------
+    .. [1] H. G. Barrow, J. M. Tenenbaum, R. C. Bolles and H. C. Wolf, "Parametric
+       correspondence and chamfer matching", IJCAI 1977.
+    .. [2] P. J. Besl and N. D. McKay, "A method for registration of 3-D shapes", IEEE Trans.
+       PAMI 14(2), 239-256, 1992.
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    >>> chamfer(cube + 5.0, cube)
+    0.0
+    """
+    est, ref, diagonal = _point_sets(points, points_true)
+    forward, backward, _ = _registered(est, ref, translate)
+    return float(100.0 * 0.5 * (forward.mean() + backward.mean()) / diagonal)
+
+
+def f_score(points, points_true, *, threshold: float = 0.01, translate: bool = True) -> float:
+    """F-score of two point sets at a distance threshold, in % (Tanks and Temples [1]_).
+
+    Precision is the share of points within ``threshold * diagonal`` of a true point, recall
+    the share of true points within that distance of a point; the F-score is their harmonic
+    mean, ``2 P R / (P + R)`` (0 when both are 0). The diagonal is that of the true points'
+    axis-aligned bounding box; with ``translate`` the points are first moved by the same
+    translation as :func:`chamfer` finds.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Reconstructed surface samples.
+    points_true : (M, 3) array_like
+        Ground-truth surface samples, not all equal.
+    threshold : float, optional
+        Distance threshold as a fraction of the diagonal, > 0 (1 % by default).
+    translate : bool, optional
+        Fit the free translation first (default), or compare in place.
+
+    Returns
+    -------
+    float
+        F-score in percent, in [0, 100].
+
+    Raises
+    ------
+    InputError
+        Bad point arrays (see :func:`chamfer`) or a threshold that is not a positive number.
+
+    References
+    ----------
+    .. [1] A. Knapitsch, J. Park, Q.-Y. Zhou and V. Koltun, "Tanks and Temples: benchmarking
+       large-scale scene reconstruction", ACM Trans. Graphics 36(4), 2017.
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    >>> f_score(cube, cube)
+    100.0
+    """
+    if isinstance(threshold, bool) or not isinstance(threshold, numbers.Real):
+        raise InputError(
+            f"threshold must be a positive number (a fraction of the diagonal), got {threshold!r}"
+        )
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise InputError(
+            f"threshold must be a positive number (a fraction of the diagonal), got {threshold!r}"
+        )
+    est, ref, diagonal = _point_sets(points, points_true)
+    forward, backward, _ = _registered(est, ref, translate)
+    tolerance = float(threshold) * diagonal
+    precision = float(np.mean(forward < tolerance))
+    recall = float(np.mean(backward < tolerance))
+    if precision + recall == 0:
+        return 0.0
+    return float(100.0 * 2.0 * precision * recall / (precision + recall))
+
+
+def volume_error(mesh_or_volume, volume_true, *, signed: bool = False) -> float:
+    """Relative error of a closed mesh's volume, in %.
+
+    The volume of a closed, consistently wound triangle mesh is the divergence-theorem sum
+    ``|sum over faces of det(v0, v1, v2)| / 6`` (either winding gives the same magnitude).
+
+    Parameters
+    ----------
+    mesh_or_volume : Mesh, trimesh.Trimesh or float
+        Anything with ``vertices`` (V, 3) and ``faces`` (F, 3) (:class:`shadeform.mesh.Mesh`,
+        a trimesh), closed: every edge shared by exactly two faces, wound consistently; or the
+        volume itself.
+    volume_true : float
+        The true volume, > 0, in the same units cubed
+        (e.g. :attr:`shadeform.synth.ClosedObject.volume`).
+    signed : bool, optional
+        Return the signed error (positive: too large) instead of its magnitude.
+
+    Returns
+    -------
+    float
+        ``100 * |V - volume_true| / volume_true`` (signed with ``signed=True``).
+
+    Raises
+    ------
+    InputError
+        A mesh that is not closed or not consistently wound, bad faces, or a volume that is
+        not a positive finite number.
+
+    Examples
+    --------
+    >>> tetra = type("T", (), {"vertices": np.eye(4, 3, k=-1), "faces": [[0, 2, 1], [0, 1, 3],
+    ...                                                                  [0, 3, 2], [1, 2, 3]]})
+    >>> round(volume_error(tetra, 1 / 6), 12)
+    0.0
+    """
+    volume_true = _positive_volume(volume_true, "volume_true")
+    if hasattr(mesh_or_volume, "vertices") and hasattr(mesh_or_volume, "faces"):
+        volume = _mesh_volume(mesh_or_volume.vertices, mesh_or_volume.faces)
+    else:
+        volume = _positive_volume(mesh_or_volume, "volume")
+    error = 100.0 * (volume - volume_true) / volume_true
+    return float(error if signed else abs(error))
+
+
+def _point_sets(points, points_true):
+    """Validated float64 ``(N, 3)`` and ``(M, 3)`` arrays and the true bounding-box diagonal."""
+    sets = []
+    for what, value in (("points", points), ("points_true", points_true)):
+        try:
+            array = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{what} must be an (N, 3) array of numbers, got {type(value).__name__}"
+            ) from None
+        if array.ndim != 2 or array.shape[1] != 3 or array.shape[0] == 0:
+            raise InputError(f"{what} must be a non-empty (N, 3) array, got shape {array.shape}")
+        if not np.isfinite(array).all():
+            raise InputError(f"{what} contain NaN or inf; drop those points first")
+        sets.append(array)
+    est, ref = sets
+    diagonal = float(np.linalg.norm(ref.max(axis=0) - ref.min(axis=0)))
+    if diagonal == 0:
+        raise InputError("points_true are all the same point; their bounding box has no diagonal")
+    return est, ref, diagonal
+
+
+#: Points of each set the translation is fitted on (evenly strided); the distances use all.
+REGISTRATION_POINTS = 10_000
+
+
+def _registered(est, ref, translate: bool, iterations: int = 100):
+    """Nearest distances both ways after the best translation of ``est``, and that translation.
+
+    The translation is fitted on at most :data:`REGISTRATION_POINTS` of each set (it is a mean
+    over thousands of pairs, which a subset gives as well), the distances use every point."""
+    from scipy.spatial import cKDTree
+
+    def distances(est, ref, shift, trees):
+        forward, to_ref = trees[0].query(est + shift)
+        backward, to_est = trees[1].query(ref - shift)
+        return forward, backward, to_ref, to_est
+
+    full = (cKDTree(ref), cKDTree(est))
+    if not translate:
+        forward, backward, _, _ = distances(est, ref, np.zeros(3), full)
+        return forward, backward, np.zeros(3)
+    sub_est = est[:: max(1, len(est) // REGISTRATION_POINTS)]
+    sub_ref = ref[:: max(1, len(ref) // REGISTRATION_POINTS)]
+    trees = (cKDTree(sub_ref), cKDTree(sub_est))
+    scale = float(np.linalg.norm(ref.max(axis=0) - ref.min(axis=0)))
+    best = None
+    for shift in (np.zeros(3), ref.mean(axis=0) - est.mean(axis=0)):
+        for _ in range(iterations):
+            forward, backward, to_ref, to_est = distances(sub_est, sub_ref, shift, trees)
+            # Least-squares translation for these pairs: the mean of (true - estimate) over both.
+            update = (
+                sub_ref[to_ref].sum(axis=0)
+                - sub_est.sum(axis=0)
+                + sub_ref.sum(axis=0)
+                - sub_est[to_est].sum(axis=0)
+            ) / (sub_est.shape[0] + sub_ref.shape[0])
+            moved = float(np.linalg.norm(update - shift))
+            shift = update
+            if moved <= 1e-9 * scale:
+                break
+        forward, backward, _, _ = distances(est, ref, shift, full)
+        score = forward.mean() + backward.mean()
+        if best is None or score < best[0]:
+            best = (score, forward, backward, shift)
+    return best[1], best[2], best[3]
+
+
+def _positive_volume(value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
+        raise InputError(f"{what} must be a positive finite number, got {value!r}")
+    return float(value)
+
+
+def _mesh_volume(vertices, faces) -> float:
+    """Enclosed volume of a closed, consistently wound triangle mesh (divergence theorem)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if (
+        vertices.ndim != 2
+        or vertices.shape[1] != 3
+        or faces.ndim != 2
+        or faces.shape[1] != 3
+        or not len(faces)
+    ):
+        raise InputError(
+            f"mesh must have (V, 3) vertices and (F, 3) faces, got {vertices.shape} and {faces.shape}"
+        )
+    if not np.issubdtype(faces.dtype, np.integer) or faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError(f"mesh faces must be vertex indices in [0, {len(vertices)})")
+    if not np.isfinite(vertices).all():
+        raise InputError("mesh vertices contain NaN or inf; the volume is undefined")
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    undirected = np.sort(directed, axis=1)
+    _, uses = np.unique(undirected, axis=0, return_counts=True)
+    if np.any(uses != 2):
+        raise InputError(
+            f"mesh is not closed ({int(np.sum(uses != 2))} edges are not shared by exactly two faces); "
+            "its volume is undefined"
+        )
+    if len(np.unique(directed, axis=0)) != len(directed):
+        raise InputError("mesh faces are not wound consistently; fix their orientation first")
+    v0, v1, v2 = (vertices[faces[:, k]] for k in range(3))
+    return float(abs(np.einsum("ij,ij->i", v0, np.cross(v1, v2)).sum()) / 6.0)

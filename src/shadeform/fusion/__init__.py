@@ -1,0 +1,175 @@
+"""Complete models: partial models of several views fused into one closed mesh.
+
+A user photographs an object from several sides (a turntable, or walking around it) and gets
+one :class:`~shadeform.Reconstruction` per photo; :func:`fuse` places them in one frame (the
+turntable's axis found from the silhouettes, each view's unknown depth offset from what the
+other views' silhouettes allow), fuses their surfaces in a signed-distance volume bounded by
+their visual hull and meshes it (:mod:`.volume`). The result is closed and watertight; a part no
+view saw (the poles of a turntable object) is closed by the hull, never left open.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from shadeform.errors import InputError
+from shadeform.fusion.geometry import ViewPose, axis_column, parse_pose
+from shadeform.fusion.register import refine_poses
+from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
+
+__all__ = ["fuse"]
+
+#: Most voxels of the fusion grid when ``resolution`` is not given.
+MAX_VOXELS = 6_000_000
+#: Truncation of the signed distance, in voxels.
+TRUNCATION_VOXELS = 3.0
+
+
+def fuse(
+    views: Sequence,
+    *,
+    resolution: float | None = None,
+    refine: bool = True,
+    axis: float | None = None,
+):
+    """One closed mesh from several views' reconstructions.
+
+    Parameters
+    ----------
+    views : sequence of (Reconstruction, pose)
+        Two or more single-photo reconstructions (orthographic, pixel units, the same image
+        size) with their poses: a turntable angle in degrees (the object turned by that angle
+        about the camera's vertical axis, right-handed about +y: camera point
+        ``= R_y(angle) @ object point``) or a 4x4 matrix taking object points to the view's
+        camera frame (``docs/conventions.md``; its x = 0 at the image's centre column).
+    resolution : float, optional
+        Voxel edge in pixels; default: 1, or coarser so that the grid has at most
+        :data:`MAX_VOXELS` voxels.
+    refine : bool
+        Correct the poses and depth offsets so that the views agree (:mod:`.register`): each
+        view's points inside the others' silhouettes, overlapping surfaces at one depth. Poses
+        off by up to 10 degrees are corrected this way.
+    axis : float, optional
+        The turntable axis's column in the images; default: found from the silhouettes
+        (:func:`shadeform.fusion.geometry.axis_column`).
+
+    Returns
+    -------
+    shadeform.mesh.Mesh
+        Closed, watertight, outward-facing, in the object frame (the frame of the view whose
+        pose is 0 or the identity), pixel units.
+
+    Raises
+    ------
+    InputError
+        Fewer than two views, views of different sizes, a malformed pose, an empty mask, or
+        views that share no volume.
+    """
+    import trimesh
+    from skimage.measure import marching_cubes
+
+    from shadeform.mesh import Mesh
+
+    items = _check(views)
+    poses = [parse_pose(pose, i) for i, (_, pose) in enumerate(items)]
+    recs = [rec for rec, _ in items]
+    turntable = all(pose.angle is not None for pose in poses)
+    width = recs[0].mask.shape[1]
+    if axis is not None:
+        column0 = float(axis)
+    elif turntable:
+        column0 = axis_column([rec.mask for rec in recs], [pose.angle for pose in poses])
+    else:
+        column0 = (width - 1) / 2.0
+    placed = [_placed(rec, pose, column0) for rec, pose in zip(recs, poses)]
+    grid = _grid(placed, resolution)
+    inside = hull(placed, grid)
+    if not inside.any():
+        raise InputError(
+            "the views share no volume: their silhouettes do not meet at these poses; check the angles"
+        )
+    offsets = view_offsets(placed, grid, inside)
+    placed = [_with_offset(view, offset) for view, offset in zip(placed, offsets)]
+    if refine:
+        placed = refine_poses(placed, turntable=turntable)
+        inside = hull(placed, grid)
+        if not inside.any():
+            raise InputError("the views share no volume at the refined poses; check the angles")
+    distance = one_solid(fused_distance(placed, grid, truncation=TRUNCATION_VOXELS * grid.spacing))
+    padded = np.pad(distance, 1, constant_values=1.0)
+    if not (padded < 0).any():
+        raise InputError(
+            "the fused model is empty: the views do not agree on any solid; check the poses and masks"
+        )
+    verts, faces, _, _ = marching_cubes(padded, level=0.0, spacing=(grid.spacing,) * 3)
+    verts = verts + grid.origin - grid.spacing
+    solid = trimesh.Trimesh(verts, faces, process=True)
+    if solid.volume < 0:
+        solid.invert()
+    return Mesh(
+        vertices=np.asarray(solid.vertices),
+        faces=np.asarray(solid.faces, dtype=np.int64),
+        normals=np.asarray(solid.vertex_normals),
+    )
+
+
+def _check(views) -> list:
+    try:
+        items = [(rec, pose) for rec, pose in views]
+    except (TypeError, ValueError):
+        raise InputError("views must be (reconstruction, pose) pairs") from None
+    if len(items) < 2:
+        raise InputError(f"fusing needs at least two views, got {len(items)}")
+    shape = items[0][0].mask.shape
+    for i, (rec, _) in enumerate(items):
+        if rec.mask.shape != shape:
+            raise InputError(
+                f"view {i + 1} is {rec.mask.shape[1]}x{rec.mask.shape[0]} but view 1 is "
+                f"{shape[1]}x{shape[0]}; give views from one camera, at one size"
+            )
+        if not rec.mask.any():
+            raise InputError(f"view {i + 1} has an empty mask; every view must show the object")
+    return items
+
+
+def _placed(rec, pose: ViewPose, column0: float) -> FusionView:
+    mask = np.asarray(rec.mask, bool) & np.isfinite(rec.depth)
+    depth = np.where(mask, rec.depth, np.nan)
+    # one offset per view is unknown: start from its depths centred on 0
+    depth = depth - np.nanmedian(depth[mask])
+    return FusionView(depth, mask, np.asarray(rec.normals), pose.matrix[:3, :3], pose.matrix[:3, 3], column0)
+
+
+def _with_offset(view: FusionView, offset: float) -> FusionView:
+    return FusionView(
+        view.depth, view.mask, view.normals, view.rotation, view.translation, view.column0, offset
+    )
+
+
+def _grid(views: list[FusionView], resolution: float | None) -> Grid:
+    """A grid over the views' coarse visual hull, a few voxels beyond it."""
+    h, w = views[0].mask.shape
+    reach = max(h, w) + max(float(np.linalg.norm(view.translation)) for view in views)
+    coarse = Grid(np.full(3, -reach), 2 * reach / 63, (64, 64, 64))
+    inside = hull(views, coarse)
+    if not inside.any():
+        raise InputError(
+            "the views share no volume: their silhouettes do not meet at these poses; check the angles"
+        )
+    index = np.argwhere(inside)
+    low = coarse.origin + coarse.spacing * (index.min(axis=0) - 2)
+    high = coarse.origin + coarse.spacing * (index.max(axis=0) + 2)
+    if resolution is None:
+        spacing = max(1.0, float(np.prod(high - low) / MAX_VOXELS) ** (1 / 3))
+    else:
+        spacing = float(resolution)
+        if not (np.isfinite(spacing) and spacing > 0):
+            raise InputError(f"resolution must be a positive voxel size in pixels, got {resolution!r}")
+    shape = tuple(int(n) for n in np.ceil((high - low) / spacing).astype(int) + 1)
+    if np.prod(shape) > 20 * MAX_VOXELS:
+        raise InputError(
+            f"a resolution of {spacing:g} pixels needs {np.prod(shape):,} voxels; choose a coarser one"
+        )
+    return Grid(low, spacing, shape)

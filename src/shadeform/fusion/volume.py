@@ -1,0 +1,228 @@
+"""The volume the views share: their visual hull, each view's depth offset, and the signed
+distance that fuses their surfaces, on one grid of voxels in the object frame.
+
+Signed distance (Curless & Levoy 1996): along view ``v``'s ray through a voxel, ``s = z - z_v``
+with ``z_v`` the view's surface (its depth plus offset) and ``z`` the voxel's depth, positive in
+front of the surface (toward the camera). Each view that sees the voxel (it projects inside the view's mask and lies
+at most ``truncation`` behind the view's surface) adds ``clip(s, -tau, tau) / tau`` weighted by
+how squarely the view saw that surface (its normal's ``n_z``); a voxel that projects outside any
+view's silhouette is outside (the visual hull, Laurentini 1994); one that no view sees, inside
+the hull, is inside. The zero level is meshed by marching cubes (Lorensen & Cline 1987), on a
+grid padded with outside so that the mesh is closed.
+
+References
+----------
+.. [1] B. Curless, M. Levoy, "A volumetric method for building complex models from range
+   images", SIGGRAPH 1996.
+.. [2] A. Laurentini, "The visual hull concept for silhouette-based image understanding",
+   IEEE TPAMI 16(2), 1994.
+.. [3] W. E. Lorensen, H. E. Cline, "Marching cubes", SIGGRAPH 1987.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["Grid", "FusionView", "fused_distance", "hull", "hull_depth", "one_solid", "view_offsets"]
+
+#: The percentile of the gaps between the hull's front and a view's surface taken as where they
+#: touch (a low one: they touch along curves, and a few wrong depths must not decide).
+TOUCH_PERCENTILE = 2.0
+#: Pixels whose normal has ``n_z`` below this are the view's own rim (left out of the gaps).
+RIM_NZ = 0.3
+#: Smallest weight of a view's reading: how squarely it saw the surface (``n_z``), at least this.
+MIN_WEIGHT = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class FusionView:
+    """One view, placed: its depth map (up to ``offset``), mask, normals and pose.
+
+    ``depth`` is the single-photo height (NaN off the mask); ``rotation`` and ``translation``
+    take object points to the camera frame; ``column0`` is the column of ``x = 0``.
+    """
+
+    depth: np.ndarray
+    mask: np.ndarray
+    normals: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    column0: float
+    offset: float = 0.0
+    filled: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # the depth continued off the mask by its nearest object pixel: a bilinear lookup at the
+        # silhouette then never reads NaN
+        near = ndimage.distance_transform_edt(~self.mask, return_distances=False, return_indices=True)
+        object.__setattr__(self, "filled", np.nan_to_num(self.depth[tuple(near)]))
+
+    @property
+    def row0(self) -> float:
+        return (self.mask.shape[0] - 1) / 2.0
+
+    def camera(self, points: np.ndarray) -> np.ndarray:
+        """Object points (M, 3) in this view's camera frame."""
+        return points @ self.rotation.T + self.translation
+
+    def pixels(self, camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera points (..., 3) -> their (row, column), fractional, each (...)."""
+        return self.row0 - camera[..., 1], camera[..., 0] + self.column0
+
+    def inside(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Whether (row, column) lies on the mask (nearest pixel)."""
+        r, c = np.rint(rows).astype(np.int64), np.rint(cols).astype(np.int64)
+        h, w = self.mask.shape
+        valid = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        out = np.zeros(r.shape, bool)
+        out[valid] = self.mask[r[valid], c[valid]]
+        return out
+
+    def surface(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """The view's surface depth (with its offset) at (row, column), bilinear."""
+        return ndimage.map_coordinates(self.filled, [rows, cols], order=1, mode="nearest") + self.offset
+
+    def points(self, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """The view's surface as object points (M, 3) and its normals' ``n_z`` (M,), every
+        ``step``-th pixel of the mask."""
+        rows, cols = np.nonzero(self.mask)
+        rows, cols = rows[::step], cols[::step]
+        camera = np.stack(
+            [cols - self.column0, self.row0 - rows, self.depth[rows, cols] + self.offset], axis=1
+        )
+        return (camera - self.translation) @ self.rotation, self.normals[rows, cols, 2]
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Voxel centres ``origin + spacing * (i, j, k)`` for ``(i, j, k) < shape``, object frame."""
+
+    origin: np.ndarray
+    spacing: float
+    shape: tuple[int, int, int]
+
+    def slabs(self, view: FusionView):
+        """The voxels in a view's camera frame, one slab ``i`` at a time: yields ``(i, camera)``
+        with ``camera`` (shape[1], shape[2], 3). The frame is affine in the indices, so a slab is
+        one sum of precomputed planes (no matrix product per voxel)."""
+        rotation = view.rotation
+        base = rotation @ self.origin + view.translation
+        step = self.spacing * rotation[:, 0]
+        j = np.arange(self.shape[1], dtype=np.float64)[:, None, None]
+        k = np.arange(self.shape[2], dtype=np.float64)[None, :, None]
+        plane = j * (self.spacing * rotation[:, 1]) + k * (self.spacing * rotation[:, 2]) + base
+        for i in range(self.shape[0]):
+            yield i, plane + i * step
+
+    def index(self, points: np.ndarray) -> np.ndarray:
+        """Points (M, 3) as fractional grid indices (3, M)."""
+        return ((points - self.origin) / self.spacing).T
+
+
+def hull(views: list[FusionView], grid: Grid) -> np.ndarray:
+    """The visual hull on the grid: voxels that project onto every view's mask, (shape) bool."""
+    inside = np.ones(grid.shape, bool)
+    for view in views:
+        for i, camera in grid.slabs(view):
+            if inside[i].any():
+                inside[i] &= view.inside(*view.pixels(camera))
+    return inside
+
+
+def hull_depth(view: FusionView, grid: Grid, inside: np.ndarray) -> np.ndarray:
+    """The hull's front surface seen from a view: per pixel, the largest camera ``z`` of a hull
+    voxel on its ray plus half a voxel (NaN where none), (H, W)."""
+    h, w = view.mask.shape
+    front = np.full(h * w, -np.inf)
+    for i, camera in grid.slabs(view):
+        points = camera[inside[i]]
+        if not len(points):
+            continue
+        rows, cols = view.pixels(points)
+        r, c = np.rint(rows).astype(np.int64), np.rint(cols).astype(np.int64)
+        valid = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        pixel, z = r[valid] * w + c[valid], points[valid, 2]
+        order = np.argsort(z)  # assigned in increasing z: each pixel keeps its largest
+        slab = np.full(h * w, -np.inf)
+        slab[pixel[order]] = z[order]
+        np.maximum(front, slab, out=front)
+    front += grid.spacing / 2
+    return np.where(np.isfinite(front), front, np.nan).reshape(h, w)
+
+
+def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> list[float]:
+    """Each view's depth offset: the one that brings its surface forward until it touches the
+    other views' visual hull.
+
+    The hull's boundary holds the other views' contour generators (where their lines of sight
+    graze the surface), and a view that does not look along the same line sees those curves
+    from the front: there its surface and the hull's front meet, everywhere else the surface lies
+    behind the hull's front. So the offset is the smallest gap between the hull's front and the
+    view's surface, over the view's pixels, taken robustly (its :data:`TOUCH_PERCENTILE`-th
+    percentile, so that a few wrong depths do not decide it) and away from the view's own rim,
+    where both surfaces turn away steeply. A view whose direction no other view crosses keeps
+    its offset.
+
+    Returns
+    -------
+    list of float
+        One offset per view, pixel units.
+    """
+    offsets = []
+    for n, view in enumerate(views):
+        others = [other for m, other in enumerate(views) if m != n]
+        crossed = any(np.linalg.norm(np.cross(view.rotation[2], other.rotation[2])) > 0.2 for other in others)
+        if not crossed:
+            offsets.append(view.offset)
+            continue
+        front = hull_depth(view, grid, inside)
+        facing = view.mask & (np.nan_to_num(view.normals[..., 2]) > RIM_NZ) & np.isfinite(front)
+        if not facing.any():
+            offsets.append(view.offset)
+            continue
+        gap = front[facing] - (view.depth[facing] + view.offset)
+        offsets.append(view.offset + float(np.percentile(gap, TOUCH_PERCENTILE)))
+    return offsets
+
+
+def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) -> np.ndarray:
+    """The fused, truncated signed distance in ``[-1, 1]`` on the grid (module description):
+    positive outside, negative inside."""
+    in_hull = np.ones(grid.shape, bool)
+    total = np.zeros(grid.shape)
+    weight = np.zeros(grid.shape)
+    for view in views:
+        squarely = np.maximum(np.nan_to_num(view.normals[..., 2]), MIN_WEIGHT)
+        for i, camera in grid.slabs(view):
+            rows, cols = view.pixels(camera)
+            on = view.inside(rows, cols)
+            in_hull[i] &= on
+            if not on.any():
+                continue
+            signed = camera[..., 2] - view.surface(rows, cols)
+            seen = on & (signed > -truncation)
+            r, c = np.rint(rows[seen]).astype(np.int64), np.rint(cols[seen]).astype(np.int64)
+            w = squarely[r, c]
+            total[i][seen] += w * np.clip(signed[seen] / truncation, -1.0, 1.0)
+            weight[i][seen] += w
+    fused = np.where(weight > 0, total / np.maximum(weight, 1e-12), -1.0)
+    return np.where(in_hull, fused, 1.0)
+
+
+def one_solid(distance: np.ndarray) -> np.ndarray:
+    """The signed distance of one solid: the largest connected inside part (face-connected
+    voxels), its inner voids filled; other inside bits become outside. Where views disagree
+    (slightly wrong poses, wrong depths) the fused distance leaves floating crumbs and bubbles,
+    which a printable, renderable model must not have."""
+    labels, count = ndimage.label(distance < 0)
+    if count == 0:
+        return distance
+    sizes = np.bincount(labels.ravel())[1:]
+    solid = ndimage.binary_fill_holes(labels == 1 + int(np.argmax(sizes)))
+    # never (nearly) 0: a grid point on the level would put several mesh vertices at one place
+    # (to float32 precision, which marching cubes returns)
+    magnitude = np.maximum(np.abs(distance), 1e-3)
+    return np.where(solid, -magnitude, magnitude)
