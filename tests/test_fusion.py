@@ -139,3 +139,52 @@ def test_bad_views_get_one_line():
             shadeform.fuse(views)
         message = str(caught.value)
         assert words in message and "\n" not in message, message
+
+
+def test_cli_fuses_photos_with_angles_or_a_views_file(tmp_path):
+    import json
+
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    from shadeform.cli import app
+
+    angles = (0, 90, 180, 270)
+    names = []
+    for view in synth.render_views("pebble", angles, size=SMALL):
+        names.append(f"p{int(view.angle)}.png")
+        Image.fromarray(np.rint(np.array(view.image) * 65535).astype(np.uint16)).save(tmp_path / names[-1])
+    out = tmp_path / "pebble.ply"
+    args = ["fuse", *(str(tmp_path / n) for n in names), "--angles", "0,90,180,270", "-o", str(out), "--json"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["mesh"]["watertight"] and out.is_file()
+    truth = synth.closed_object("pebble", size=SMALL)
+    assert abs(report["mesh"]["volume"] / truth.volume - 1) < 0.05
+    # the same views from a views file, one given as its 4x4 pose
+    document = {"views": [{"photo": n, "angle": a} for n, a in zip(names, angles)]}
+    document["views"][1] = {"photo": names[1], "pose": turntable(90).tolist()}
+    (tmp_path / "views.json").write_text(json.dumps(document))
+    again = tmp_path / "again.stl"
+    result = CliRunner().invoke(app, ["fuse", "--views", str(tmp_path / "views.json"), "-o", str(again)])
+    assert result.exit_code == 0, result.output
+    assert "watertight" in result.output and again.is_file()
+    # bad input: one line, exit 2, nothing written
+    bad = [
+        (["fuse", str(tmp_path / names[0]), "--angles", "0", "-o", str(tmp_path / "x.glb")], "at least two"),
+        (["fuse", *(str(tmp_path / n) for n in names[:2]), "--angles", "0,90,180", "-o", str(tmp_path / "x.glb")], "3 angles for 2"),
+        (["fuse", *(str(tmp_path / n) for n in names[:2]), "-o", str(tmp_path / "x.glb")], "--angles"),
+        (["fuse", *(str(tmp_path / n) for n in names[:2]), "--angles", "0,ninety", "-o", str(tmp_path / "x.glb")], "numbers"),
+        (["fuse", str(tmp_path / names[0]), "--views", str(tmp_path / "views.json"), "-o", str(tmp_path / "x.glb")], "not both"),
+        (["fuse", *(str(tmp_path / n) for n in names[:2]), "--angles", "0,90", "-o", str(tmp_path / "x.xyz")], "x.xyz"),
+    ]  # fmt: skip
+    (tmp_path / "broken.json").write_text("{views: [")
+    bad.append(
+        (["fuse", "--views", str(tmp_path / "broken.json"), "-o", str(tmp_path / "x.glb")], "not valid JSON")
+    )
+    for args, words in bad:
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2, result.output
+        assert words in result.output and result.output.count("\n") == 1, result.output
+    assert not (tmp_path / "x.glb").exists()

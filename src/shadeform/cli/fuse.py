@@ -1,0 +1,235 @@
+"""``shadeform fuse``: photos of one object from several sides -> one closed model."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from shadeform.cli._shell import (
+    ChannelOption,
+    FilterOption,
+    IntegratorOption,
+    MethodOption,
+    app,
+    check_outputs,
+    format_seconds,
+    output_temps,
+    print_files,
+    print_json,
+    resolve_light,
+    stage,
+    stderr_console,
+    stdout_console,
+)
+from shadeform.errors import InputError
+from shadeform.io.atomic import OutputSet
+
+
+@app.command()
+def fuse(
+    photos: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Photos of the object from several sides (or give --views).", show_default=False),
+    ] = None,
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o", "--output", help="Mesh file; the suffix picks the format (see `shadeform formats`)."
+        ),
+    ] = Path("model.glb"),
+    angles: Annotated[
+        str | None,
+        typer.Option(
+            metavar="A,B,...",
+            help="Turntable angle of each photo in degrees (the object turned about the vertical "
+            "axis, right-handed about +y; docs/conventions.md).",
+            show_default=False,
+        ),
+    ] = None,
+    views: Annotated[
+        Path | None,
+        typer.Option(
+            help='JSON file of the views instead: {"views": [{"photo": "a.png", "angle": 0, '
+            '"mask": "a_mask.png"}, {"photo": "b.png", "pose": [[4x4 object -> camera]]}, ...]}; '
+            "paths relative to the file.",
+            show_default=False,
+        ),
+    ] = None,
+    mask: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="Mask of each photo, in order (repeat once per photo); found automatically if not given."
+        ),
+    ] = None,
+    light: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,Z", help="Direction toward the light in each camera's frame; 0,0,1 if not given."
+        ),
+    ] = None,
+    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
+    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    channel: ChannelOption = "auto",
+    filter: FilterOption = None,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    resolution: Annotated[
+        float | None,
+        typer.Option(min=0.25, max=64, help="Voxel edge in pixels (default: 1, or coarser for big objects)."),
+    ] = None,
+    refine: Annotated[
+        bool,
+        typer.Option("--refine/--no-refine", help="Correct the poses and offsets so that the views agree."),
+    ] = True,
+    axis: Annotated[
+        float | None,
+        typer.Option(
+            metavar="COLUMN", help="The turntable axis's column (default: found from the silhouettes)."
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
+    ] = False,
+) -> None:
+    """Fuse photos of one object from several sides into one closed, watertight model."""
+    import shadeform
+    from shadeform.io.images import read_photo
+
+    check_outputs(output, None, None)
+    entries = _views(photos, angles, views, mask)
+    light_vector = resolve_light(light, slant, tilt)
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    with OutputSet() as outputs:
+        temps = output_temps(outputs, output)
+        recs = []
+        with Progress(
+            TextColumn("reconstructing each view"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err,
+            transient=True,
+        ) as bar:
+            task = bar.add_task("views", total=len(entries))
+            lap = time.perf_counter()
+            for photo_path, _, mask_path in entries:
+                photo = read_photo(photo_path, channel=channel)
+                object_mask = shadeform.load_mask(mask_path, shape=photo.image.shape) if mask_path else None
+                recs.append(
+                    shadeform.reconstruct(
+                        photo.image,
+                        light=light_vector,
+                        method=method,
+                        mask=object_mask,
+                        filter=filter,
+                        integrator=integrator,
+                    )
+                )
+                bar.advance(task)
+            timings["reconstruct"] = time.perf_counter() - lap
+        with stage(err, f"fusing {len(recs)} views", timings, "fuse"):
+            mesh = shadeform.fuse(
+                list(zip(recs, [pose for _, pose, _ in entries])),
+                resolution=resolution,
+                refine=refine,
+                axis=axis,
+            )
+        with stage(err, "writing the model", timings, "write"):
+            shadeform.export(mesh, temps[output])
+        outputs.commit()
+    timings["total"] = time.perf_counter() - start
+    solid = _solid(mesh)
+    if as_json:
+        print_json(
+            {
+                "command": "fuse",
+                "views": [{"photo": p, "pose": _plain_pose(pose)} for p, pose, _ in entries],
+                "files": {"mesh": output},
+                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **solid},
+                "timings": timings,
+            }
+        )
+        return
+    out = stdout_console()
+    out.print(f"[bold]fused[/] {len(entries)} views into one closed model")
+    low, high = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    size = " x ".join(f"{v:.0f}" for v in high - low)
+    out.print(
+        f"  {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles, {size} pixels, volume "
+        f"{solid['volume']:,.0f} cubic pixels, {'watertight' if solid['watertight'] else 'NOT watertight'}"
+    )
+    out.print(
+        f"  time {format_seconds(timings['total'])}: reconstruct {format_seconds(timings['reconstruct'])}, "
+        f"fuse {format_seconds(timings['fuse'])}, write {format_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, [(output, shadeform.available_formats()[output.suffix.lower()])])
+
+
+def _views(photos, angles, views_file, masks) -> list[tuple[Path, object, Path | None]]:
+    """(photo, pose, mask) per view, from the arguments or the views file, checked."""
+    if views_file is not None:
+        if photos or angles is not None or masks:
+            raise InputError(
+                "give the views either as photos with --angles (and --mask) or as --views FILE, not both"
+            )
+        return _views_file(views_file)
+    photos = list(photos or [])
+    if len(photos) < 2:
+        raise InputError(f"fusing needs photos from at least two sides, got {len(photos)}")
+    if angles is None:
+        raise InputError("give each photo's turntable angle: --angles 0,90,180,270 (or --views FILE)")
+    try:
+        values = [float(text) for text in angles.split(",")]
+    except ValueError:
+        raise InputError(f"--angles must be numbers separated by commas, got {angles!r}") from None
+    if len(values) != len(photos):
+        raise InputError(f"--angles gives {len(values)} angles for {len(photos)} photos; give one per photo")
+    if masks and len(masks) != len(photos):
+        raise InputError(f"{len(masks)} --mask files for {len(photos)} photos; give one per photo, or none")
+    return [
+        (photo, angle, masks[i] if masks else None) for i, (photo, angle) in enumerate(zip(photos, values))
+    ]
+
+
+def _views_file(path: Path) -> list[tuple[Path, object, Path | None]]:
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"views file '{path}' does not exist; check the path") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"views file '{path}' is not valid JSON ({err})") from None
+    items = document.get("views") if isinstance(document, dict) else None
+    if not isinstance(items, list) or not all(isinstance(item, dict) for item in items):
+        raise InputError(
+            f'views file \'{path}\' must hold {{"views": [{{"photo": ..., "angle": ...}}, ...]}}'
+        )
+    entries = []
+    for i, item in enumerate(items):
+        if "photo" not in item or ("angle" in item) == ("pose" in item):
+            raise InputError(f"views file '{path}': view {i + 1} needs a photo and either an angle or a pose")
+        pose = item.get("angle", item.get("pose"))
+        mask = path.parent / item["mask"] if item.get("mask") else None
+        entries.append((path.parent / item["photo"], pose, mask))
+    if len(entries) < 2:
+        raise InputError(f"views file '{path}' has {len(entries)} view(s); fusing needs at least two")
+    return entries
+
+
+def _solid(mesh) -> dict:
+    import trimesh
+
+    solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
+    return {"volume": float(solid.volume), "watertight": bool(solid.is_watertight)}
+
+
+def _plain_pose(pose):
+    return np.asarray(pose, dtype=float).tolist() if np.ndim(pose) else float(pose)
