@@ -36,17 +36,10 @@ SAMPLES, TRUE_SAMPLES = 50_000, 200_000
 
 
 def score(mesh, truth):
-    import trimesh
-
-    solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
-    points = trimesh.sample.sample_surface(solid, SAMPLES, seed=0)[0]
-    true_points, _ = truth.surface_points(TRUE_SAMPLES, seed=1)
-    return (
-        metrics.chamfer(points, true_points),
-        metrics.f_score(points, true_points),
-        metrics.volume_error(mesh, truth.volume, signed=True),
-        bool(solid.is_watertight),
+    got = metrics.surface_scores(
+        mesh, truth.surface_points(TRUE_SAMPLES, seed=1)[0], truth.volume, samples=SAMPLES
     )
+    return got["chamfer"], got["f_score"], got["volume_error"], got["watertight"]
 
 
 def run(name, count, disturbed, repeats, rng):

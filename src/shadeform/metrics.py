@@ -389,6 +389,45 @@ def volume_error(mesh_or_volume, volume_true, *, signed: bool = False) -> float:
     return float(error if signed else abs(error))
 
 
+def surface_scores(mesh, points_true, volume_true, *, samples: int = 50_000, seed: int = 0) -> dict:
+    """A closed mesh scored against a true surface: Chamfer, F-score, volume error, closedness.
+
+    Points are sampled uniformly by area on the mesh (trimesh) and compared with points on the
+    true surface. Point samplings have a floor: a surface against a sampling of itself scores
+    about 0.17 % Chamfer with 50,000 points against 200,000, 0.57 % with 8,000 a side, so give
+    the true surface densely.
+
+    Parameters
+    ----------
+    mesh : Mesh or trimesh.Trimesh
+        The model, closed.
+    points_true : (M, 3) float
+        Points on the true surface (e.g. :meth:`shadeform.synth.ClosedObject.surface_points`).
+    volume_true : float
+        The true volume.
+    samples, seed : int
+        Points sampled on the mesh, and the sampling's seed.
+
+    Returns
+    -------
+    dict
+        ``chamfer`` (% of the diagonal, :func:`chamfer`), ``f_score`` (% at 1 % of the
+        diagonal, :func:`f_score`), ``volume_error`` (%, signed: positive is too large) and
+        ``watertight`` (bool: closed, consistently wound, positive volume).
+    """
+    import trimesh
+
+    solid = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    points = trimesh.sample.sample_surface(solid, int(samples), seed=seed)[0]
+    closed = bool(solid.is_watertight and solid.is_winding_consistent and solid.volume > 0)
+    return {
+        "chamfer": chamfer(points, points_true),
+        "f_score": f_score(points, points_true),
+        "volume_error": volume_error(solid, volume_true, signed=True) if closed else float("nan"),
+        "watertight": closed,
+    }
+
+
 def _point_sets(points, points_true):
     """Validated float64 ``(N, 3)`` and ``(M, 3)`` arrays and the true bounding-box diagonal."""
     sets = []
