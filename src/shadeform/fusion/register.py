@@ -58,11 +58,19 @@ def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView
     # the axis); only its turn fixes the frame
     params = np.zeros(per_view * (len(views) - 1) + (1 if turntable else 0))
 
-    def residuals(params):
-        placed = _corrected(views, params, turntable)
-        return _residuals(placed, samples, outside)
+    def owner(k: int) -> int:
+        """The view parameter ``k`` moves."""
+        return 0 if k == per_view * (len(views) - 1) else 1 + k // per_view
 
-    r = residuals(params)
+    def residuals(params, base=None, moved_view=None):
+        """All residual blocks (one per ordered pair of views); with ``base`` (the blocks at
+        other parameters differing only in ``moved_view``'s), only the blocks of pairs that
+        involve that view are recomputed."""
+        placed = _corrected(views, params, turntable)
+        return _residuals(placed, samples, outside, base=base, moved=moved_view)
+
+    blocks = residuals(params)
+    r = np.concatenate(blocks)
     scale = _scale(r)
     cost = _tukey_cost(r, scale)
     damping = 1e-3
@@ -74,17 +82,18 @@ def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView
             delta = 1e-3 if rotation else 1e-2
             moved = params.copy()
             moved[k] += delta
-            jacobian[:, k] = (residuals(moved) - r) / delta
+            jacobian[:, k] = (np.concatenate(residuals(moved, blocks, owner(k))) - r) / delta
         weighted = jacobian * weights[:, None]
         normal = weighted.T @ jacobian
         gradient = weighted.T @ r
         # Levenberg-Marquardt: a step is taken only if it lowers the robust cost
         for _ in range(8):
             step = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9), -gradient)
-            trial = residuals(params + step)
+            trial_blocks = residuals(params + step)
+            trial = np.concatenate(trial_blocks)
             trial_cost = _tukey_cost(trial, scale)
             if trial_cost < cost:
-                params, r, cost = params + step, trial, trial_cost
+                params, blocks, r, cost = params + step, trial_blocks, trial, trial_cost
                 damping = max(damping / 3, 1e-7)
                 break
             damping *= 4
@@ -106,31 +115,35 @@ def _samples(view: FusionView) -> np.ndarray:
 def _corrected(views, params, turntable) -> list[FusionView]:
     first = views[0]
     if turntable:
-        first = FusionView(
-            first.depth,
-            first.mask,
-            first.normals,
-            first.rotation,
-            first.translation,
-            first.column0,
-            first.offset + params[-1],
-        )
+        first = _moved(first, first.rotation, first.translation, first.offset + params[-1])
     out = [first]
     per_view = 2 if turntable else 6
     for n, view in enumerate(views[1:]):
         p = params[per_view * n : per_view * (n + 1)]
         if turntable:
-            rotation = _rotation(np.array([0.0, p[0], 0.0])) @ view.rotation
-            translation = view.translation
-            offset = view.offset + p[1]
+            out.append(
+                _moved(
+                    view,
+                    _rotation(np.array([0.0, p[0], 0.0])) @ view.rotation,
+                    view.translation,
+                    view.offset + p[1],
+                )
+            )
         else:
-            rotation = _rotation(p[:3]) @ view.rotation
-            translation = view.translation + p[3:]
-            offset = view.offset
-        out.append(
-            FusionView(view.depth, view.mask, view.normals, rotation, translation, view.column0, offset)
-        )
+            out.append(_moved(view, _rotation(p[:3]) @ view.rotation, view.translation + p[3:], view.offset))
     return out
+
+
+def _moved(view: FusionView, rotation, translation, offset) -> FusionView:
+    """The view at another pose and offset, sharing its arrays (its depth's nearest-pixel fill
+    is not computed again)."""
+    moved = object.__new__(FusionView)
+    for name, value in vars(view).items():
+        object.__setattr__(moved, name, value)
+    object.__setattr__(moved, "rotation", rotation)
+    object.__setattr__(moved, "translation", translation)
+    object.__setattr__(moved, "offset", offset)
+    return moved
 
 
 def _rotation(omega: np.ndarray) -> np.ndarray:
@@ -143,11 +156,12 @@ def _rotation(omega: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
 
 
-def _residuals(views, samples, outside) -> np.ndarray:
-    """All residuals: for every ordered pair of views, the first's points outside the second's
-    silhouette (distance, pixels) and, where the second sees them squarely, their depth
-    difference along its ray times its ``n_z``."""
-    parts = []
+def _residuals(views, samples, outside, *, base=None, moved=None) -> list[np.ndarray]:
+    """The residual blocks, one per ordered pair of views ``(u, v)``: ``u``'s points outside
+    ``v``'s silhouette (distance, pixels) and, where ``v`` sees them squarely, their depth
+    difference along ``v``'s ray times its ``n_z``. With ``base``, the blocks of pairs without
+    view ``moved`` are taken from it."""
+    blocks = []
     for u, (view, pixels) in enumerate(zip(views, samples)):
         rows, cols = pixels[:, 0], pixels[:, 1]
         camera = np.stack(
@@ -158,19 +172,20 @@ def _residuals(views, samples, outside) -> np.ndarray:
         for v, other in enumerate(views):
             if v == u:
                 continue
+            if base is not None and moved not in (u, v):
+                blocks.append(base[len(blocks)])
+                continue
             seen = points @ other.rotation.T + other.translation
             r, c = other.pixels(seen)
             away = ndimage.map_coordinates(outside[v], [r, c], order=1, mode="nearest")
-            parts.append(away)
             facing = (normals @ other.rotation.T)[:, 2] > TRUSTED_NZ
-            inside = other.inside(r, c) & (away == 0)
-            both = facing & inside
+            both = facing & other.inside(r, c) & (away == 0)
             nz = ndimage.map_coordinates(
                 np.nan_to_num(other.normals[..., 2]), [r, c], order=1, mode="nearest"
             )
             gap = (seen[:, 2] - other.surface(r, c)) * np.clip(nz, 0.0, 1.0)
-            parts.append(np.where(both, gap, 0.0))
-    return np.concatenate(parts)
+            blocks.append(np.concatenate([away, np.where(both, gap, 0.0)]))
+    return blocks
 
 
 def _scale(r: np.ndarray) -> float:
