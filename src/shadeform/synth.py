@@ -537,16 +537,20 @@ def _check_size(size) -> int:
     return int(size)
 
 
-def _unit_light(light) -> np.ndarray:
+def _unit_light(light, *, front: bool = True) -> np.ndarray:
+    """``light`` as a unit vector; with ``front``, it must point toward the viewer (z > 0)."""
     try:
         direction = np.asarray(light, dtype=np.float64)
     except (TypeError, ValueError):
         direction = None
     if direction is None or direction.shape != (3,) or not np.isfinite(direction).all():
         raise InputError(f"light must be 3 finite numbers (x, y, z), got {light!r}")
-    if direction[2] <= 0:
+    if front and direction[2] <= 0:
         raise InputError(f"light must point toward the viewer (z > 0), got {tuple(direction.tolist())}")
-    return direction / np.linalg.norm(direction)
+    norm = np.linalg.norm(direction)
+    if norm == 0:
+        raise InputError("light must be a nonzero direction, got (0, 0, 0)")
+    return direction / norm
 
 
 def _finite_float(value, what: str) -> float:
@@ -847,7 +851,7 @@ def render_views(
     ([(32, 32), (32, 32)], 90.0)
     """
     obj = closed_object(name, size=size)
-    direction = _any_light(light)
+    direction = _unit_light(light, front=False)
     albedo = _finite_float(albedo, "albedo")
     if albedo <= 0:
         raise InputError(f"albedo must be > 0, got {albedo}")
@@ -989,22 +993,6 @@ def _check_pose(pose) -> np.ndarray:
     from shadeform.fusion.geometry import rigid
 
     return rigid(pose)
-
-
-def _any_light(light) -> np.ndarray:
-    try:
-        direction = np.asarray(light, dtype=np.float64)
-    except (TypeError, ValueError):
-        direction = None
-    if direction is None or direction.shape != (3,) or not np.isfinite(direction).all():
-        raise InputError(f"light must be 3 finite numbers (x, y, z), got {light!r}")
-    norm = np.linalg.norm(direction)
-    if norm == 0:
-        raise InputError("light must be a nonzero direction, got (0, 0, 0)")
-    return direction / norm
-
-
-# Each object: implicit(p, size), gradient(p, size), volume(implicit, size).
 
 
 def _ellipsoid_f(p, size):

@@ -182,7 +182,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
 
 def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
     """The uploads as a :class:`StoredPhotoSet`; every failure a one-line 4xx."""
-    from shadeform.io.images import ImageTooLargeError, load_mask, read_photo
+    from shadeform.io.images import ImageTooLargeError, load_mask
     from shadeform.io.photoset import match_lp, parse_lp, parse_rows, read_photos
 
     limits = state.limits
@@ -196,16 +196,10 @@ def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
         if not data:
             raise HTTPException(400, f"photo {name} is empty (0 bytes); choose image files")
     try:
-        # the whole set must fit in memory: judge it by its first photo before decoding the rest
-        first = read_photo(contents[0], max_pixels=limits.max_pixels)
-        height, width = first.image.shape
-        need = len(contents) * height * width * 3 * 4
-        if need > limits.max_image_bytes:
-            raise HTTPException(
-                413,
-                f"{len(contents)} photos of {width}x{height} need {size_text(need)}, more than the "
-                f"{size_text(limits.max_image_bytes)} this server keeps; open fewer or smaller photos",
-            )
+        # the whole set must fit in memory: each photo may have its share of it, checked from
+        # the files' headers before anything is decoded
+        share = max(1, limits.max_image_bytes // (len(contents) * 3 * 4))
+        per_photo = min(limits.max_pixels, share)
         directions = strengths = object_mask = None
         if intensities is not None:
             label = display_name(intensities.filename)
@@ -214,9 +208,19 @@ def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
         # light strengths divide only linear values: a set that has them is radiometrically
         # calibrated whatever its bit depth (as for a folder, shadeform.io.photoset)
         linear = True if strengths is not None else None
-        images, _, encoding, _, _ = read_photos(
-            contents, linear=linear, names=names, max_pixels=limits.max_pixels
-        )
+        try:
+            images, _, encoding, _, _ = read_photos(
+                contents, linear=linear, names=names, max_pixels=per_photo
+            )
+        except ImageTooLargeError:
+            if per_photo == limits.max_pixels:
+                raise
+            raise HTTPException(
+                413,
+                f"{len(contents)} photos this large need more than the {size_text(limits.max_image_bytes)} "
+                f"this server keeps (at most {per_photo:,} pixels each); open fewer or smaller photos",
+            ) from None
+        height, width = images.shape[1:3]
         if lights is not None:
             label = display_name(lights.filename)
             text = _text(lights, label, "light")

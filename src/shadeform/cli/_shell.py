@@ -291,6 +291,12 @@ def write_model(
 
 
 # options shared by the commands that build meshes
+SlantOption = Annotated[
+    float | None, typer.Option(metavar="DEGREES", help="Light slant: angle from the viewing direction.")
+]
+TiltOption = Annotated[
+    float | None, typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant.")
+]
 StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
 MethodOption = Annotated[
     str,

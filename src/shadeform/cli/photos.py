@@ -21,7 +21,9 @@ from shadeform.cli._shell import (
     LinearOption,
     MethodOption,
     RefineOption,
+    SlantOption,
     StepOption,
+    TiltOption,
     app,
     check_outputs,
     check_suffix,
@@ -65,13 +67,8 @@ def reconstruct(
             help='Direction toward the light in the camera frame, or "estimate" to estimate it from the image; 0,0,1 if not given.',
         ),
     ] = None,
-    slant: Annotated[
-        float | None, typer.Option(metavar="DEGREES", help="Light slant: angle from the viewing direction.")
-    ] = None,
-    tilt: Annotated[
-        float | None,
-        typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant."),
-    ] = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
     channel: ChannelOption = "auto",
     linear: LinearOption = None,
     concave: Annotated[
@@ -505,8 +502,8 @@ def batch(
             metavar="X,Y,Z", help='Direction toward the light, or "estimate" (per photo); 0,0,1 if not given.'
         ),
     ] = None,
-    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
-    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
     channel: ChannelOption = "auto",
     linear: LinearOption = None,
     method: MethodOption = "auto",

@@ -15,6 +15,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from shadeform.cli._shell import (
+    SlantOption,
+    TiltOption,
     app,
     check_suffix,
     format_seconds,
@@ -44,8 +46,8 @@ def synth(
     light: Annotated[
         str | None, typer.Option(metavar="X,Y,Z", help="Direction toward the light; 0,0,1 if not given.")
     ] = None,
-    slant: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light slant.")] = None,
-    tilt: Annotated[float | None, typer.Option(metavar="DEGREES", help="Light tilt; needs --slant.")] = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
     noise: Annotated[float, typer.Option(help="Gaussian noise sigma, as a fraction of the albedo.")] = 0.0,
     size: Annotated[int, typer.Option(help="Image side in pixels.")] = 256,
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,

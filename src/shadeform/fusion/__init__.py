@@ -23,7 +23,8 @@ __all__ = ["fuse"]
 
 #: Most voxels of the fusion grid when ``resolution`` is not given.
 MAX_VOXELS = 6_000_000
-#: Truncation of the signed distance, in voxels.
+#: Truncation of the signed distance, in voxels (set by hand; checked only on the synthetic closed
+#: objects of benchmarks/results/fusion.md).
 TRUNCATION_VOXELS = 3.0
 
 
@@ -91,7 +92,7 @@ def fuse(
             "the views share no volume: their silhouettes do not meet at these poses; check the angles"
         )
     offsets = view_offsets(placed, grid, inside)
-    placed = [_with_offset(view, offset) for view, offset in zip(placed, offsets)]
+    placed = [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
     if refine:
         placed = refine_poses(placed, turntable=turntable)
         inside = hull(placed, grid)
@@ -140,12 +141,6 @@ def _placed(rec, pose: ViewPose, column0: float) -> FusionView:
     # one offset per view is unknown: start from its depths centred on 0
     depth = depth - np.nanmedian(depth[mask])
     return FusionView(depth, mask, np.asarray(rec.normals), pose.matrix[:3, :3], pose.matrix[:3, 3], column0)
-
-
-def _with_offset(view: FusionView, offset: float) -> FusionView:
-    return FusionView(
-        view.depth, view.mask, view.normals, view.rotation, view.translation, view.column0, offset
-    )
 
 
 def _grid(views: list[FusionView], resolution: float | None) -> Grid:

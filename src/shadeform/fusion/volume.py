@@ -28,6 +28,9 @@ from scipy import ndimage
 
 __all__ = ["Grid", "FusionView", "fused_distance", "hull", "hull_depth", "one_solid", "view_offsets"]
 
+# The constants below were set by hand, not swept, and checked only on synthetic views (the closed
+# objects of benchmarks/results/fusion.md).
+
 #: The percentile of the gaps between the hull's front and a view's surface taken as where they
 #: touch (a low one: they touch along curves, and a few wrong depths must not decide).
 TOUCH_PERCENTILE = 2.0
@@ -85,15 +88,23 @@ class FusionView:
         """The view's surface depth (with its offset) at (row, column), bilinear."""
         return ndimage.map_coordinates(self.filled, [rows, cols], order=1, mode="nearest") + self.offset
 
-    def points(self, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        """The view's surface as object points (M, 3) and its normals' ``n_z`` (M,), every
-        ``step``-th pixel of the mask."""
-        rows, cols = np.nonzero(self.mask)
-        rows, cols = rows[::step], cols[::step]
+    def surface_points(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """The view's surface at mask pixels (rows, cols) as object points (M, 3)."""
         camera = np.stack(
             [cols - self.column0, self.row0 - rows, self.depth[rows, cols] + self.offset], axis=1
         )
-        return (camera - self.translation) @ self.rotation, self.normals[rows, cols, 2]
+        return (camera - self.translation) @ self.rotation
+
+    def at(self, rotation: np.ndarray, translation: np.ndarray, offset: float) -> FusionView:
+        """The same view at another pose and depth offset, sharing its arrays (the depth's
+        nearest-pixel fill is not computed again)."""
+        moved = object.__new__(FusionView)
+        for name, value in vars(self).items():
+            object.__setattr__(moved, name, value)
+        object.__setattr__(moved, "rotation", rotation)
+        object.__setattr__(moved, "translation", translation)
+        object.__setattr__(moved, "offset", float(offset))
+        return moved
 
 
 @dataclass(frozen=True)
@@ -116,10 +127,6 @@ class Grid:
         plane = j * (self.spacing * rotation[:, 1]) + k * (self.spacing * rotation[:, 2]) + base
         for i in range(self.shape[0]):
             yield i, plane + i * step
-
-    def index(self, points: np.ndarray) -> np.ndarray:
-        """Points (M, 3) as fractional grid indices (3, M)."""
-        return ((points - self.origin) / self.spacing).T
 
 
 def hull(views: list[FusionView], grid: Grid) -> np.ndarray:
