@@ -196,3 +196,29 @@ def test_evaluate_fuse_prints_the_table():
     assert all(row["watertight"] and row["chamfer"] > 0 and 0 <= row["f_score"] <= 100 for row in rows)
     lumpy = rows[synth.CLOSED_OBJECTS.index("lumpy")]
     assert lumpy["chamfer"] < 1.0 and abs(lumpy["volume_error"]) < 5  # 64 px: coarse, still close
+
+
+def test_placement_puts_each_partial_model_on_the_object():
+    """place + solid equal fuse, and each view's own mesh, moved by its transform, lies on the
+    true surface (the app shows the partial models this way)."""
+    from scipy.spatial import cKDTree
+
+    from shadeform.fusion import place, solid
+    from shadeform.mesh import to_mesh
+
+    angles = (0, 90, 180, 270)
+    recs = true_views("ellipsoid", angles)
+    placement = place(list(zip(recs, angles)))
+    mesh = solid(placement)
+    assert np.array_equal(mesh.vertices, shadeform.fuse(list(zip(recs, angles))).vertices)
+    truth = synth.closed_object("ellipsoid", size=SMALL)
+    fused = cKDTree(mesh.vertices)
+    for rec, transform in zip(recs, placement.transforms([rec.depth for rec in recs])):
+        part = to_mesh(rec, step=2)
+        points = part.vertices @ transform[:3, :3].T + transform[:3, 3]
+        # on the fused surface (near its vertices, which are a voxel or less apart)
+        distance, _ = fused.query(points)
+        assert np.median(distance) < 1.0 and np.percentile(distance, 95) < 2.0
+        # and on the true object (distance ~ |F| / |grad F|; a wrong frame would be far off)
+        off = np.abs(truth.implicit(points)) / np.linalg.norm(truth.gradient(points), axis=-1)
+        assert np.median(off) < 1.0, np.median(off)

@@ -11,6 +11,7 @@ view saw (the poles of a turntable object) is closed by the hull, never left ope
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from shadeform.fusion.geometry import ViewPose, axis_column, parse_pose
 from shadeform.fusion.register import refine_poses
 from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
 
-__all__ = ["fuse"]
+__all__ = ["Placement", "fuse", "place", "solid"]
 
 #: Most voxels of the fusion grid when ``resolution`` is not given.
 MAX_VOXELS = 6_000_000
@@ -68,11 +69,54 @@ def fuse(
         Fewer than two views, views of different sizes, a malformed pose, an empty mask, or
         views that share no volume.
     """
-    import trimesh
-    from skimage.measure import marching_cubes
+    return solid(place(views, resolution=resolution, refine=refine, axis=axis))
 
-    from shadeform.mesh import Mesh
 
+@dataclass(frozen=True, eq=False)
+class Placement:
+    """The views placed in one frame, ready to be fused (:func:`place`).
+
+    Attributes
+    ----------
+    views : tuple of FusionView
+        Each view at its (refined) pose and depth offset.
+    grid : Grid
+        The voxels over the views' visual hull, object frame.
+    axis : float
+        The column of the object frame's x = 0 in the images (the turntable axis).
+    """
+
+    views: tuple[FusionView, ...]
+    grid: Grid
+    axis: float
+
+    def transforms(self, depths: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """Per view, the 4x4 matrix taking its partial model's vertices (the mesh frame of
+        ``docs/conventions.md``: ``(c, -r, depth[r, c])``, with ``depths[i]`` that view's
+        reconstruction depth) to the object frame; the partial models then lie where the fused
+        one does."""
+        out = []
+        for view, depth in zip(self.views, depths):
+            # mesh (c, -r, d) -> camera (c - c0, row0 - r, d - median + offset) -> object
+            shift = np.eye(4)
+            shift[:3, 3] = [-view.column0, view.row0, view.offset - _depth_centre(view.mask, depth)]
+            inverse = np.eye(4)
+            inverse[:3, :3] = view.rotation.T
+            inverse[:3, 3] = -view.rotation.T @ view.translation
+            out.append(inverse @ shift)
+        return out
+
+
+def place(
+    views: Sequence,
+    *,
+    resolution: float | None = None,
+    refine: bool = True,
+    axis: float | None = None,
+) -> Placement:
+    """Several views' reconstructions placed in one frame: the first half of :func:`fuse`
+    (its parameters), for a caller that also shows the partial models where they were put
+    (:meth:`Placement.transforms`) or meshes the placement itself (:func:`solid`)."""
     items = _check(views)
     poses = [parse_pose(pose, i) for i, (_, pose) in enumerate(items)]
     recs = [rec for rec, _ in items]
@@ -95,10 +139,23 @@ def fuse(
     placed = [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
     if refine:
         placed = refine_poses(placed, turntable=turntable)
-        inside = hull(placed, grid)
-        if not inside.any():
+        if not hull(placed, grid).any():
             raise InputError("the views share no volume at the refined poses; check the angles")
-    distance = one_solid(fused_distance(placed, grid, truncation=TRUNCATION_VOXELS * grid.spacing))
+    return Placement(tuple(placed), grid, column0)
+
+
+def solid(placement: Placement):
+    """The closed mesh of placed views: their truncated signed distance, one solid kept,
+    marching cubes (the second half of :func:`fuse`)."""
+    import trimesh
+    from skimage.measure import marching_cubes
+
+    from shadeform.mesh import Mesh
+
+    grid = placement.grid
+    distance = one_solid(
+        fused_distance(list(placement.views), grid, truncation=TRUNCATION_VOXELS * grid.spacing)
+    )
     padded = np.pad(distance, 1, constant_values=1.0)
     if not (padded < 0).any():
         raise InputError(
@@ -106,13 +163,13 @@ def fuse(
         )
     verts, faces, _, _ = marching_cubes(padded, level=0.0, spacing=(grid.spacing,) * 3)
     verts = verts + grid.origin - grid.spacing
-    solid = trimesh.Trimesh(verts, faces, process=True)
-    if solid.volume < 0:
-        solid.invert()
+    mesh = trimesh.Trimesh(verts, faces, process=True)
+    if mesh.volume < 0:
+        mesh.invert()
     return Mesh(
-        vertices=np.asarray(solid.vertices),
-        faces=np.asarray(solid.faces, dtype=np.int64),
-        normals=np.asarray(solid.vertex_normals),
+        vertices=np.asarray(mesh.vertices),
+        faces=np.asarray(mesh.faces, dtype=np.int64),
+        normals=np.asarray(mesh.vertex_normals),
     )
 
 
@@ -139,8 +196,13 @@ def _placed(rec, pose: ViewPose, column0: float) -> FusionView:
     mask = np.asarray(rec.mask, bool) & np.isfinite(rec.depth)
     depth = np.where(mask, rec.depth, np.nan)
     # one offset per view is unknown: start from its depths centred on 0
-    depth = depth - np.nanmedian(depth[mask])
+    depth = depth - _depth_centre(mask, rec.depth)
     return FusionView(depth, mask, np.asarray(rec.normals), pose.matrix[:3, :3], pose.matrix[:3, 3], column0)
+
+
+def _depth_centre(mask: np.ndarray, depth: np.ndarray) -> float:
+    """The depth a view is centred on before its offset is found: its median over the mask."""
+    return float(np.median(depth[mask & np.isfinite(depth)]))
 
 
 def _grid(views: list[FusionView], resolution: float | None) -> Grid:
