@@ -69,6 +69,40 @@ def test_photos_of_a_lumpy_sphere_from_four_sides():
     assert closed and chamfer <= 0.5 and fscore >= 95 and volume <= 3, (chamfer, fscore, volume)
 
 
+def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
+    """The waisted object's front and back photos each read the waist as a third hill top and
+    one lobe 25 px too deep (Chamfer over 2 %, a quarter of the volume gone); with ``resolve``
+    the side views' silhouettes settle the waist as concave and the model meets the bars of the
+    shapes without a concavity, stricter than the waisted one's 2 %. The lobe the outline does
+    not settle either stays convex."""
+    from shadeform.fusion import place, solid
+
+    angles = (0, 90, 180, 270)
+    views = synth.render_views("waisted", angles, size=SIZE)
+    recs = [shadeform.reconstruct(view.image, mask=view.mask, light=(0, 0, 1)) for view in views]
+    asked = []
+
+    def resolve(i, regions):
+        asked.append(i)
+        return shadeform.reconstruct(views[i].image, mask=views[i].mask, light=(0, 0, 1), concave=regions)
+
+    guessed = scores(shadeform.fuse(list(zip(recs, angles))), "waisted", size=SIZE)
+    assert guessed[0] > 2 and guessed[2] > 20, guessed
+    placement = place(list(zip(recs, angles)), resolve=resolve)
+    chamfer, fscore, volume, closed = scores(solid(placement), "waisted", size=SIZE)
+    assert closed and chamfer <= 0.5 and fscore >= 95 and volume <= 3, (chamfer, fscore, volume)
+    # only the photos with unsure areas were solved again, and only the waist (at the middle
+    # column) is read as concave
+    assert set(asked) == {0, 2}
+    assert [len(marked) for marked in placement.concave] == [1, 0, 1, 0]
+    for marked in (placement.concave[0], placement.concave[2]):
+        assert abs(marked[0]["centre"][0] - (SIZE - 1) / 2) < 0.05 * SIZE
+    # the readings placed are the settled ones: their depth is the true one up to an offset
+    for rec, view in zip(placement.readings, views):
+        error = rec.depth[view.mask] - view.depth[view.mask]
+        assert np.std(error) < 0.5
+
+
 def test_poses_off_by_up_to_ten_degrees_are_refined():
     angles = (0, 90, 180, 270)
     recs = true_views("pebble", angles, size=SIZE)
@@ -213,7 +247,7 @@ def test_placement_puts_each_partial_model_on_the_object():
     assert np.array_equal(mesh.vertices, shadeform.fuse(list(zip(recs, angles))).vertices)
     truth = synth.closed_object("ellipsoid", size=SMALL)
     fused = cKDTree(mesh.vertices)
-    for rec, transform in zip(recs, placement.transforms([rec.depth for rec in recs])):
+    for rec, transform in zip(placement.readings, placement.transforms()):
         part = to_mesh(rec, step=2)
         points = part.vertices @ transform[:3, :3].T + transform[:3, 3]
         # on the fused surface (near its vertices, which are a voxel or less apart)

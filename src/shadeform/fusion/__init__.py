@@ -10,13 +10,13 @@ view saw (the poles of a turntable object) is closed by the hull, never left ope
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from shadeform.errors import InputError
-from shadeform.fusion.geometry import ViewPose, axis_column, parse_pose
+from shadeform.fusion.geometry import axis_column, parse_pose
 from shadeform.fusion.register import refine_poses
 from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
 
@@ -35,6 +35,7 @@ def fuse(
     resolution: float | None = None,
     refine: bool = True,
     axis: float | None = None,
+    resolve: Callable[[int, list], object] | None = None,
 ):
     """One closed mesh from several views' reconstructions.
 
@@ -56,6 +57,12 @@ def fuse(
     axis : float, optional
         The turntable axis's column in the images; default: found from the silhouettes
         (:func:`shadeform.fusion.geometry.axis_column`).
+    resolve : callable, optional
+        ``resolve(i, regions) -> Reconstruction``: view ``i`` solved again with ``regions`` (a
+        list of :class:`shadeform.regions.Region`) marked concave besides the user's. Given, the
+        areas each photo could not settle (``info["unsure"]``) are read as concave where the
+        other views' silhouettes say so (:mod:`.settle`): a waist between two lobes, which one
+        photo reads as a third hill top.
 
     Returns
     -------
@@ -69,7 +76,7 @@ def fuse(
         Fewer than two views, views of different sizes, a malformed pose, an empty mask, or
         views that share no volume.
     """
-    return solid(place(views, resolution=resolution, refine=refine, axis=axis))
+    return solid(place(views, resolution=resolution, refine=refine, axis=axis, resolve=resolve))
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,22 +91,30 @@ class Placement:
         The voxels over the views' visual hull, object frame.
     axis : float
         The column of the object frame's x = 0 in the images (the turntable axis).
+    readings : tuple of Reconstruction
+        Each view's reconstruction as placed: the one given, or the one :func:`place` solved
+        again with unsure areas read as concave (``concave``).
+    concave : tuple of tuple of dict
+        Per view, the unsure areas (its ``info["unsure"]`` entries) the other views' silhouettes
+        showed to be concave (:mod:`.settle`); empty when nothing was settled.
     """
 
     views: tuple[FusionView, ...]
     grid: Grid
     axis: float
+    readings: tuple
+    concave: tuple[tuple[dict, ...], ...]
 
-    def transforms(self, depths: Sequence[np.ndarray]) -> list[np.ndarray]:
+    def transforms(self) -> list[np.ndarray]:
         """Per view, the 4x4 matrix taking its partial model's vertices (the mesh frame of
-        ``docs/conventions.md``: ``(c, -r, depth[r, c])``, with ``depths[i]`` that view's
-        reconstruction depth) to the object frame; the partial models then lie where the fused
-        one does."""
+        ``docs/conventions.md``: ``(c, -r, depth[r, c])`` of its reading,
+        ``shadeform.mesh.to_mesh(placement.readings[i])``) to the object frame; the partial
+        models then lie where the fused one does."""
         out = []
-        for view, depth in zip(self.views, depths):
+        for view, rec in zip(self.views, self.readings):
             # mesh (c, -r, d) -> camera (c - c0, row0 - r, d - median + offset) -> object
             shift = np.eye(4)
-            shift[:3, 3] = [-view.column0, view.row0, view.offset - _depth_centre(view.mask, depth)]
+            shift[:3, 3] = [-view.column0, view.row0, view.offset - _depth_centre(view.mask, rec.depth)]
             inverse = np.eye(4)
             inverse[:3, :3] = view.rotation.T
             inverse[:3, 3] = -view.rotation.T @ view.translation
@@ -113,6 +128,7 @@ def place(
     resolution: float | None = None,
     refine: bool = True,
     axis: float | None = None,
+    resolve: Callable[[int, list], object] | None = None,
 ) -> Placement:
     """Several views' reconstructions placed in one frame: the first half of :func:`fuse`
     (its parameters), for a caller that also shows the partial models where they were put
@@ -128,20 +144,38 @@ def place(
         column0 = axis_column([rec.mask for rec in recs], [pose.angle for pose in poses])
     else:
         column0 = (width - 1) / 2.0
-    placed = [_placed(rec, pose, column0) for rec, pose in zip(recs, poses)]
+    placed = [_placed(rec, pose.matrix, column0) for rec, pose in zip(recs, poses)]
     grid = _grid(placed, resolution)
+    placed = _touching(placed, grid)
+    concave = ((),) * len(recs)
+    if resolve is not None:
+        from shadeform.fusion.settle import settle
+
+        # before the poses are refined: a lobe read tens of pixels too deep pulls them off
+        recs, concave = settle(placed, grid, recs, resolve)
+        changed = [i for i, marked in enumerate(concave) if marked]
+        for i in changed:
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = placed[i].rotation, placed[i].translation
+            placed[i] = _placed(recs[i], pose, column0)
+        if changed:
+            placed = _touching(placed, grid)
+    if refine:
+        placed = refine_poses(placed, turntable=turntable)
+    if refine and not hull(placed, grid).any():
+        raise InputError("the views share no volume at the refined poses; check the angles")
+    return Placement(tuple(placed), grid, column0, tuple(recs), tuple(concave))
+
+
+def _touching(placed: list[FusionView], grid: Grid) -> list[FusionView]:
+    """The views, each moved in depth until it touches the others' visual hull."""
     inside = hull(placed, grid)
     if not inside.any():
         raise InputError(
             "the views share no volume: their silhouettes do not meet at these poses; check the angles"
         )
     offsets = view_offsets(placed, grid, inside)
-    placed = [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
-    if refine:
-        placed = refine_poses(placed, turntable=turntable)
-        if not hull(placed, grid).any():
-            raise InputError("the views share no volume at the refined poses; check the angles")
-    return Placement(tuple(placed), grid, column0)
+    return [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
 
 
 def solid(placement: Placement):
@@ -192,12 +226,12 @@ def _check(views) -> list:
     return items
 
 
-def _placed(rec, pose: ViewPose, column0: float) -> FusionView:
+def _placed(rec, pose: np.ndarray, column0: float) -> FusionView:
     mask = np.asarray(rec.mask, bool) & np.isfinite(rec.depth)
     depth = np.where(mask, rec.depth, np.nan)
     # one offset per view is unknown: start from its depths centred on 0
     depth = depth - _depth_centre(mask, rec.depth)
-    return FusionView(depth, mask, np.asarray(rec.normals), pose.matrix[:3, :3], pose.matrix[:3, 3], column0)
+    return FusionView(depth, mask, np.asarray(rec.normals), pose[:3, :3], pose[:3, 3], column0)
 
 
 def _depth_centre(mask: np.ndarray, depth: np.ndarray) -> float:

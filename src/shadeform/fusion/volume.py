@@ -26,7 +26,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["Grid", "FusionView", "fused_distance", "hull", "hull_depth", "one_solid", "view_offsets"]
+__all__ = [
+    "Grid",
+    "FusionView",
+    "crossed",
+    "fused_distance",
+    "hull",
+    "hull_depth",
+    "one_solid",
+    "view_offsets",
+]
 
 # The constants below were set by hand, not swept, and checked only on synthetic views (the closed
 # objects of benchmarks/results/fusion.md).
@@ -160,6 +169,12 @@ def hull_depth(view: FusionView, grid: Grid, inside: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(front), front, np.nan).reshape(h, w)
 
 
+def crossed(view: FusionView, others: list[FusionView]) -> bool:
+    """Whether another view looks across this one's direction (by more than about 12 degrees),
+    so that its silhouette bounds this view's depths."""
+    return any(np.linalg.norm(np.cross(view.rotation[2], other.rotation[2])) > 0.2 for other in others)
+
+
 def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> list[float]:
     """Each view's depth offset: the one that brings its surface forward until it touches the
     other views' visual hull.
@@ -180,9 +195,7 @@ def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> lis
     """
     offsets = []
     for n, view in enumerate(views):
-        others = [other for m, other in enumerate(views) if m != n]
-        crossed = any(np.linalg.norm(np.cross(view.rotation[2], other.rotation[2])) > 0.2 for other in others)
-        if not crossed:
+        if not crossed(view, [other for m, other in enumerate(views) if m != n]):
             offsets.append(view.offset)
             continue
         front = hull_depth(view, grid, inside)
