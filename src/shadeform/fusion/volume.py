@@ -211,15 +211,30 @@ def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> lis
 def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) -> np.ndarray:
     """The fused, truncated signed distance in ``[-1, 1]`` on the grid (module description):
     positive outside, negative inside."""
-    in_hull = np.ones(grid.shape, bool)
+    hull_distance = np.full(grid.shape, -np.inf)
     total = np.zeros(grid.shape)
     weight = np.zeros(grid.shape)
     for view in views:
         squarely = np.maximum(np.nan_to_num(view.normals[..., 2]), MIN_WEIGHT)
+        outline = silhouette_distance(view.mask)
         for i, camera in grid.slabs(view):
             rows, cols = view.pixels(camera)
+            # beyond the image the silhouette distance goes on growing, so that such a voxel is out
+            beyond = np.maximum.reduce(
+                [
+                    -rows,
+                    rows - (view.mask.shape[0] - 1),
+                    -cols,
+                    cols - (view.mask.shape[1] - 1),
+                    np.zeros_like(rows),
+                ]
+            )
+            np.maximum(
+                hull_distance[i],
+                ndimage.map_coordinates(outline, [rows, cols], order=1, mode="nearest") + beyond,
+                out=hull_distance[i],
+            )
             on = view.inside(rows, cols)
-            in_hull[i] &= on
             if not on.any():
                 continue
             signed = camera[..., 2] - view.surface(rows, cols)
@@ -229,7 +244,17 @@ def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) ->
             total[i][seen] += w * np.clip(signed[seen] / truncation, -1.0, 1.0)
             weight[i][seen] += w
     fused = np.where(weight > 0, total / np.maximum(weight, 1e-12), -1.0)
-    return np.where(in_hull, fused, 1.0)
+    # the solid within the visual hull: the larger of the two signed distances (an intersection),
+    # so that where the surface is the hull's it is as smooth as the silhouettes, not voxel steps
+    return np.maximum(fused, np.clip(hull_distance / truncation, -1.0, 1.0))
+
+
+def silhouette_distance(mask: np.ndarray) -> np.ndarray:
+    """Signed distance (pixels) to a view's silhouette, negative inside: the outline lies half a
+    pixel beyond the outermost object pixels' centres, (H, W)."""
+    outside = ndimage.distance_transform_edt(~mask)
+    inside = ndimage.distance_transform_edt(mask)
+    return np.where(mask, 0.5 - inside, outside - 0.5)
 
 
 def one_solid(distance: np.ndarray) -> np.ndarray:
