@@ -11,6 +11,12 @@ on the fly by :mod:`shadeform.synth`.
                           light is not known: it is estimated from the photo.
 ``synth:<scene>``         A noise-free Lambertian rendering of a :data:`shadeform.synth.SCENES`
                           scene under the light ``(0, 0, 1)``, with its true mask.
+``stereo:vase``           A photo set (:data:`PHOTO_SET_EXAMPLES`): a painted vase under 12
+                          lights, for photometric stereo.
+``views:<object>``        A view set (:data:`VIEW_SET_EXAMPLES`): a closed synthetic object
+                          (:data:`shadeform.synth.CLOSED_OBJECTS`: lumpy, waisted)
+                          photographed from four sides, for a complete model fused from
+                          several views.
 ========================= ===================================================================
 """
 
@@ -24,7 +30,14 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.synth import SCENES
 
-__all__ = ["EXAMPLES", "PHOTO_SET_EXAMPLES", "load_example", "load_photo_set_example"]
+__all__ = [
+    "EXAMPLES",
+    "PHOTO_SET_EXAMPLES",
+    "VIEW_SET_EXAMPLES",
+    "load_example",
+    "load_photo_set_example",
+    "load_view_set_example",
+]
 
 # (rows, cols) of the coin in skimage.data.coins() (303 x 384): the large helmeted head on the
 # right of the third row, with a few pixels of dark background all round.
@@ -44,6 +57,20 @@ PHOTO_SET_EXAMPLES: dict[str, str] = {
     "stereo:vase": (
         "synthetic: a painted Lambertian vase under 12 known lights (slant 45 degrees all "
         "round), with attached shadows, for photometric stereo and relighting"
+    ),
+}
+
+#: View-set example name -> one-line description (photos of one object from several sides, fused
+#: into one closed model).
+VIEW_SET_EXAMPLES: dict[str, str] = {
+    "views:lumpy": (
+        "synthetic: a lumpy Lambertian sphere photographed from 4 sides (turntable 0, 90, 180 and "
+        "270 degrees), light from the camera, true masks, fused into one closed model"
+    ),
+    "views:waisted": (
+        "synthetic: two Lambertian lobes joined by a waist, photographed from 4 sides, light from "
+        "the camera, true masks; the front and back photos read the waist as a hill top, the side "
+        "views' silhouettes settle it"
     ),
 }
 
@@ -169,3 +196,45 @@ def load_photo_set_example(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     shading = np.stack([render(normals, mask, light=light) for light in lights])
     images = (shading[..., None] * paint[None]).astype(np.float32)
     return images, lights, mask
+
+
+def load_view_set_example(name: str) -> tuple[np.ndarray, np.ndarray, tuple[float, ...], dict[str, Any]]:
+    """Load a shipped view-set example (:data:`VIEW_SET_EXAMPLES`): one object from several sides.
+
+    Returns
+    -------
+    images : (N, H, W) float32
+        Linear grey photos in ``[0, 1]``, one per view.
+    masks : (N, H, W) bool
+        Each view's true object mask.
+    angles : tuple of float
+        Each view's turntable angle in degrees (``docs/conventions.md``, "Turntable views").
+    settings : dict
+        What every view is best reconstructed with, as :func:`load_example` gives it: ``light``,
+        ``filter``, ``step`` and ``method``.
+
+    Raises
+    ------
+    InputError
+        If ``name`` is not a view-set example.
+
+    Examples
+    --------
+    >>> images, masks, angles, settings = load_view_set_example("views:lumpy")
+    >>> images.shape, angles
+    ((4, 256, 256), (0.0, 90.0, 180.0, 270.0))
+    """
+    from shadeform.synth import TURNTABLE_ANGLES, render_views
+
+    if not isinstance(name, str) or name not in VIEW_SET_EXAMPLES:
+        raise InputError(f"unknown view set {name!r}; choose one of: {', '.join(VIEW_SET_EXAMPLES)}")
+    views = render_views(name.removeprefix("views:"), TURNTABLE_ANGLES, size=_SYNTH_SIZE)
+    images = np.stack([view.image for view in views]).astype(np.float32)
+    masks = np.stack([view.mask for view in views])
+    settings = {
+        "light": tuple(float(v) for v in views[0].light),
+        "filter": None,
+        "step": max(1, _SYNTH_SIZE // 128),
+        "method": "auto",
+    }
+    return images, masks, tuple(float(view.angle) for view in views), settings

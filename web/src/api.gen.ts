@@ -116,6 +116,8 @@ export interface Options {
   stereo_methods: MethodInfo[];
   photo_set_examples: ExampleInfo[];
   stereo_defaults: StereoParams;
+  /** Shipped view sets: one object photographed from several sides, to fuse. */
+  view_set_examples: ExampleInfo[];
   limits: Limits;
   defaults: ReconstructParams;
   /** The image the server was started with (``shadeform app IMAGE``), else null. */
@@ -130,7 +132,7 @@ export interface MeshData {
   positions: string;
   /** float32 little-endian, 3 per vertex, unit length */
   normals: string;
-  /** float32 little-endian, 2 per vertex: u = (col + 0.5) / W, v = 1 - (row + 0.5) / H */
+  /** float32 little-endian, 2 per vertex: u = (col + 0.5) / W, v = 1 - (row + 0.5) / H; empty for a mesh without texture coordinates (a fused model) */
   uvs: string;
   /** uint32 little-endian, 3 per triangle, counter-clockwise seen from +z */
   indices: string;
@@ -230,6 +232,73 @@ export interface StereoResult {
   timings: Record<string, number>;
   /** What ran (the library's ``Reconstruction.info`` plus ``cached``). */
   info: Record<string, unknown>;
+}
+
+/** One view of a fusion: a stored photo, its turntable angle and how it is reconstructed. */
+export interface FuseView {
+  image_id: string;
+  /** Turntable angle in degrees: the object turned by it about the camera's vertical axis, right-handed about +y (``docs/conventions.md``, "Turntable views"). */
+  angle: number;
+  /** The view's reconstruction, exactly as ``/api/reconstruct`` makes it (its ``step`` is the finest grid of its partial model). */
+  params: ReconstructParams;
+}
+
+/** Several views of one object fused into one closed model (or its export). */
+export interface FuseRequest {
+  /** Two to 24 views. */
+  views: FuseView[];
+  /** Correct the poses and depth offsets so that the views agree. */
+  refine: boolean;
+  /** Read each view's unsure areas (what its photo leaves open: ``info['unsure']``) as concave where the other views' silhouettes say so (``shadeform.fusion.settle``). */
+  settle: boolean;
+  /** Voxel edge in pixels; null: 1, or coarser for a big object (the library's default). */
+  resolution: number | null;
+  /** Chosen by the client, echoed in the result: a response older than the newest is stale. */
+  request_id: number;
+}
+
+/** What one view of a fusion was reconstructed with. */
+export interface FusedView {
+  /** The view's object mask as a base64 8-bit grey PNG (255 = object). */
+  mask_png: string;
+  /** Unit vector toward the light that was used. */
+  light: [number, number, number];
+  /** Whether its reconstruction was reused, not solved for this request. */
+  cached: boolean;
+  /** Unsure areas of the view's photo that the other views showed to be concave: its partial model and the fused one read them so (add them to the view's regions to keep them). */
+  settled: ConcaveRegion[];
+  /** The 4x4 matrix (rows) that took the view's own mesh (``(col, -row, depth)``) to its partial model in the object frame: its refined pose and depth offset. */
+  transform: number[][];
+}
+
+/** The fused model, and each view's partial model where the fusion placed it. */
+export interface FuseResult {
+  request_id: number;
+  /** The fused model: closed, outward-facing, in the object frame (the frame of the view at angle 0, x = 0 on the turntable axis), pixel units; no texture coordinates. */
+  mesh: MeshData;
+  /** Each view's own mesh (on a coarser grid, to stay light), moved into the object frame where the fusion placed it; in the views' order. */
+  parts: MeshData[];
+  /** Per view, in order. */
+  views: FusedView[];
+  /** The turntable axis's column in the photos (the object frame's x = 0). */
+  axis: number;
+  /** The fused model's volume, cubic pixels. */
+  volume: number;
+  /** Whether the fused model is closed (every edge shared by two faces). */
+  watertight: boolean;
+  /** Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, total. */
+  timings: Record<string, number>;
+  /** What ran: ``resolution`` (the voxel edge used), ``refine``, ``settle``, ``cached`` (whether the fusion was reused). */
+  info: Record<string, unknown>;
+}
+
+/** A view set the server opened: its photos (stored images) and their turntable angles. */
+export interface ViewSetInfo {
+  name: string;
+  /** One stored image per view, in order. */
+  images: ImageInfo[];
+  /** Each view's turntable angle in degrees. */
+  angles: number[];
 }
 
 /** The automatic object mask of a stored image, or the one of a threshold (:func:`shadeform.preprocess.object_mask`). */

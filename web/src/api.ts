@@ -4,6 +4,8 @@
 // the UI can show it as it is and react to 404 (the server forgot an image) specially.
 import type {
   AutoMaskRequest,
+  FuseRequest,
+  FuseResult,
   ImageInfo,
   MaskResult,
   MeshData,
@@ -15,6 +17,7 @@ import type {
   SeedMaskRequest,
   StereoRequest,
   StereoResult,
+  ViewSetInfo,
 } from './api.gen';
 
 export type StereoRequestBody = StereoRequest;
@@ -34,7 +37,8 @@ export interface DecodedMesh {
   triangleCount: number;
   positions: Float32Array;
   normals: Float32Array;
-  uvs: Float32Array;
+  /** Null for a mesh without texture coordinates (a fused model). */
+  uvs: Float32Array | null;
   indices: Uint32Array;
 }
 
@@ -162,6 +166,20 @@ export function exportStereo(request: StereoRequest, suffix: string): Promise<{ 
   return downloaded(postJson(`/api/stereo/export?format=${encodeURIComponent(suffix)}`, request), suffix);
 }
 
+// ------------------------------------------------------------------------------ views
+
+export function openViewSetExample(name: string): Promise<ViewSetInfo> {
+  return json<ViewSetInfo>(fetch(`/api/viewsets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+}
+
+export function fuse(request: FuseRequest, signal?: AbortSignal): Promise<FuseResult> {
+  return json<FuseResult>(postJson('/api/fuse', request, signal));
+}
+
+export function exportFused(request: FuseRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson(`/api/fuse/export?format=${encodeURIComponent(suffix)}`, request), suffix);
+}
+
 async function downloaded(pending: Promise<Response>, suffix: string): Promise<{ blob: Blob; filename: string }> {
   const response = await pending;
   if (!response.ok) throw await failure(response);
@@ -213,7 +231,7 @@ export function decodeMesh(mesh: MeshData): DecodedMesh {
     triangleCount: t,
     positions: floats(mesh.positions, 3 * v, 'positions'),
     normals: floats(mesh.normals, 3 * v, 'normals'),
-    uvs: floats(mesh.uvs, 2 * v, 'uvs'),
+    uvs: mesh.uvs ? floats(mesh.uvs, 2 * v, 'uvs') : null,
     indices,
   };
 }

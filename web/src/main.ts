@@ -1,5 +1,7 @@
 // The app's controller: owns the session (image, parameters, regions, mask, view), talks to the
-// server, and wires the image pane, the side panel, the mask tool and the 3D view together.
+// server, and wires the image pane, the side panel, the mask tool and the 3D view together. The
+// photo-set mode (stereo.ts) and the Views panel (views.ts) own their sessions; the controller
+// switches modes and lends them the 3D view.
 //
 // Requests: every edit sends one reconstruct request (slider drags debounced briefly, one at a
 // time); a quick look solved at the mesh's grid (or a coarser one) comes first where the image
@@ -8,7 +10,7 @@
 // model never arrives last.
 import './style.css';
 import * as api from './api';
-import type { ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
+import type { ExampleInfo, ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
 import { MaskTool } from './maskTool';
@@ -30,6 +32,7 @@ import {
   type ViewSettings,
 } from './state';
 import { StereoSession } from './stereo';
+import { PART_COLOURS, ViewsSession } from './views';
 import { Viewer } from './viewer';
 
 const DRAG_DEBOUNCE_MS = 40;
@@ -76,6 +79,7 @@ class App {
   private readonly panel: Panel;
   private readonly maskTool: MaskTool;
   private readonly stereo: StereoSession;
+  private readonly views: ViewsSession;
 
   constructor(private readonly options: Options) {
     const session = loadSession();
@@ -110,9 +114,7 @@ class App {
         this.viewer.setMesh(mesh, { refit });
         this.viewer.setLight(result.light);
         this.viewer.setPhoto(`data:image/png;base64,${result.albedo_png}`);
-        $('view-empty').hidden = true;
-        $('view-host').classList.add('has-model');
-        $<HTMLButtonElement>('export-button').disabled = false;
+        this.modelShown();
         const [low, high] = result.depth_range;
         $('mesh-info').textContent =
           `${mesh.vertexCount.toLocaleString()} vertices · ${mesh.triangleCount.toLocaleString()} triangles · ` +
@@ -123,6 +125,31 @@ class App {
       solving: (on) => this.setSolving(on),
       toast: (message, kind) => this.toast(message, kind),
       changed: () => this.persist(),
+    });
+    this.views = new ViewsSession(options, {
+      showFused: (result, fused, parts, refit) => {
+        this.mesh = fused;
+        this.viewer.setMesh(fused, { refit });
+        this.viewer.setParts(parts, PART_COLOURS);
+        this.viewer.setPartsVisible(this.views.showParts);
+        this.viewer.setLight(result.views[0].light); // the object frame is the first view's camera frame
+        this.modelShown();
+        $('mesh-info').textContent =
+          `${fused.vertexCount.toLocaleString()} vertices · ${fused.triangleCount.toLocaleString()} triangles · ` +
+          `fused from ${result.views.length} views${result.watertight ? '' : ' · NOT closed'}`;
+        $('timing').textContent = `server ${((result.timings.total ?? 0) * 1000).toFixed(0)} ms${result.info.cached ? ' (fused model reused)' : ''}`;
+      },
+      showParts: (on) => this.viewer.setPartsVisible(on),
+      edit: (index) => this.editView(index),
+      // an upload's bytes kept for a reload are the open photo's, not a view's: never re-sent for one
+      reopen: (source) => (source.kind === 'upload' ? Promise.resolve(null) : this.reopen(source)),
+      busy: (text, work) => this.busy(text, work),
+      solving: (on) => this.setSolving(on),
+      toast: (message, kind) => this.toast(message, kind),
+      changed: () => {
+        if (document.body.classList.contains('views-mode')) this.showViewsTitle();
+        this.persist();
+      },
     });
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
@@ -148,6 +175,7 @@ class App {
     this.panel.show(this.params);
     this.showReferences();
     this.showRegions();
+    this.showEditing();
   }
 
   /** Reopen what the last visit had open: the server may have forgotten the image. */
@@ -155,10 +183,13 @@ class App {
     const session = loadSession();
     const initial = this.options.initial_image;
     this.initialId = session.initialId;
+    if (session.views) this.views.restore(session.views);
     if (initial && initial.image_id !== session.initialId) {
       this.initialId = initial.image_id;
+      this.views.editing = null;
       return this.showImage(initial, { kind: 'initial', name: initial.name }, null);
     }
+    if (session.viewsOpen) return this.setViewsMode(true);
     if (session.photoSet) {
       this.stereo.reopen(session.photoSet.info, session.photoSet.params);
       this.setStereoMode(true);
@@ -185,6 +216,7 @@ class App {
   private async reopen(source: ImageSource): Promise<ImageInfo | null> {
     if (source.kind === 'example') return api.openExample(source.name);
     if (source.kind === 'initial') return (await api.getOptions()).initial_image;
+    if (source.kind === 'viewset') return (await api.openViewSetExample(source.name)).images[source.index] ?? null;
     const bytes = this.imageBytes ?? (await loadImageBytes());
     if (!bytes) return null;
     this.imageBytes = bytes;
@@ -202,6 +234,7 @@ class App {
     }
     await this.busy('Uploading…', async () => {
       const info = await api.uploadImage(file, file.name);
+      this.views.editing = null;
       this.imageBytes = file;
       await storeImageBytes(file);
       this.showImage(info, { kind: 'upload', name: file.name, type: file.type }, null);
@@ -213,6 +246,7 @@ class App {
       const info = await api.openExample(name);
       this.imageBytes = null;
       await storeImageBytes(null);
+      this.views.editing = null;
       this.showImage(info, { kind: 'example', name }, null);
     });
   }
@@ -247,6 +281,7 @@ class App {
       }
       this.view = { ...this.view, ...project.view };
       this.applyView();
+      this.views.editing = null;
       this.showImage(info, source, { ...this.options.defaults, ...project.params });
     });
   }
@@ -254,6 +289,7 @@ class App {
   /** Make ``info`` the current image, with ``params`` or else its suggested settings. */
   private showImage(info: ImageInfo, source: ImageSource, params: Params | null): void {
     this.setStereoMode(false);
+    this.setViewsMode(false);
     this.image = info;
     this.source = source;
     this.result = null;
@@ -274,34 +310,117 @@ class App {
     this.showUnsure([]);
     this.showReferences();
     this.showRegions();
+    this.showEditing();
     this.persist();
     this.solve();
   }
 
   /** Photo-set mode (photometric stereo) or one photo: the pane, the panel and exports follow. */
   private setStereoMode(on: boolean): void {
+    if (on) this.setViewsMode(false);
     document.body.classList.toggle('stereo-mode', on);
     if (!on) {
       this.stereo.close();
       return;
     }
-    this.inFlight?.abort();
-    this.image = null;
-    this.source = null;
-    this.result = null;
-    this.mesh = null;
-    $('image-empty').hidden = true;
-    $('view-empty').hidden = false;
-    $('view-host').classList.remove('has-model');
-    $<HTMLButtonElement>('export-button').disabled = true;
-    $('mesh-info').textContent = '';
-    $('timing').textContent = '';
+    this.leaveImage();
     const info = this.stereo.info!;
     $('image-title').innerHTML = '';
     const name = document.createElement('b');
     name.textContent = info.name;
     $('image-title').append(name, ` ${info.count} photos · ${info.width} × ${info.height}`);
     this.persist();
+  }
+
+  /** The Views panel (several sides fused into one model) or not: the panes and exports follow. */
+  private setViewsMode(on: boolean): void {
+    const was = document.body.classList.contains('views-mode');
+    if (on) this.setStereoMode(false);
+    document.body.classList.toggle('views-mode', on);
+    if (!on) {
+      if (was) {
+        this.views.close();
+        this.clearModel();
+      }
+      return;
+    }
+    this.leaveImage();
+    this.showViewsTitle();
+    this.views.show();
+    this.persist();
+  }
+
+  private showViewsTitle(): void {
+    const count = this.views.views.length;
+    $('image-title').innerHTML = '';
+    const name = document.createElement('b');
+    name.textContent = 'Views';
+    $('image-title').append(name, ` ${count} photo${count === 1 ? '' : 's'} of one object, fused into one closed model`);
+  }
+
+  /** No single photo is open any more (another mode takes the panes): nothing of it is solved or shown. */
+  private leaveImage(): void {
+    this.inFlight?.abort();
+    this.image = null;
+    this.source = null;
+    this.result = null;
+    $('image-empty').hidden = true;
+    this.clearModel();
+  }
+
+  /** No model on screen (a new mode's comes): the 3D view is empty, the exports off. */
+  private clearModel(): void {
+    this.mesh = null;
+    this.viewer.clear();
+    this.viewer.setParts([], PART_COLOURS);
+    $('view-empty').hidden = false;
+    $('view-host').classList.remove('has-model');
+    $<HTMLButtonElement>('export-button').disabled = true;
+    $('mesh-info').textContent = '';
+    $('timing').textContent = '';
+  }
+
+  /** A model is on screen: the 3D view's controls and the exports are on. */
+  private modelShown(): void {
+    $('view-empty').hidden = true;
+    $('view-host').classList.add('has-model');
+    $<HTMLButtonElement>('export-button').disabled = false;
+  }
+
+  async openViewPhotos(files: File[]): Promise<void> {
+    if (await this.views.openFiles(files)) this.setViewsMode(true);
+  }
+
+  async openViewSetExample(name: string): Promise<void> {
+    if (await this.views.openExample(name)) this.setViewsMode(true);
+  }
+
+  /** The photo open now, with its settings, becomes one more view. */
+  private addView(): void {
+    if (!this.image || !this.source) return this.toast('Open a photo first, then add it as a view');
+    const angle = this.views.nextAngle();
+    const index = this.views.add({ image: this.image, source: this.source, angle, params: this.params });
+    this.toast(`Added as view ${index + 1} at ${angle}° — Views fuses the views into one model`, 'info');
+  }
+
+  /** Open a view's photo in single-photo mode with its settings; what changes is kept in the view. */
+  private editView(index: number): void {
+    const view = this.views.views[index];
+    if (!view) return;
+    // the stored bytes are another photo's: a forgotten upload is then said, not replaced by them
+    this.imageBytes = null;
+    storeImageBytes(null);
+    this.showImage(view.image, view.source, { ...this.options.defaults, ...view.params });
+  }
+
+  /** The single-photo panel says which view is being edited, and offers to go back. */
+  private showEditing(): void {
+    const index = this.views.editing;
+    const view = index === null ? undefined : this.views.views[index];
+    $('view-editing').hidden = !view;
+    $('view-add-row').hidden = !!view;
+    $('view-add-group').hidden = !this.image; // nothing to add or edit before a photo is open
+    if (view) $('view-editing-name').textContent = `view ${index! + 1} (${view.image.name}, ${view.angle}°)`;
   }
 
   async openPhotos(files: File[]): Promise<void> {
@@ -487,9 +606,7 @@ class App {
     this.viewer.setMesh(mesh, { refit: this.refitNext });
     this.refitNext = false;
     this.viewer.setLight(result.light);
-    $('view-empty').hidden = true;
-    $('view-host').classList.add('has-model');
-    $<HTMLButtonElement>('export-button').disabled = false;
+    this.modelShown();
     this.maskTool.solvedWith(result.mask_png);
     this.showReferences();
     this.panel.showResult(result);
@@ -511,6 +628,12 @@ class App {
   // --------------------------------------------------------------------------- files
 
   private async exportFormat(suffix: string): Promise<void> {
+    if (document.body.classList.contains('views-mode')) {
+      return this.busy(`Exporting ${suffix}…`, async () => {
+        const { blob, filename } = await this.views.exportFormat(suffix);
+        download(blob, filename);
+      });
+    }
     if (document.body.classList.contains('stereo-mode')) {
       return this.busy(`Exporting ${suffix}…`, async () => {
         const { blob, filename } = await this.stereo.exportFormat(suffix);
@@ -568,6 +691,8 @@ class App {
   }
 
   private persist(): void {
+    // a view being edited keeps what the user changes (its photo too: a forgotten one reopened)
+    if (this.image && this.source && this.views.editing !== null) this.views.edited(this.image, this.source, this.params);
     clearTimeout(this.saveTimer);
     this.saveTimer = window.setTimeout(
       () => saveSession({
@@ -577,6 +702,8 @@ class App {
           view: this.view,
           initialId: this.initialId,
           photoSet: this.stereo.session(),
+          views: this.views.session(),
+          viewsOpen: document.body.classList.contains('views-mode'),
         }),
       150,
     );
@@ -622,7 +749,8 @@ class App {
     const examples = $('examples-menu').querySelector('.menu-items')!;
     const photos = this.options.examples.filter((e) => !e.name.startsWith('synth:'));
     const synthetic = this.options.examples.filter((e) => e.name.startsWith('synth:'));
-    const group = (heading: string, entries: typeof photos) => {
+    // one heading per kind; each button names its entry in data-<kind> (data-example, ...)
+    const group = (heading: string, entries: ExampleInfo[], kind: string, label: (name: string) => string, open: (name: string) => void) => {
       if (!entries.length) return;
       const title = document.createElement('div');
       title.className = 'heading';
@@ -630,33 +758,22 @@ class App {
       examples.append(title);
       for (const example of entries) {
         const button = document.createElement('button');
-        button.dataset.example = example.name;
+        button.dataset[kind] = example.name;
         button.className = 'example';
         button.innerHTML = '<b></b><small></small>';
-        button.querySelector('b')!.textContent = example.name.replace(/^synth:/, '');
+        button.querySelector('b')!.textContent = label(example.name);
         button.querySelector('small')!.textContent = example.title;
-        button.addEventListener('click', () => this.openExample(example.name));
+        button.addEventListener('click', () => open(example.name));
         examples.append(button);
       }
     };
-    group('Photographs', photos);
-    group('Synthetic scenes (known shape)', synthetic);
-    if (this.options.photo_set_examples.length) {
-      const title = document.createElement('div');
-      title.className = 'heading';
-      title.textContent = 'Photo sets (several lights)';
-      examples.append(title);
-      for (const example of this.options.photo_set_examples) {
-        const button = document.createElement('button');
-        button.dataset.photoSet = example.name;
-        button.className = 'example';
-        button.innerHTML = '<b></b><small></small>';
-        button.querySelector('b')!.textContent = example.name.replace(/^stereo:/, '') + ' (photo set)';
-        button.querySelector('small')!.textContent = example.title;
-        button.addEventListener('click', () => this.openPhotoSetExample(example.name));
-        examples.append(button);
-      }
-    }
+    const image = (name: string) => this.openExample(name);
+    group('Photographs', photos, 'example', (name) => name, image);
+    group('Synthetic scenes (known shape)', synthetic, 'example', (name) => name.replace(/^synth:/, ''), image);
+    group('Photo sets (several lights)', this.options.photo_set_examples, 'photoSet',
+      (name) => name.replace(/^stereo:/, '') + ' (photo set)', (name) => this.openPhotoSetExample(name));
+    group('View sets (several sides)', this.options.view_set_examples, 'viewSet',
+      (name) => name.replace(/^views:/, '') + ' (views)', (name) => this.openViewSetExample(name));
     for (const example of this.options.examples) {
       const button = document.createElement('button');
       button.className = 'btn small';
@@ -730,23 +847,24 @@ class App {
   }
 
   private bindFiles(): void {
-    const picked = (id: string, use: (file: File) => void) => {
+    const pickedAll = (id: string, use: (files: File[]) => void) => {
       const input = $<HTMLInputElement>(id);
       input.addEventListener('change', () => {
-        const file = input.files?.[0];
-        input.value = ''; // choosing the same file again must fire again
-        if (file) use(file);
+        const files = Array.from(input.files ?? []);
+        input.value = ''; // choosing the same files again must fire again
+        if (files.length) use(files);
       });
     };
+    const picked = (id: string, use: (file: File) => void) => pickedAll(id, (files) => use(files[0]));
     $('open-image').addEventListener('click', () => $<HTMLInputElement>('file-image').click());
     picked('file-image', (file) => this.openFile(file));
     $('open-photos').addEventListener('click', () => $<HTMLInputElement>('file-photos').click());
-    const photos = $<HTMLInputElement>('file-photos');
-    photos.addEventListener('change', () => {
-      const files = Array.from(photos.files ?? []);
-      photos.value = '';
-      if (files.length) this.openPhotos(files);
-    });
+    pickedAll('file-photos', (files) => this.openPhotos(files));
+    $('open-views').addEventListener('click', () => this.setViewsMode(true));
+    $('views-open').addEventListener('click', () => $<HTMLInputElement>('file-views').click());
+    pickedAll('file-views', (files) => this.openViewPhotos(files));
+    $('add-view').addEventListener('click', () => this.addView());
+    $('view-back').addEventListener('click', () => this.setViewsMode(true));
     picked('file-project', (file) => this.openJson(file));
     picked('file-regions', (file) => this.openJson(file));
 
@@ -769,8 +887,10 @@ class App {
       depth = 0;
       overlay.hidden = true;
       const files = Array.from(event.dataTransfer?.files ?? []);
-      // several images at once are a photo set; one file opens as before
-      if (files.filter((f) => f.type.startsWith('image/') || /\.tiff?$/i.test(f.name)).length > 1) this.openPhotos(files);
+      // several images at once are a photo set (views, in the Views panel); one file opens as before
+      const several = files.filter((f) => f.type.startsWith('image/') || /\.tiff?$/i.test(f.name)).length > 1;
+      if (several && document.body.classList.contains('views-mode')) this.openViewPhotos(files);
+      else if (several) this.openPhotos(files);
       else if (files[0]) this.openFile(files[0]);
     });
   }
@@ -791,8 +911,9 @@ class App {
         return;
       }
       if (event.ctrlKey || event.metaKey || event.altKey) return;
-      const stereo = document.body.classList.contains('stereo-mode');
-      if (!stereo && this.pane.key(event)) {
+      // the image pane's keys act on one photo only
+      const photo = !document.body.classList.contains('stereo-mode') && !document.body.classList.contains('views-mode');
+      if (photo && this.pane.key(event)) {
         event.preventDefault();
         return;
       }
@@ -820,7 +941,7 @@ class App {
         '-': () => this.viewer.zoom(1 / 1.2),
         '?': () => $<HTMLDialogElement>('help-dialog').showModal(),
       };
-      if (stereo) for (const key of 'vpfkxybm') delete actions[key];
+      if (!photo) for (const key of 'vpfkxybm') delete actions[key];
       const act = event.key === 'O' ? () => $<HTMLInputElement>('file-photos').click() : (actions[event.key] ?? actions[event.key.toLowerCase()]);
       if (act) {
         event.preventDefault();
@@ -868,7 +989,7 @@ class App {
         this.mesh && {
           positions: Array.from(this.mesh.positions),
           normals: Array.from(this.mesh.normals),
-          uvs: Array.from(this.mesh.uvs),
+          uvs: this.mesh.uvs ? Array.from(this.mesh.uvs) : [],
           indices: Array.from(this.mesh.indices),
         },
       pagePoint: (x: number, y: number) => this.pane.pagePoint(x, y),
@@ -880,6 +1001,13 @@ class App {
       maskAt: (row: number, col: number) => this.maskTool.at(row, col),
       /** The photo set's session (photometric stereo): what it shows and found. */
       stereo: this.stereo.hook(),
+      /** The views' session (several sides fused): the views, the fused model and what is drawn. */
+      views: {
+        ...this.views.hook(),
+        open: () => document.body.classList.contains('views-mode'),
+        shownVertexCount: () => this.viewer.vertexCount(),
+        partsShown: () => this.viewer.partsShown(),
+      },
     };
   }
 }

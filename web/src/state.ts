@@ -1,11 +1,13 @@
 // What survives a page reload, and the project file.
 //
-// localStorage holds the small part (image info, parameters with the regions, view toggles);
+// localStorage holds the small part (image info, parameters with the regions, view toggles, the
+// photo set and the views with their settings);
 // IndexedDB holds the image's original bytes, so that an image the server has forgotten (it
 // keeps a bounded number, and none across a restart) can be uploaded again. A project file is
 // the same session as one JSON document with the image inline as base64.
 import { base64ToBytes, bytesToBase64 } from './api';
 import type { ImageInfo, PhotoSetInfo, ReconstructParams, StereoParams } from './api.gen';
+import type { ViewsSaved } from './views';
 
 export type Params = ReconstructParams;
 export type Region = Params['concave']['regions'][number];
@@ -15,7 +17,8 @@ export type Axis = Region['axis'];
 export type ImageSource =
   | { kind: 'example'; name: string }
   | { kind: 'upload'; name: string; type: string }
-  | { kind: 'initial'; name: string }; // the image `shadeform app IMAGE` was started with
+  | { kind: 'initial'; name: string } // the image `shadeform app IMAGE` was started with
+  | { kind: 'viewset'; name: string; index: number }; // a photo of a shipped view set
 
 export interface ViewSettings {
   wireframe: boolean;
@@ -34,6 +37,10 @@ export interface Session {
   initialId: string | null;
   /** The photo set open (photometric stereo) and its settings, when one is. */
   photoSet?: { info: PhotoSetInfo; params: StereoParams } | null;
+  /** The views (photos of one object from several sides) and the fusion's settings. */
+  views?: ViewsSaved | null;
+  /** Whether the Views panel was open. */
+  viewsOpen?: boolean;
 }
 
 export const DEFAULT_VIEW: ViewSettings = {
@@ -62,6 +69,8 @@ export function loadSession(): Session {
       view: { ...DEFAULT_VIEW, ...(saved.view ?? {}) },
       initialId: saved.initialId ?? null,
       photoSet: saved.photoSet ?? null,
+      views: saved.views ?? null,
+      viewsOpen: saved.viewsOpen ?? false,
     };
   } catch {
     return empty; // storage disabled or a corrupt entry: start afresh

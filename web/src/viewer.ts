@@ -25,6 +25,7 @@ export class Viewer {
   private readonly camera = new THREE.PerspectiveCamera(32, 1, 0.1, 1e5);
   private readonly controls: OrbitControls;
   private readonly model = new THREE.Group();
+  private readonly parts = new THREE.Group(); // partial models placed on a fused one
   private readonly keyLight = new THREE.DirectionalLight(0xffffff, 2.6);
   private readonly fillLight = new THREE.DirectionalLight(0xdfe8ff, 0.6);
   private readonly gizmo = new Gizmo();
@@ -73,6 +74,7 @@ export class Viewer {
       light.target.position.set(0, 0, 0);
     }
     this.scene.add(this.camera);
+    this.model.add(this.parts);
     this.scene.add(this.model);
 
     new ResizeObserver(() => this.resize()).observe(host);
@@ -81,13 +83,7 @@ export class Viewer {
 
   /** Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new parameter). */
   setMesh(mesh: DecodedMesh, { refit }: { refit: boolean }): void {
-    const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', new THREE.BufferAttribute(mesh.positions, 3));
-    geometry.setAttribute('normal', new THREE.BufferAttribute(mesh.normals, 3));
-    geometry.setAttribute('uv', new THREE.BufferAttribute(mesh.uvs, 2));
-    geometry.setIndex(new THREE.BufferAttribute(mesh.indices, 1));
-    geometry.computeBoundingBox();
-    geometry.computeBoundingSphere();
+    const geometry = geometryOf(mesh);
     const old = this.surface?.geometry;
     if (this.surface) this.model.remove(this.surface);
     if (this.wire) {
@@ -104,6 +100,47 @@ export class Viewer {
     if (refit || !this.model.userData.centred) this.centre(box);
     if (refit) this.recenter();
     this.requestRender();
+  }
+
+  /**
+   * Show partial models with the mesh, each in its colour (an empty list removes them): a fused
+   * model's views where the fusion placed them. They are drawn a little toward the camera, so
+   * that where one lies on the fused surface its colour shows; where none does, the fused one.
+   */
+  setParts(meshes: DecodedMesh[], colours: string[]): void {
+    for (const part of [...this.parts.children] as THREE.Mesh[]) {
+      this.parts.remove(part);
+      part.geometry.dispose();
+      (part.material as THREE.Material).dispose();
+    }
+    meshes.forEach((mesh, i) => {
+      const material = new THREE.MeshStandardMaterial({
+        color: colours[i % colours.length],
+        roughness: 0.85,
+        metalness: 0,
+        side: THREE.DoubleSide,
+        polygonOffset: true,
+        polygonOffsetFactor: -1,
+        polygonOffsetUnits: -4 * (i + 1), // a fixed order where two parts overlap: no flicker
+      });
+      this.parts.add(new THREE.Mesh(geometryOf(mesh), material));
+    });
+    this.requestRender();
+  }
+
+  setPartsVisible(on: boolean): void {
+    this.parts.visible = on;
+    this.requestRender();
+  }
+
+  /** How many partial models are drawn now (0 when hidden). */
+  partsShown(): number {
+    return this.parts.visible ? this.parts.children.length : 0;
+  }
+
+  /** How many vertices the main mesh on screen has. */
+  vertexCount(): number {
+    return this.positions ? this.positions.length / 3 : 0;
   }
 
   clear(): void {
@@ -244,7 +281,8 @@ export class Viewer {
     } else {
       surface.material = this.shaded;
     }
-    const map = texture && this.texture ? this.texture : null;
+    // a mesh without texture coordinates (a fused model) is never draped
+    const map = texture && this.texture && surface.geometry.getAttribute('uv') ? this.texture : null;
     if (this.shaded.map !== map) {
       this.shaded.map = map;
       this.shaded.color.set(map ? 0xffffff : BASE_COLOUR);
@@ -268,6 +306,17 @@ export class Viewer {
     this.camera.updateProjectionMatrix();
     this.requestRender();
   }
+}
+
+function geometryOf(mesh: DecodedMesh): THREE.BufferGeometry {
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.BufferAttribute(mesh.positions, 3));
+  geometry.setAttribute('normal', new THREE.BufferAttribute(mesh.normals, 3));
+  if (mesh.uvs) geometry.setAttribute('uv', new THREE.BufferAttribute(mesh.uvs, 2));
+  geometry.setIndex(new THREE.BufferAttribute(mesh.indices, 1));
+  geometry.computeBoundingBox();
+  geometry.computeBoundingSphere();
+  return geometry;
 }
 
 /** Per-vertex colours (n + 1) / 2: the OpenGL normal-map convention the library writes. */

@@ -25,6 +25,7 @@ __all__ = [
     "plain",
     "mesh_data",
     "mesh_file",
+    "mesh_bytes",
     "download",
     "format_suffix",
     "display_name",
@@ -76,22 +77,29 @@ def plain(value: Any) -> Any:
 
 
 def mesh_data(mesh) -> MeshData:
-    """A :class:`shadeform.mesh.Mesh` as the client's typed arrays."""
+    """A :class:`shadeform.mesh.Mesh` as the client's typed arrays (``uvs`` empty for a mesh
+    without texture coordinates)."""
     return MeshData(
         vertex_count=mesh.n_vertices,
         triangle_count=mesh.n_faces,
         positions=base64_array(mesh.vertices, "<f4"),
         normals=base64_array(mesh.normals, "<f4"),
-        uvs=base64_array(mesh.uv, "<f4"),
+        uvs="" if mesh.uv is None else base64_array(mesh.uv, "<f4"),
         indices=base64_array(mesh.faces, "<u4"),
     )
 
 
 def mesh_file(reconstruction, step: int, suffix: str) -> bytes:
     """A reconstruction's mesh, at ``step`` pixels per vertex, as a file of the registry's format."""
-    from shadeform import export, to_mesh
+    from shadeform import to_mesh
 
-    mesh = to_mesh(reconstruction, step=step)
+    return mesh_bytes(to_mesh(reconstruction, step=step), suffix)
+
+
+def mesh_bytes(mesh, suffix: str) -> bytes:
+    """A :class:`shadeform.mesh.Mesh` as a file of the registry's format (``suffix``)."""
+    from shadeform import export
+
     with tempfile.TemporaryDirectory(prefix="shadeform-export-") as folder:
         # the file name is ours: a fixed stem and a suffix from the registry
         path = export(mesh, Path(folder) / f"model{suffix}")

@@ -29,7 +29,8 @@ class AppLimits:
     max_images, max_image_bytes : int
         Images kept in memory; the least recently used go first.
     max_results, max_result_bytes : int
-        Reconstructions kept for re-meshing (a change of ``step`` only) and exports.
+        Reconstructions kept for re-meshing (a change of ``step`` only) and exports, and fused
+        models: every view of a fusion keeps its own, so that editing one view re-solves only it.
     max_json_bytes : int
         Largest JSON request body (regions with many points still fit).
     """
@@ -38,7 +39,7 @@ class AppLimits:
     max_pixels: int = 4096 * 4096
     max_images: int = 16
     max_image_bytes: int = 1024 * 2**20
-    max_results: int = 4
+    max_results: int = 32
     max_result_bytes: int = 1024 * 2**20
     max_json_bytes: int = 4 * 2**20
 
@@ -101,6 +102,12 @@ def _validation_message(errors: Sequence[dict]) -> str:
             message = "no file in the upload; send the image as the multipart form field 'file'"
         else:
             message = f"{where or 'body'}: missing; it is required"
+    elif kind in ("too_short", "too_long"):
+        ctx = first.get("ctx", {})
+        bound = (
+            f"at least {ctx.get('min_length')}" if kind == "too_short" else f"at most {ctx.get('max_length')}"
+        )
+        message = f"{where or 'body'}: give {bound}, got {ctx.get('actual_length')}"
     elif kind == "extra_forbidden":
         message = f"{where}: unknown field; remove it (see /api/openapi.json for the fields)"
     else:

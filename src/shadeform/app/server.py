@@ -12,6 +12,8 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``POST /api/reconstruct``                   ``ReconstructRequest`` -> ``ReconstructResult``
 ``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
 ``POST /api/images/{id}/mask/...``          masks: :mod:`shadeform.app.masks`
+``/api/photosets``, ``/api/stereo``         photo sets: :mod:`shadeform.app.stereo`
+``/api/fuse``, ``/api/viewsets``            several views fused: :mod:`shadeform.app.fusion`
 ==========================================  ===================================================
 
 Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a library
@@ -55,6 +57,7 @@ from shadeform.app.encoding import (
     png,
     png_base64,
 )
+from shadeform.app.fusion import add_fusion_routes
 from shadeform.app.guard import AppLimits, Guard, add_error_handlers, file_too_large
 from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.schema import (
@@ -201,13 +204,7 @@ def create_app(
 
     @app.post("/api/reconstruct", response_model=ReconstructResult)
     async def post_reconstruct(body: ReconstructRequest, request: Request) -> Response:
-        entry = state.image(body.image_id)
-        async with state.solve_lock:
-            # a client that gave up on this request (a newer one superseded it) gets no solve
-            if await request.is_disconnected():
-                return Response(status_code=204)
-            result = await run_in_threadpool(_reconstruct_result, state, entry, body)
-        return Response(result.model_dump_json(), media_type="application/json")
+        return await state.solve_json(request, _reconstruct_result, state, state.image(body.image_id), body)
 
     @app.post("/api/export", response_class=Response)
     async def post_export(
@@ -224,6 +221,7 @@ def create_app(
 
     add_mask_routes(app, state)
     add_stereo_routes(app, state)
+    add_fusion_routes(app, state)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index() -> Response:
@@ -272,6 +270,16 @@ class _State:
         self._examples: dict[tuple[str, int | None], str] = {}
         # one solve at a time: two would only share the cores and both arrive late
         self.solve_lock = asyncio.Lock()
+
+    async def solve_json(self, request: Request, work, *args) -> Response:
+        """``work(*args)`` (a solve returning a pydantic model) run in a worker thread, one solve
+        at a time, as a JSON response; a client that gave up while it waited (a newer request
+        superseded it) gets 204 and no solve."""
+        async with self.solve_lock:
+            if await request.is_disconnected():
+                return Response(status_code=204)
+            result = await run_in_threadpool(work, *args)
+        return Response(result.model_dump_json(), media_type="application/json")
 
     def add(
         self, name: str, pixels: np.ndarray, *, mask=None, suggested=None, pinned=False, photo=None
@@ -525,7 +533,7 @@ def _image_info(entry: StoredImage) -> ImageInfo:
 
 def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
     from shadeform.app.schema import StereoParams
-    from shadeform.examples import EXAMPLES, PHOTO_SET_EXAMPLES
+    from shadeform.examples import EXAMPLES, PHOTO_SET_EXAMPLES, VIEW_SET_EXAMPLES
     from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
@@ -547,6 +555,7 @@ def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
             ExampleInfo(name=name, title=title) for name, title in PHOTO_SET_EXAMPLES.items()
         ],
         stereo_defaults=StereoParams(),
+        view_set_examples=[ExampleInfo(name=name, title=title) for name, title in VIEW_SET_EXAMPLES.items()],
         limits=Limits(max_upload_bytes=limits.max_upload_bytes, max_pixels=limits.max_pixels),
         defaults=ReconstructParams(),
         initial_image=None if initial is None else _image_info(initial),

@@ -153,12 +153,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
 
     @router.post("/api/stereo", response_model=StereoResult)
     async def post_stereo(body: StereoRequest, request: Request) -> Response:
-        entry = _photoset(state, body.photoset_id)
-        async with state.solve_lock:
-            if await request.is_disconnected():
-                return Response(status_code=204)
-            result = await run_in_threadpool(_result, state, entry, body)
-        return Response(result.model_dump_json(), media_type="application/json")
+        return await state.solve_json(request, _result, state, _photoset(state, body.photoset_id), body)
 
     @router.post("/api/stereo/export", response_class=Response)
     async def post_stereo_export(

@@ -1,0 +1,262 @@
+"""The app's views routes: photos of one object from several sides, each reconstructed as one
+photo is, placed in one frame and fused into one closed model.
+
+==============================================  =================================================
+``POST /api/fuse``                              ``FuseRequest`` -> ``FuseResult``
+``POST /api/fuse/export?format=.glb``           ``FuseRequest`` -> the fused mesh file
+``POST /api/viewsets/examples/{name}``          a shipped view set -> ``ViewSetInfo``
+==============================================  =================================================
+
+As for one photo, every endpoint is input checking, library calls (:func:`shadeform.fusion.place`,
+:func:`shadeform.fusion.solid`) and encoding. A view is the server's own single-photo solve of
+its image with its parameters (``/api/reconstruct``'s, cache included): re-fusing after one
+view's mask or regions changed solves only that view again, and the same request twice (an
+export after the view) fuses once. With ``settle``, what a photo leaves open (its unsure areas)
+is read as concave where the other views' silhouettes say so (:mod:`shadeform.fusion.settle`):
+the view is solved again the same way with those areas added to its regions, and the result
+lists them per view. Each view's partial model (the reading the fusion kept) comes back moved to
+where the fusion placed it (:meth:`shadeform.fusion.Placement.transforms`), on a coarser grid so
+that the response stays light.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, FastAPI, Query, Request
+from fastapi.responses import Response
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+
+from shadeform.app.encoding import download, format_suffix, json_response, mesh_bytes, mesh_data, safe_stem
+from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
+from shadeform.errors import InputError
+
+__all__ = ["PART_VERTICES", "add_fusion_routes"]
+
+#: Most vertices across a partial model's longer side: the parts only show where each view went.
+PART_VERTICES = 64
+
+
+@dataclass(frozen=True, eq=False)
+class _Fused:
+    """A cached fusion: the closed model, each view's reading and where its partial model goes."""
+
+    mesh: Any
+    readings: tuple[Any, ...]
+    settled: tuple[tuple[dict, ...], ...]
+    transforms: tuple[np.ndarray, ...]
+    axis: float
+    spacing: float
+    volume: float
+    watertight: bool
+    timings: dict[str, float]
+
+
+def add_fusion_routes(app: FastAPI, state: Any) -> None:
+    """Add the views endpoints to an app (before its catch-all route).
+
+    Parameters
+    ----------
+    app : fastapi.FastAPI
+        The app :func:`shadeform.app.server.create_app` builds.
+    state : shadeform.app.server._State
+        The app's store: its images, its reconstructions (each view's is kept there) and fusions.
+    """
+    router = APIRouter()
+    # example name -> its images' ids and angles (rendered once, while the server keeps the images)
+    view_sets: dict[str, tuple[tuple[str, ...], tuple[float, ...]]] = {}
+
+    @router.post("/api/fuse", response_model=FuseResult)
+    async def post_fuse(body: FuseRequest, request: Request) -> Response:
+        return await state.solve_json(request, _result, state, _entries(state, body), body)
+
+    @router.post("/api/fuse/export", response_class=Response)
+    async def post_fuse_export(
+        body: FuseRequest,
+        format: str = Query(..., description="A suffix from Options.formats, e.g. .glb."),
+    ) -> Response:
+        from shadeform.io.exporters import available_formats
+
+        suffix = format_suffix(format, available_formats())
+        entries = _entries(state, body)
+        async with state.solve_lock:
+            solved = await run_in_threadpool(_solved, state, entries, body)
+            fused, _ = await run_in_threadpool(_fuse, state, entries, body, solved)
+            data = await run_in_threadpool(mesh_bytes, fused.mesh, suffix)
+        return download(data, f"{safe_stem(entries[0].name)}-fused", suffix)
+
+    @router.post("/api/viewsets/examples/{name}", response_model=ViewSetInfo, status_code=201)
+    def post_view_set_example(name: str) -> Response:
+        from shadeform.app.server import _image_info, _suggested
+        from shadeform.examples import VIEW_SET_EXAMPLES, load_view_set_example
+
+        if name not in VIEW_SET_EXAMPLES:
+            shown = name if len(name) <= 40 else name[:37] + "..."
+            raise HTTPException(
+                404, f"unknown view set {shown!r}; choose one of: {', '.join(VIEW_SET_EXAMPLES)}"
+            )
+        ids, angles = view_sets.get(name, ((), ()))
+        known = [state.images.get(image_id) for image_id in ids]
+        if not known or any(entry is None for entry in known):
+            images, masks, angles, settings = load_view_set_example(name)
+            suggested = _suggested(settings)
+            stem = name.split(":")[-1]
+            known = [
+                state.add(f"{stem} {angle:g}°", image[:, :, None], mask=mask, suggested=suggested)
+                for image, mask, angle in zip(images, masks, angles)
+            ]
+            view_sets[name] = (tuple(entry.image_id for entry in known), angles)
+        info = ViewSetInfo(name=name, images=[_image_info(entry) for entry in known], angles=list(angles))
+        return json_response(info, status_code=201)
+
+    app.include_router(router)
+
+
+# --- the work ----------------------------------------------------------------------------------
+
+
+def _entries(state, body: FuseRequest) -> list:
+    """Each view's stored image; an unknown one is a 404 that says which view."""
+    entries = []
+    for i, view in enumerate(body.views):
+        try:
+            entries.append(state.image(view.image_id))
+        except HTTPException as err:
+            raise HTTPException(err.status_code, f"view {i + 1}: {err.detail}") from None
+    return entries
+
+
+def _solved(state, entries: list, body: FuseRequest) -> list[tuple[Any, bool]]:
+    """Each view's reconstruction, exactly as ``/api/reconstruct`` makes it (and caches it)."""
+    return [_view_solve(state, entries, i, view.params) for i, view in enumerate(body.views)]
+
+
+def _view_solve(state, entries: list, i: int, params) -> tuple[Any, bool]:
+    """View ``i`` solved with ``params`` by the server's own solve (and cache); a failure says
+    which view."""
+    from shadeform.app.server import _solve
+
+    try:
+        return _solve(state, entries[i], params)
+    except InputError as err:
+        raise InputError(f"view {i + 1} ({entries[i].name}): {err}") from None
+
+
+def _resolver(state, entries: list, body: FuseRequest):
+    """``resolve(i, regions)`` for :func:`shadeform.fusion.place`: view ``i`` solved again as
+    ``/api/reconstruct`` would with ``regions`` added to its own concave regions (and cached, so
+    that fusing the same views again tries nothing anew)."""
+
+    def resolve(i: int, regions: list) -> Any:
+        params = body.views[i].params
+        extra = [ConcaveRegion(polygon=region.polygon.tolist(), axis=region.axis) for region in regions]
+        concave = params.concave.model_copy(update={"regions": [*params.concave.regions, *extra]})
+        solved, _ = _view_solve(state, entries, i, params.model_copy(update={"concave": concave}))
+        return solved.reconstruction
+
+    return resolve
+
+
+def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]]) -> tuple[_Fused, bool]:
+    """The fused model of the solved views (cached per views, angles, parameters but ``step``,
+    refine, settle and resolution), and whether it was reused."""
+    from shadeform.fusion import place, solid
+
+    key = (
+        "fuse",
+        tuple(
+            (view.image_id, view.params.model_dump_json(exclude={"step"}), view.angle) for view in body.views
+        ),
+        body.refine,
+        body.settle,
+        body.resolution,
+    )
+    fused = state.results.get(key)
+    if fused is not None:
+        return fused, True
+    recs = [item.reconstruction for item, _ in solved]
+    lap = time.perf_counter()
+    placement = place(
+        list(zip(recs, [view.angle for view in body.views])),
+        resolution=body.resolution,
+        refine=body.refine,
+        resolve=_resolver(state, entries, body) if body.settle else None,
+    )
+    placed = time.perf_counter()
+    mesh = solid(placement)
+    volume, watertight = _closed(mesh)
+    fused = _Fused(
+        mesh,
+        placement.readings,
+        placement.concave,
+        tuple(placement.transforms()),
+        placement.axis,
+        placement.grid.spacing,
+        volume,
+        watertight,
+        {"place": placed - lap, "solid": time.perf_counter() - placed},
+    )
+    state.results.put(key, fused, mesh.vertices.nbytes + mesh.faces.nbytes + mesh.normals.nbytes)
+    return fused, False
+
+
+def _result(state, entries: list, body: FuseRequest) -> FuseResult:
+    from shadeform import to_mesh
+
+    start = time.perf_counter()
+    solved = _solved(state, entries, body)
+    timings = {"reconstruct": time.perf_counter() - start}
+    fused, cached = _fuse(state, entries, body, solved)
+    if not cached:
+        timings.update(fused.timings)
+    lap = time.perf_counter()
+    parts = []
+    for rec, view, transform in zip(fused.readings, body.views, fused.transforms):
+        step = max(view.params.step, math.ceil(max(rec.mask.shape) / PART_VERTICES))
+        parts.append(_moved(to_mesh(rec, step=step), transform))
+    timings["parts"] = time.perf_counter() - lap
+    lap = time.perf_counter()
+    mesh, encoded_parts = mesh_data(fused.mesh), [mesh_data(part) for part in parts]
+    timings["encode"] = time.perf_counter() - lap
+    timings["total"] = time.perf_counter() - start
+    return FuseResult(
+        request_id=body.request_id,
+        mesh=mesh,
+        parts=encoded_parts,
+        views=[
+            FusedView(
+                mask_png=item.mask_png,
+                light=tuple(float(v) for v in item.reconstruction.light),
+                cached=was_cached,
+                settled=[ConcaveRegion(polygon=area["polygon"], axis=area["axis"]) for area in settled],
+                transform=transform.tolist(),
+            )
+            for (item, was_cached), settled, transform in zip(solved, fused.settled, fused.transforms)
+        ],
+        axis=fused.axis,
+        volume=fused.volume,
+        watertight=fused.watertight,
+        timings=timings,
+        info={"resolution": fused.spacing, "refine": body.refine, "settle": body.settle, "cached": cached},
+    )
+
+
+def _moved(mesh, transform: np.ndarray):
+    """A mesh moved by a rigid 4x4 transform (its normals turned with it)."""
+    from shadeform.mesh import Mesh
+
+    rotation, shift = transform[:3, :3], transform[:3, 3]
+    return Mesh(mesh.vertices @ rotation.T + shift, mesh.faces, mesh.normals @ rotation.T, mesh.uv)
+
+
+def _closed(mesh) -> tuple[float, bool]:
+    """A mesh's enclosed volume and whether it is watertight (trimesh's measures)."""
+    import trimesh
+
+    solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
+    return float(solid.volume), bool(solid.is_watertight)
