@@ -16,7 +16,7 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
-__all__ = ["Mesh", "to_mesh"]
+__all__ = ["Mesh", "solid_measures", "to_mesh"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,3 +286,13 @@ def to_mesh(reconstruction: Reconstruction, *, step: int = 1) -> Mesh:
     vertex_normals = grid_normals[used] / lengths[used][:, None]
     uv = np.column_stack([(vertex_c + 0.5) / width, 1.0 - (vertex_r + 0.5) / height])
     return Mesh(vertices, faces, vertex_normals, uv)
+
+
+def solid_measures(mesh: Mesh) -> dict:
+    """A closed model's enclosed volume (cubic pixels) and whether it is watertight (every edge
+    shared by exactly two consistently wound faces), as trimesh measures them:
+    ``{"volume": float, "watertight": bool}``."""
+    import trimesh
+
+    solid = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    return {"volume": float(solid.volume), "watertight": bool(solid.is_watertight)}

@@ -166,6 +166,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
     """The fused model of the solved views (cached per views, angles, parameters but ``step``,
     refine, settle and resolution), and whether it was reused."""
     from shadeform.fusion import place, solid
+    from shadeform.mesh import solid_measures
 
     key = (
         "fuse",
@@ -189,7 +190,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
     )
     placed = time.perf_counter()
     mesh = solid(placement)
-    volume, watertight = _closed(mesh)
+    measures = solid_measures(mesh)
     fused = _Fused(
         mesh,
         placement.readings,
@@ -197,8 +198,8 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
         tuple(placement.transforms()),
         placement.axis,
         placement.grid.spacing,
-        volume,
-        watertight,
+        measures["volume"],
+        measures["watertight"],
         {"place": placed - lap, "solid": time.perf_counter() - placed},
     )
     state.results.put(key, fused, mesh.vertices.nbytes + mesh.faces.nbytes + mesh.normals.nbytes)
@@ -252,11 +253,3 @@ def _moved(mesh, transform: np.ndarray):
 
     rotation, shift = transform[:3, :3], transform[:3, 3]
     return Mesh(mesh.vertices @ rotation.T + shift, mesh.faces, mesh.normals @ rotation.T, mesh.uv)
-
-
-def _closed(mesh) -> tuple[float, bool]:
-    """A mesh's enclosed volume and whether it is watertight (trimesh's measures)."""
-    import trimesh
-
-    solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
-    return float(solid.volume), bool(solid.is_watertight)
