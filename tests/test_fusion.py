@@ -256,3 +256,49 @@ def test_placement_puts_each_partial_model_on_the_object():
         # and on the true object (distance ~ |F| / |grad F|; a wrong frame would be far off)
         off = np.abs(truth.implicit(points)) / np.linalg.norm(truth.gradient(points), axis=-1)
         assert np.median(off) < 1.0, np.median(off)
+
+
+def test_cli_settles_the_waist_and_takes_regions_per_view(tmp_path):
+    """'shadeform fuse' on the waisted object's photos: by default the side views settle the
+    waist that the front and back photos leave open (said per view, the volume right); with
+    --no-settle it is not; drawn in the views file (inline regions for the front, a file for the
+    back) it needs no settling."""
+    import json
+
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    from shadeform.cli import app
+
+    angles = (0, 90, 180, 270)
+    views = synth.render_views("waisted", angles, size=SIZE)
+    names = []
+    for view in views:
+        names.append(f"w{int(view.angle)}.png")
+        Image.fromarray(np.rint(np.array(view.image) * 65535).astype(np.uint16)).save(tmp_path / names[-1])
+    truth = synth.closed_object("waisted", size=SIZE).volume
+    photos = [str(tmp_path / n) for n in names]
+    common = ["--angles", "0,90,180,270", "--resolution", "2", "--no-refine", "--json"]
+
+    def run(*args):
+        result = CliRunner().invoke(app, ["fuse", *args])
+        assert result.exit_code == 0, result.output
+        return json.loads(result.stdout)  # stderr has the progress
+
+    settled = run(*photos, "-o", str(tmp_path / "a.ply"), *common)
+    assert [len(view["settled_concave"]) for view in settled["views"]] == [1, 0, 1, 0]
+    assert abs(settled["mesh"]["volume"] / truth - 1) < 0.05
+    alone = run(*photos, "-o", str(tmp_path / "b.ply"), *common, "--no-settle")
+    assert all(not view["settled_concave"] for view in alone["views"])
+    assert alone["mesh"]["volume"] / truth < 0.85
+    # the waist drawn by the user: as the settled areas, inline and from a file
+    front = {"regions": [{"polygon": settled["views"][0]["settled_concave"][0]["polygon"], "axis": "x"}]}
+    back = {"regions": [{"polygon": settled["views"][2]["settled_concave"][0]["polygon"], "axis": "x"}]}
+    (tmp_path / "back.json").write_text(json.dumps(back))
+    document = {"views": [{"photo": n, "angle": a} for n, a in zip(names, angles)]}
+    document["views"][0]["concave"] = front
+    document["views"][2]["concave"] = "back.json"
+    (tmp_path / "views.json").write_text(json.dumps(document))
+    drawn = run("--views", str(tmp_path / "views.json"), "-o", str(tmp_path / "c.ply"), *common[2:])
+    assert all(not view["settled_concave"] for view in drawn["views"])
+    assert abs(drawn["mesh"]["volume"] / truth - 1) < 0.05

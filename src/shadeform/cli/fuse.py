@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NamedTuple
 
 import numpy as np
 import typer
@@ -58,8 +58,9 @@ def fuse(
         Path | None,
         typer.Option(
             help='JSON file of the views instead: {"views": [{"photo": "a.png", "angle": 0, '
-            '"mask": "a_mask.png"}, {"photo": "b.png", "pose": [[4x4 object -> camera]]}, ...]}; '
-            "paths relative to the file.",
+            '"mask": "a_mask.png", "concave": "a_regions.json"}, {"photo": "b.png", "pose": '
+            "[[4x4 object -> camera]]}, ...]}; paths relative to the file; concave regions as a file "
+            "or inline (docs/conventions.md).",
             show_default=False,
         ),
     ] = None,
@@ -95,23 +96,61 @@ def fuse(
             metavar="COLUMN", help="The turntable axis's column (default: found from the silhouettes)."
         ),
     ] = None,
+    surface: Annotated[
+        str,
+        typer.Option(
+            metavar="volume|poisson",
+            help="The surface: volume (signed distance in the visual hull, marching cubes) or poisson "
+            "(screened Poisson reconstruction; needs pip install 'shadeform[fusion]').",
+        ),
+    ] = "volume",
+    settle: Annotated[
+        bool,
+        typer.Option(
+            "--settle/--no-settle",
+            help="Where a photo cannot tell convex from concave, let the other views' silhouettes "
+            "decide (each such area is solved again as concave and kept if it fits them better).",
+        ),
+    ] = True,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
     ] = False,
 ) -> None:
     """Fuse photos of one object from several sides into one closed, watertight model."""
     import shadeform
+    from shadeform._checks import check_choice
+    from shadeform.fusion import SURFACES, place, solid
     from shadeform.io.images import read_photo
+    from shadeform.mesh import solid_measures
+    from shadeform.regions import as_regions
 
     check_outputs(output, None, None)
     entries = _views(photos, angles, views, mask)
+    # before the views are solved: a missing extra must not cost the user the wait
+    if check_choice(surface, SURFACES, "surface") == "poisson":
+        from shadeform.fusion.poisson import require_open3d
+
+        require_open3d(load=False)
     light_vector = resolve_light(light, slant, tilt)
     err = stderr_console()
     timings: dict[str, float] = {}
     start = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output)
-        recs = []
+        images, object_masks, drawn, recs = [], [], [], []
+
+        def solve(i: int, extra=()):
+            """View ``i`` solved, with ``extra`` concave regions besides the ones drawn for it."""
+            return shadeform.reconstruct(
+                images[i],
+                light=light_vector,
+                method=method,
+                mask=object_masks[i],
+                filter=filter,
+                integrator=integrator,
+                concave=[*drawn[i], *extra] or None,
+            )
+
         with Progress(
             TextColumn("reconstructing each view"),
             BarColumn(),
@@ -122,40 +161,48 @@ def fuse(
         ) as bar:
             task = bar.add_task("views", total=len(entries))
             lap = time.perf_counter()
-            for photo_path, _, mask_path in entries:
-                photo = read_photo(photo_path, channel=channel)
-                object_mask = shadeform.load_mask(mask_path, shape=photo.image.shape) if mask_path else None
-                recs.append(
-                    shadeform.reconstruct(
-                        photo.image,
-                        light=light_vector,
-                        method=method,
-                        mask=object_mask,
-                        filter=filter,
-                        integrator=integrator,
-                    )
+            for i, entry in enumerate(entries):
+                photo = read_photo(entry.photo, channel=channel)
+                images.append(photo.image)
+                object_masks.append(
+                    shadeform.load_mask(entry.mask, shape=photo.image.shape) if entry.mask else None
                 )
+                try:
+                    drawn.append(list(as_regions(entry.concave)))
+                except InputError as error:
+                    raise InputError(f"view {i + 1} ({entry.photo.name}): {error}") from None
+                recs.append(solve(i))
                 bar.advance(task)
             timings["reconstruct"] = time.perf_counter() - lap
         with stage(err, f"fusing {len(recs)} views", timings, "fuse"):
-            mesh = shadeform.fuse(
-                list(zip(recs, [pose for _, pose, _ in entries])),
+            placement = place(
+                list(zip(recs, [entry.pose for entry in entries])),
                 resolution=resolution,
                 refine=refine,
                 axis=axis,
+                resolve=solve if settle else None,
             )
+            mesh = solid(placement, surface=surface)
         with stage(err, "writing the model", timings, "write"):
             shadeform.export(mesh, temps[output])
         outputs.commit()
     timings["total"] = time.perf_counter() - start
-    solid = _solid(mesh)
+    measures = solid_measures(mesh)
+    settled = [
+        [{"centre": area["centre"], "axis": area["axis"], "polygon": area["polygon"]} for area in areas]
+        for areas in placement.concave
+    ]
     if as_json:
         print_json(
             {
                 "command": "fuse",
-                "views": [{"photo": p, "pose": _plain_pose(pose)} for p, pose, _ in entries],
+                "views": [
+                    {"photo": entry.photo, "pose": _plain_pose(entry.pose), "settled_concave": areas}
+                    for entry, areas in zip(entries, settled)
+                ],
+                "surface": surface,
                 "files": {"mesh": output},
-                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **solid},
+                "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **measures},
                 "timings": timings,
             }
         )
@@ -166,8 +213,17 @@ def fuse(
     size = " x ".join(f"{v:.0f}" for v in high - low)
     out.print(
         f"  {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles, {size} pixels, volume "
-        f"{solid['volume']:,.0f} cubic pixels, {'watertight' if solid['watertight'] else 'NOT watertight'}"
+        f"{measures['volume']:,.0f} cubic pixels, "
+        f"{'watertight' if measures['watertight'] else 'NOT watertight'}"
     )
+    for i, areas in enumerate(settled):
+        for area in areas:
+            x, y = (round(v) for v in area["centre"])
+            out.print(
+                f"  view {i + 1} ({entries[i].photo.name}): the area around x={x}, y={y} is read as concave "
+                f"(along {area['axis']}), as the other views' silhouettes show",
+                highlight=False,
+            )
     out.print(
         f"  time {format_seconds(timings['total'])}: reconstruct {format_seconds(timings['reconstruct'])}, "
         f"fuse {format_seconds(timings['fuse'])}, write {format_seconds(timings['write'])}"
@@ -176,8 +232,18 @@ def fuse(
     print_files(out, [(output, shadeform.available_formats()[output.suffix.lower()])])
 
 
-def _views(photos, angles, views_file, masks) -> list[tuple[Path, object, Path | None]]:
-    """(photo, pose, mask) per view, from the arguments or the views file, checked."""
+class ViewEntry(NamedTuple):
+    """One view as the user gave it: photo, turntable angle or 4x4 pose, mask file, concave
+    regions (a regions file, or the regions themselves as JSON data)."""
+
+    photo: Path
+    pose: object
+    mask: Path | None = None
+    concave: object = None
+
+
+def _views(photos, angles, views_file, masks) -> list[ViewEntry]:
+    """One entry per view, from the arguments or the views file, checked."""
     if views_file is not None:
         if photos or angles is not None or masks:
             raise InputError(
@@ -198,11 +264,12 @@ def _views(photos, angles, views_file, masks) -> list[tuple[Path, object, Path |
     if masks and len(masks) != len(photos):
         raise InputError(f"{len(masks)} --mask files for {len(photos)} photos; give one per photo, or none")
     return [
-        (photo, angle, masks[i] if masks else None) for i, (photo, angle) in enumerate(zip(photos, values))
+        ViewEntry(photo, angle, masks[i] if masks else None)
+        for i, (photo, angle) in enumerate(zip(photos, values))
     ]
 
 
-def _views_file(path: Path) -> list[tuple[Path, object, Path | None]]:
+def _views_file(path: Path) -> list[ViewEntry]:
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -220,17 +287,13 @@ def _views_file(path: Path) -> list[tuple[Path, object, Path | None]]:
             raise InputError(f"views file '{path}': view {i + 1} needs a photo and either an angle or a pose")
         pose = item.get("angle", item.get("pose"))
         mask = path.parent / item["mask"] if item.get("mask") else None
-        entries.append((path.parent / item["photo"], pose, mask))
+        concave = item.get("concave")
+        if isinstance(concave, str):  # a regions file, relative to the views file
+            concave = path.parent / concave
+        entries.append(ViewEntry(path.parent / item["photo"], pose, mask, concave))
     if len(entries) < 2:
         raise InputError(f"views file '{path}' has {len(entries)} view(s); fusing needs at least two")
     return entries
-
-
-def _solid(mesh) -> dict:
-    import trimesh
-
-    solid = trimesh.Trimesh(mesh.vertices, mesh.faces)
-    return {"volume": float(solid.volume), "watertight": bool(solid.is_watertight)}
 
 
 def _plain_pose(pose):

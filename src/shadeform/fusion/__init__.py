@@ -15,13 +15,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shadeform._checks import check_choice
 from shadeform.errors import InputError
 from shadeform.fusion.geometry import axis_column, parse_pose
+from shadeform.fusion.poisson import poisson_solid, require_open3d
 from shadeform.fusion.register import refine_poses
 from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
 
 __all__ = ["Placement", "fuse", "place", "solid"]
 
+#: The ways :func:`fuse` turns the placed views into one surface.
+SURFACES = ("volume", "poisson")
 #: Most voxels of the fusion grid when ``resolution`` is not given.
 MAX_VOXELS = 6_000_000
 #: Truncation of the signed distance, in voxels (set by hand; checked only on the synthetic closed
@@ -36,6 +40,7 @@ def fuse(
     refine: bool = True,
     axis: float | None = None,
     resolve: Callable[[int, list], object] | None = None,
+    surface: str = "volume",
 ):
     """One closed mesh from several views' reconstructions.
 
@@ -63,6 +68,11 @@ def fuse(
         areas each photo could not settle (``info["unsure"]``) are read as concave where the
         other views' silhouettes say so (:mod:`.settle`): a waist between two lobes, which one
         photo reads as a third hill top.
+    surface : {"volume", "poisson"}
+        How the placed views become one surface: ``"volume"``, their truncated signed distance
+        meshed by marching cubes (:func:`solid`), or ``"poisson"``, screened Poisson
+        reconstruction of their oriented points (:func:`~shadeform.fusion.poisson.poisson_solid`;
+        needs Open3D: ``pip install 'shadeform[fusion]'``).
 
     Returns
     -------
@@ -73,10 +83,13 @@ def fuse(
     Raises
     ------
     InputError
-        Fewer than two views, views of different sizes, a malformed pose, an empty mask, or
-        views that share no volume.
+        Fewer than two views, views of different sizes, a malformed pose, an empty mask, views
+        that share no volume, an unknown ``surface``, or ``"poisson"`` without Open3D.
     """
-    return solid(place(views, resolution=resolution, refine=refine, axis=axis, resolve=resolve))
+    if check_choice(surface, SURFACES, "surface") == "poisson":
+        require_open3d(load=False)  # before the placement's seconds, not after
+    placement = place(views, resolution=resolution, refine=refine, axis=axis, resolve=resolve)
+    return solid(placement, surface=surface)
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,9 +191,18 @@ def _touching(placed: list[FusionView], grid: Grid) -> list[FusionView]:
     return [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
 
 
-def solid(placement: Placement):
-    """The closed mesh of placed views: their truncated signed distance, one solid kept,
-    marching cubes (the second half of :func:`fuse`)."""
+def solid(placement: Placement, *, surface: str = "volume"):
+    """The closed mesh of placed views (the second half of :func:`fuse`): with ``"volume"``
+    their truncated signed distance, one solid kept, marching cubes; with ``"poisson"`` the
+    screened Poisson surface of their oriented points
+    (:func:`~shadeform.fusion.poisson.poisson_solid`)."""
+    if check_choice(surface, SURFACES, "surface") == "poisson":
+        return poisson_solid(placement)
+    return _marched(placement)
+
+
+def _marched(placement: Placement):
+    """The volume surface: truncated signed distance, one solid, marching cubes."""
     import trimesh
     from skimage.measure import marching_cubes
 
