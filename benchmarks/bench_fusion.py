@@ -58,6 +58,14 @@ def score(mesh, truth):
     return got["chamfer"], got["f_score"], got["volume_error"], got["watertight"]
 
 
+def disturb(angles, disturbed, rng):
+    """The angles, every one but the first moved by up to :data:`DISTURBANCE` degrees if
+    ``disturbed``."""
+    return [
+        a + (rng.uniform(-DISTURBANCE, DISTURBANCE) if disturbed and i else 0.0) for i, a in enumerate(angles)
+    ]
+
+
 def solved(name, angles):
     """Each view's photo solved alone; the solver for ``resolve`` (a view again with extra
     concave regions); the seconds the first solves took."""
@@ -77,9 +85,7 @@ def run(name, count, disturbed, repeats, rng, settle=True):
     truth = synth.closed_object(name, size=SIZE)
     angles = ANGLE_SETS[count]
     recs, again, solve = solved(name, angles)
-    poses = [
-        a + (rng.uniform(-DISTURBANCE, DISTURBANCE) if disturbed and i else 0.0) for i, a in enumerate(angles)
-    ]
+    poses = disturb(angles, disturbed, rng)
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
@@ -96,9 +102,7 @@ def run_both(name, count, disturbed, repeats, rng):  # settled, as run's default
     truth = synth.closed_object(name, size=SIZE)
     angles = ANGLE_SETS[count]
     recs, again, _ = solved(name, angles)
-    poses = [
-        a + (rng.uniform(-DISTURBANCE, DISTURBANCE) if disturbed and i else 0.0) for i, a in enumerate(angles)
-    ]
+    poses = disturb(angles, disturbed, rng)
     placing = []
     times = {"volume": [], "poisson": []}
     meshes = {}

@@ -16,7 +16,7 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
-__all__ = ["Mesh", "solid_measures", "to_mesh"]
+__all__ = ["Mesh", "outward", "solid_measures", "to_mesh"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -296,3 +296,15 @@ def solid_measures(mesh: Mesh) -> dict:
 
     solid = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     return {"volume": float(solid.volume), "watertight": bool(solid.is_watertight)}
+
+
+def outward(solid) -> Mesh:
+    """A closed :class:`trimesh.Trimesh` as a :class:`Mesh` whose faces wind outward (its
+    volume positive), with its vertex normals."""
+    if solid.volume < 0:
+        solid.invert()
+    return Mesh(
+        vertices=np.asarray(solid.vertices),
+        faces=np.asarray(solid.faces, dtype=np.int64),
+        normals=np.asarray(solid.vertex_normals),
+    )

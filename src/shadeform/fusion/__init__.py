@@ -206,7 +206,7 @@ def _marched(placement: Placement):
     import trimesh
     from skimage.measure import marching_cubes
 
-    from shadeform.mesh import Mesh
+    from shadeform.mesh import outward
 
     grid = placement.grid
     distance = one_solid(
@@ -220,13 +220,7 @@ def _marched(placement: Placement):
     verts, faces, _, _ = marching_cubes(padded, level=0.0, spacing=(grid.spacing,) * 3)
     verts = verts + grid.origin - grid.spacing
     mesh = trimesh.Trimesh(verts, faces, process=True)
-    if mesh.volume < 0:
-        mesh.invert()
-    return Mesh(
-        vertices=np.asarray(mesh.vertices),
-        faces=np.asarray(mesh.faces, dtype=np.int64),
-        normals=np.asarray(mesh.vertex_normals),
-    )
+    return outward(mesh)
 
 
 def _check(views) -> list:

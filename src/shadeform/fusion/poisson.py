@@ -69,7 +69,7 @@ def poisson_solid(placement, *, depth: int | None = None):
     o3d = require_open3d()
     import trimesh
 
-    from shadeform.mesh import Mesh
+    from shadeform.mesh import outward
 
     points, normals = oriented_points(placement)
     if len(points) < 3:
@@ -104,13 +104,7 @@ def poisson_solid(placement, *, depth: int | None = None):
         raise InputError(
             "the Poisson surface came out open; fuse with surface='volume', or try another depth"
         )
-    if mesh.volume < 0:
-        mesh.invert()
-    return Mesh(
-        vertices=np.asarray(mesh.vertices),
-        faces=np.asarray(mesh.faces, dtype=np.int64),
-        normals=np.asarray(mesh.vertex_normals),
-    )
+    return outward(mesh)
 
 
 def oriented_points(placement) -> tuple[np.ndarray, np.ndarray]:
