@@ -174,7 +174,7 @@ def place(
         if changed:
             placed = _touching(placed, grid)
     if refine:
-        placed = refine_poses(placed, turntable=turntable, seen_depth=TRUNCATION_VOXELS * grid.spacing)
+        placed = refine_poses(placed, turntable=turntable)
     if refine and not hull(placed, grid).any():
         raise InputError("the views share no volume at the refined poses; check the angles")
     return Placement(tuple(placed), grid, column0, tuple(recs), tuple(concave))

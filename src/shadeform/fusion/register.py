@@ -38,7 +38,7 @@ STEPS = 40
 TUKEY = 4.685
 
 
-def refine_poses(views: list[FusionView], *, turntable: bool, seen_depth: float) -> list[FusionView]:
+def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView]:
     """Correct every view but the first (module description).
 
     Parameters
@@ -49,9 +49,6 @@ def refine_poses(views: list[FusionView], *, turntable: bool, seen_depth: float)
         Views of a turntable: each is corrected by a turn about +y and a depth offset only (the
         first by its offset only).
         Otherwise by a small rotation (3) and translation (3).
-    seen_depth : float
-        How far (pixels) behind its own nearer surface a view's point may lie and still be
-        seen by another view (the fusion's truncation); see :func:`_self_hidden`.
 
     Returns
     -------
@@ -59,7 +56,6 @@ def refine_poses(views: list[FusionView], *, turntable: bool, seen_depth: float)
         The corrected views.
     """
     samples = [_samples(view) for view in views]
-    hidden = _self_hidden(views, samples, seen_depth)
     # the silhouette lies half a pixel beyond the outermost object pixels' centres
     outside = [np.maximum(ndimage.distance_transform_edt(~view.mask) - 0.5, 0.0) for view in views]
     per_view = 2 if turntable else 6
@@ -76,7 +72,7 @@ def refine_poses(views: list[FusionView], *, turntable: bool, seen_depth: float)
         other parameters differing only in ``moved_view``'s), only the blocks of pairs that
         involve that view are recomputed."""
         placed = _corrected(views, params, turntable)
-        return _residuals(placed, samples, outside, hidden, base=base, moved=moved_view)
+        return _residuals(placed, samples, outside, base=base, moved=moved_view)
 
     blocks = residuals(params)
     r = np.concatenate(blocks)
@@ -147,43 +143,9 @@ def _rotation(omega: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
 
 
-def _self_hidden(views: list[FusionView], samples: list[np.ndarray], seen_depth: float) -> dict:
-    """Per ordered pair ``(u, v)``, which of ``u``'s sample points ``u``'s own surface hides
-    from ``v``: another part of the same surface lies in front of them along ``v``'s rays (by
-    more than ``seen_depth``), as the far lobe of a waisted body is hidden behind the near one
-    from the side. Such a point has no depth to match in ``v``. Decided once, at the starting
-    poses, from ``u``'s whole surface drawn into ``v``'s image (a depth buffer), so it does not
-    depend on how well the views agree, only on each view's own shape."""
-    hidden = {}
-    for u, view in enumerate(views):
-        rows, cols = np.nonzero(view.mask)
-        surface = view.surface_points(rows, cols)
-        points = view.surface_points(samples[u][:, 0], samples[u][:, 1])
-        for v, other in enumerate(views):
-            if v == u:
-                continue
-            h, w = other.mask.shape
-            seen = other.camera(surface)
-            r, c = other.pixels(seen)
-            # pixels of two: a surface seen obliquely leaves no gaps between its projected points
-            ri, ci = np.floor(r / 2).astype(np.int64), np.floor(c / 2).astype(np.int64)
-            inside = (ri >= 0) & (ri < (h + 1) // 2) & (ci >= 0) & (ci < (w + 1) // 2)
-            front = np.full(((h + 1) // 2) * ((w + 1) // 2), -np.inf)
-            np.maximum.at(front, ri[inside] * ((w + 1) // 2) + ci[inside], seen[inside, 2])
-            mine = other.camera(points)
-            pr, pc = other.pixels(mine)
-            pi, qi = np.floor(pr / 2).astype(np.int64), np.floor(pc / 2).astype(np.int64)
-            ok = (pi >= 0) & (pi < (h + 1) // 2) & (qi >= 0) & (qi < (w + 1) // 2)
-            nearest = np.full(len(points), -np.inf)
-            nearest[ok] = front[pi[ok] * ((w + 1) // 2) + qi[ok]]
-            hidden[u, v] = mine[:, 2] < nearest - seen_depth
-    return hidden
-
-
-def _residuals(views, samples, outside, hidden, *, base=None, moved=None) -> list[np.ndarray]:
+def _residuals(views, samples, outside, *, base=None, moved=None) -> list[np.ndarray]:
     """The residual blocks, one per ordered pair of views ``(u, v)``: ``u``'s points outside
-    ``v``'s silhouette (distance, pixels) and, where ``v`` sees them squarely and ``u``'s own
-    surface does not hide them from ``v`` (``hidden``, :func:`_self_hidden`), their depth
+    ``v``'s silhouette (distance, pixels) and, where ``v`` sees them squarely, their depth
     difference along ``v``'s ray times its ``n_z``. With ``base``, the blocks of pairs without
     view ``moved`` are taken from it."""
     blocks = []
@@ -201,7 +163,7 @@ def _residuals(views, samples, outside, hidden, *, base=None, moved=None) -> lis
             r, c = other.pixels(seen)
             away = ndimage.map_coordinates(outside[v], [r, c], order=1, mode="nearest")
             facing = (normals @ other.rotation.T)[:, 2] > TRUSTED_NZ
-            both = facing & other.inside(r, c) & (away == 0) & ~hidden[u, v]
+            both = facing & other.inside(r, c) & (away == 0)
             nz = ndimage.map_coordinates(
                 np.nan_to_num(other.normals[..., 2]), [r, c], order=1, mode="nearest"
             )
