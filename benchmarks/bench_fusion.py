@@ -94,8 +94,8 @@ def run(name, count, disturbed, repeats, rng, settle=True):
     return (*score(mesh, truth), solve, float(np.median(times)), max(times), len(mesh.faces))
 
 
-def run_both(name, count, disturbed, repeats, rng):  # settled, as run's default
-    """One case fused both ways: per surface, its scores, the placement's and the surface's
+def run_both(name, count, disturbed, repeats, rng):
+    """One case (settled, as :func:`run` settles by default) fused both ways: per surface, its scores, the placement's and the surface's
     median times, the surface's worst, and the triangles."""
     from shadeform.fusion.poisson import poisson_solid
 
@@ -124,6 +124,16 @@ def run_both(name, count, disturbed, repeats, rng):  # settled, as run's default
         )
         for surface in times
     }
+
+
+def _case(name, count, disturbed) -> str:
+    """A table row's first cells: object, views, poses."""
+    return f"{name} | {count} | {'off by up to 10 deg, refined' if disturbed else 'exact'}"
+
+
+def _scored(chamfer, fscore, volume, tight) -> str:
+    """A table row's score cells: Chamfer, F-score, volume error, watertight."""
+    return f"{chamfer:.3f} | {fscore:.1f} | {volume:+.2f} % | {'yes' if tight else 'NO'}"
 
 
 def write_section(path: Path, title: str, lines: list[str]) -> None:
@@ -175,9 +185,8 @@ def main() -> None:
     ]
     for name, count, disturbed, chamfer, fscore, volume, tight, solve, median, worst, faces in rows:
         lines.append(
-            f"| {name} | {count} | {'off by up to 10 deg, refined' if disturbed else 'exact'} | {chamfer:.3f} | "
-            f"{fscore:.1f} | {volume:+.2f} % | {'yes' if tight else 'NO'} | {solve:.2f} | {median:.2f} | "
-            f"{worst:.2f} | {faces:,} |"
+            f"| {_case(name, count, disturbed)} | {_scored(chamfer, fscore, volume, tight)} | {solve:.2f} | "
+            f"{median:.2f} | {worst:.2f} | {faces:,} |"
         )
     write_section(args.out, VOLUME_TITLE, lines)
     print("\n".join(lines))
@@ -206,9 +215,8 @@ def poisson_table(args, disturbances) -> None:
                     print((name, count, disturbed, surface, *row), flush=True)
                     chamfer, fscore, volume, tight, placing, median, worst, faces = row
                     lines.append(
-                        f"| {name} | {count} | {'off by up to 10 deg, refined' if disturbed else 'exact'} | "
-                        f"{surface} | {chamfer:.3f} | {fscore:.1f} | {volume:+.2f} % | "
-                        f"{'yes' if tight else 'NO'} | {placing:.2f} | {median:.2f} | {worst:.2f} | {faces:,} |"
+                        f"| {_case(name, count, disturbed)} | {surface} | {_scored(chamfer, fscore, volume, tight)} | "
+                        f"{placing:.2f} | {median:.2f} | {worst:.2f} | {faces:,} |"
                     )
     write_section(args.out, POISSON_TITLE, lines)
     print("\n".join(lines))

@@ -297,6 +297,7 @@ SlantOption = Annotated[
 TiltOption = Annotated[
     float | None, typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant.")
 ]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")]
 StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
 MethodOption = Annotated[
     str,

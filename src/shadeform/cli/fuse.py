@@ -15,6 +15,7 @@ from shadeform.cli._shell import (
     ChannelOption,
     FilterOption,
     IntegratorOption,
+    JsonOption,
     MethodOption,
     SlantOption,
     TiltOption,
@@ -112,9 +113,7 @@ def fuse(
             "decide (each such area is solved again as concave and kept if it fits them better).",
         ),
     ] = True,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
-    ] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Fuse photos of one object from several sides into one closed, watertight model."""
     import shadeform

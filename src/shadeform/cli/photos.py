@@ -18,6 +18,7 @@ from shadeform.cli._shell import (
     ChannelOption,
     FilterOption,
     IntegratorOption,
+    JsonOption,
     LinearOption,
     MethodOption,
     RefineOption,
@@ -92,9 +93,7 @@ def reconstruct(
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
-    ] = False,
+    as_json: JsonOption = False,
     method: MethodOption = "auto",
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
@@ -255,9 +254,7 @@ def stereo(
         Path | None,
         typer.Option(help="Also write each normal's confidence (16-bit grey .png, 0 to 1)."),
     ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
-    ] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
     from shadeform._checks import check_choice
@@ -411,9 +408,7 @@ def lights(
         ),
     ] = None,
     linear: LinearOption = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
-    ] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Read each photo's light direction and strength from the highlight on a shiny sphere (light calibration, as for RTI)."""
     from shadeform.io.atomic import atomic_write

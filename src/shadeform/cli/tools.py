@@ -15,6 +15,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from shadeform.cli._shell import (
+    JsonOption,
     SlantOption,
     TiltOption,
     app,
@@ -52,9 +53,7 @@ def synth(
     size: Annotated[int, typer.Option(help="Image side in pixels.")] = 256,
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     depth_format: Annotated[str, typer.Option(help="File type of the true depth: npy or tiff.")] = "npy",
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the summary.")
-    ] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Render a synthetic scene and write its ground truth next to it.
 

@@ -26,6 +26,8 @@ __all__ = ["Placement", "fuse", "place", "solid"]
 
 #: The ways :func:`fuse` turns the placed views into one surface.
 SURFACES = ("volume", "poisson")
+# what a user reads when the views' silhouettes do not meet
+_NOTHING_SHARED = "the views share no volume: their silhouettes do not meet at these poses; check the angles"
 #: Most voxels of the fusion grid when ``resolution`` is not given.
 MAX_VOXELS = 6_000_000
 #: Truncation of the signed distance, in voxels (set by hand; checked only on the synthetic closed
@@ -159,20 +161,22 @@ def place(
         column0 = (width - 1) / 2.0
     placed = [_placed(rec, pose.matrix, column0) for rec, pose in zip(recs, poses)]
     grid = _grid(placed, resolution)
-    placed = _touching(placed, grid)
+    inside = _shared(placed, grid)
+    placed = _touching(placed, grid, inside)
     concave = ((),) * len(recs)
     if resolve is not None:
         from shadeform.fusion.settle import settle
 
         # before the poses are refined: a lobe read tens of pixels too deep pulls them off
-        recs, concave = settle(placed, grid, recs, resolve)
+        recs, concave = settle(placed, grid, inside, recs, resolve)
         changed = [i for i, marked in enumerate(concave) if marked]
         for i in changed:
             pose = np.eye(4)
             pose[:3, :3], pose[:3, 3] = placed[i].rotation, placed[i].translation
             placed[i] = _placed(recs[i], pose, column0)
         if changed:
-            placed = _touching(placed, grid)
+            # a reading solved again may have left a few more pixels without a depth
+            placed = _touching(placed, grid, _shared(placed, grid))
     if refine:
         placed = refine_poses(placed, turntable=turntable)
     if refine and not hull(placed, grid).any():
@@ -180,13 +184,16 @@ def place(
     return Placement(tuple(placed), grid, column0, tuple(recs), tuple(concave))
 
 
-def _touching(placed: list[FusionView], grid: Grid) -> list[FusionView]:
-    """The views, each moved in depth until it touches the others' visual hull."""
+def _shared(placed: list[FusionView], grid: Grid) -> np.ndarray:
+    """The views' visual hull on the grid; none is a user's mistake (angles or masks)."""
     inside = hull(placed, grid)
     if not inside.any():
-        raise InputError(
-            "the views share no volume: their silhouettes do not meet at these poses; check the angles"
-        )
+        raise InputError(_NOTHING_SHARED)
+    return inside
+
+
+def _touching(placed: list[FusionView], grid: Grid, inside: np.ndarray) -> list[FusionView]:
+    """The views, each moved in depth until it touches the others' visual hull ``inside``."""
     offsets = view_offsets(placed, grid, inside)
     return [view.at(view.rotation, view.translation, offset) for view, offset in zip(placed, offsets)]
 
@@ -260,12 +267,7 @@ def _grid(views: list[FusionView], resolution: float | None) -> Grid:
     h, w = views[0].mask.shape
     reach = max(h, w) + max(float(np.linalg.norm(view.translation)) for view in views)
     coarse = Grid(np.full(3, -reach), 2 * reach / 63, (64, 64, 64))
-    inside = hull(views, coarse)
-    if not inside.any():
-        raise InputError(
-            "the views share no volume: their silhouettes do not meet at these poses; check the angles"
-        )
-    index = np.argwhere(inside)
+    index = np.argwhere(_shared(views, coarse))
     low = coarse.origin + coarse.spacing * (index.min(axis=0) - 2)
     high = coarse.origin + coarse.spacing * (index.max(axis=0) + 2)
     if resolution is None:

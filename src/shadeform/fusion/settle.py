@@ -22,18 +22,20 @@ from collections.abc import Callable
 
 import numpy as np
 
-from shadeform.fusion.volume import RIM_NZ, TOUCH_PERCENTILE, FusionView, Grid, crossed, hull, hull_depth
+from shadeform.fusion.volume import TOUCH_PERCENTILE, FusionView, Grid, crossed, hull_depth, hull_gaps
 from shadeform.regions import Region
 
 __all__ = ["MAX_AREAS", "settle"]
 
-#: At most this many unsure areas of a view (the largest) are tried: 2**3 readings per view.
+#: At most this many unsure areas of a view (the largest) are tried: 2**3 readings per view. A
+#: bound on the work (each reading is a solve), not a measurement.
 MAX_AREAS = 3
 
 
 def settle(
     views: list[FusionView],
     grid: Grid,
+    inside: np.ndarray,
     readings: list,
     resolve: Callable[[int, list[Region]], object],
 ) -> tuple[list, tuple[tuple[dict, ...], ...]]:
@@ -45,6 +47,8 @@ def settle(
         The views, placed (:func:`shadeform.fusion.place` before its settling).
     grid : Grid
         Voxels over their visual hull.
+    inside : (grid.shape) bool
+        The visual hull on the grid (:func:`shadeform.fusion.volume.hull`).
     readings : list of Reconstruction
         Each view's reconstruction (its ``info["unsure"]`` lists the areas to try).
     resolve : callable
@@ -59,7 +63,6 @@ def settle(
     concave : tuple of tuple of dict
         Per view, the unsure areas (``info["unsure"]`` entries) it now reads as concave.
     """
-    inside = hull(views, grid)
     kept, concave = [], []
     for i, (view, rec) in enumerate(zip(views, readings)):
         best, marked = rec, ()
@@ -84,9 +87,7 @@ def _gap(rec, front: np.ndarray) -> float:
     """The median gap between a reading's surface and the hull's front over the pixels that
     face the camera, once the surface is moved forward until it touches (as
     :func:`shadeform.fusion.volume.view_offsets` moves it); NaN where the hull says nothing."""
-    normals_z = np.nan_to_num(np.asarray(rec.normals)[..., 2])
-    facing = np.asarray(rec.mask, bool) & np.isfinite(rec.depth) & (normals_z > RIM_NZ) & np.isfinite(front)
-    if not facing.any():
+    gap = hull_gaps(front, rec.depth, np.asarray(rec.mask, bool), np.asarray(rec.normals))
+    if not len(gap):
         return float("nan")
-    gap = front[facing] - rec.depth[facing]
     return float(np.median(gap) - np.percentile(gap, TOUCH_PERCENTILE))

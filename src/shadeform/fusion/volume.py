@@ -175,6 +175,14 @@ def crossed(view: FusionView, others: list[FusionView]) -> bool:
     return any(np.linalg.norm(np.cross(view.rotation[2], other.rotation[2])) > 0.2 for other in others)
 
 
+def hull_gaps(front: np.ndarray, depth: np.ndarray, mask: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """How far the hull's front (:func:`hull_depth`) lies in front of a view's surface
+    (``depth``, camera z), over the pixels that face the view (``n_z`` above :data:`RIM_NZ`,
+    away from its own rim) where the hull says something, (M,)."""
+    facing = mask & np.isfinite(depth) & (np.nan_to_num(normals[..., 2]) > RIM_NZ) & np.isfinite(front)
+    return front[facing] - depth[facing]
+
+
 def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> list[float]:
     """Each view's depth offset: the one that brings its surface forward until it touches the
     other views' visual hull.
@@ -199,12 +207,9 @@ def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> lis
             offsets.append(view.offset)
             continue
         front = hull_depth(view, grid, inside)
-        facing = view.mask & (np.nan_to_num(view.normals[..., 2]) > RIM_NZ) & np.isfinite(front)
-        if not facing.any():
-            offsets.append(view.offset)
-            continue
-        gap = front[facing] - (view.depth[facing] + view.offset)
-        offsets.append(view.offset + float(np.percentile(gap, TOUCH_PERCENTILE)))
+        gap = hull_gaps(front, view.depth + view.offset, view.mask, view.normals)
+        touch = float(np.percentile(gap, TOUCH_PERCENTILE)) if len(gap) else 0.0
+        offsets.append(view.offset + touch)
     return offsets
 
 
