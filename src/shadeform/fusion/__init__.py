@@ -20,6 +20,7 @@ from shadeform.errors import InputError
 from shadeform.fusion.geometry import axis_column, parse_pose
 from shadeform.fusion.poisson import poisson_solid, require_open3d
 from shadeform.fusion.register import refine_poses
+from shadeform.fusion.settle import settle
 from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
 
 __all__ = ["Placement", "fuse", "place", "solid"]
@@ -163,25 +164,52 @@ def place(
     grid = _grid(placed, resolution)
     inside = _shared(placed, grid)
     placed = _touching(placed, grid, inside)
-    concave = ((),) * len(recs)
+    readings, concave = list(recs), ((),) * len(recs)
     if resolve is not None:
-        from shadeform.fusion.settle import settle
-
-        # before the poses are refined: a lobe read tens of pixels too deep pulls them off
-        recs, concave = settle(placed, grid, inside, recs, resolve)
-        changed = [i for i, marked in enumerate(concave) if marked]
-        for i in changed:
-            pose = np.eye(4)
-            pose[:3, :3], pose[:3, 3] = placed[i].rotation, placed[i].translation
-            placed[i] = _placed(recs[i], pose, column0)
-        if changed:
-            # a reading solved again may have left a few more pixels without a depth
-            placed = _touching(placed, grid, _shared(placed, grid))
-    if refine:
-        placed = refine_poses(placed, turntable=turntable)
+        resolve = _remembered(resolve)
+    # settled before the poses are refined (a lobe read tens of pixels too deep pulls them off)
+    # and again after (at poses 10 degrees off the hull may not show which reading is right)
+    for round_ in range(2 if resolve is not None and refine else 1):
+        if resolve is not None:
+            if round_:
+                inside = _shared(placed, grid)
+            chosen, concave = settle(placed, grid, inside, recs, resolve)
+            if round_ and all(new is old for new, old in zip(chosen, readings)):
+                break
+            placed, readings = _replaced(placed, readings, chosen, grid, column0), chosen
+        if refine:
+            placed = refine_poses(placed, turntable=turntable)
     if refine and not hull(placed, grid).any():
         raise InputError("the views share no volume at the refined poses; check the angles")
-    return Placement(tuple(placed), grid, column0, tuple(recs), tuple(concave))
+    return Placement(tuple(placed), grid, column0, tuple(readings), tuple(concave))
+
+
+def _replaced(placed, old, new, grid, column0) -> list[FusionView]:
+    """The placed views with the readings that changed from ``old`` to ``new`` put in their
+    place, at the same poses, and every view moved in depth to touch the hull again."""
+    changed = [i for i in range(len(new)) if new[i] is not old[i]]
+    if not changed:
+        return placed
+    placed = list(placed)
+    for i in changed:
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = placed[i].rotation, placed[i].translation
+        placed[i] = _placed(new[i], pose, column0)
+    # a reading solved again may have left a few more pixels without a depth
+    return _touching(placed, grid, _shared(placed, grid))
+
+
+def _remembered(resolve: Callable[[int, list], object]) -> Callable[[int, list], object]:
+    """``resolve`` that solves each view with each set of regions once (settling runs twice)."""
+    solved = {}
+
+    def again(i: int, regions: list):
+        key = (i, tuple((region.axis, np.asarray(region.polygon).tobytes()) for region in regions))
+        if key not in solved:
+            solved[key] = resolve(i, regions)
+        return solved[key]
+
+    return again
 
 
 def _shared(placed: list[FusionView], grid: Grid) -> np.ndarray:

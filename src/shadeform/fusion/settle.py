@@ -70,17 +70,26 @@ def settle(
         if areas and crossed(view, [other for other in views if other is not view]):
             front = hull_depth(view, grid, inside)
             best_gap = _gap(rec, front)
-            for count in range(1, len(areas) + 1):
-                for chosen in itertools.combinations(areas, count):
-                    regions = [Region(np.asarray(area["polygon"], float), area["axis"]) for area in chosen]
-                    other = resolve(i, regions)
-                    gap = _gap(other, front)
-                    # a reading must be closer by more than a voxel, which the hull cannot resolve
-                    if gap < best_gap - grid.spacing:
-                        best, best_gap, marked = other, gap, chosen
+            for chosen, regions in _alternatives(rec):
+                other = resolve(i, regions)
+                gap = _gap(other, front)
+                # a reading must be closer by more than a voxel, which the hull cannot resolve
+                if gap < best_gap - grid.spacing:
+                    best, best_gap, marked = other, gap, chosen
         kept.append(best)
         concave.append(tuple(marked))
     return kept, tuple(concave)
+
+
+def _alternatives(rec) -> list[tuple[tuple[dict, ...], list[Region]]]:
+    """The other readings of a view to try: every combination of its largest :data:`MAX_AREAS`
+    unsure areas, each as the areas (``info["unsure"]`` entries) and the concave regions."""
+    areas = list((rec.info or {}).get("unsure") or [])[:MAX_AREAS]
+    return [
+        (chosen, [Region(np.asarray(area["polygon"], float), area["axis"]) for area in chosen])
+        for count in range(1, len(areas) + 1)
+        for chosen in itertools.combinations(areas, count)
+    ]
 
 
 def _gap(rec, front: np.ndarray) -> float:
