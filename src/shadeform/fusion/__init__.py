@@ -20,7 +20,7 @@ from shadeform.errors import InputError
 from shadeform.fusion.geometry import axis_column, parse_pose
 from shadeform.fusion.poisson import poisson_solid, require_open3d
 from shadeform.fusion.register import refine_poses
-from shadeform.fusion.settle import settle
+from shadeform.fusion.settle import settle as _settle  # the package keeps .settle, the module
 from shadeform.fusion.volume import FusionView, Grid, fused_distance, hull, one_solid, view_offsets
 
 __all__ = ["Placement", "fuse", "place", "solid"]
@@ -173,7 +173,7 @@ def place(
         if resolve is not None:
             if round_:
                 inside = _shared(placed, grid)
-            chosen, concave = settle(placed, grid, inside, recs, resolve)
+            chosen, concave = _settle(placed, grid, inside, recs, resolve)
             if round_ and all(new is old for new, old in zip(chosen, readings)):
                 break
             placed, readings = _replaced(placed, readings, chosen, grid, column0), chosen
