@@ -25,7 +25,7 @@ from scipy import ndimage
 
 from shadeform.fusion.volume import FusionView
 
-__all__ = ["refine_poses"]
+__all__ = ["disagreement", "refine_poses"]
 
 # The constants below were set by hand, not swept; they were checked only on synthetic views
 # (the closed objects of benchmarks/results/fusion.md and an analytic ellipsoid), never on photos.
@@ -44,7 +44,7 @@ MIN_SCALE = 0.5
 TUKEY = 4.685
 
 
-def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView]:
+def refine_poses(views: list[FusionView], *, turntable: bool, samples: int = SAMPLES) -> list[FusionView]:
     """Correct every view but the first (module description).
 
     Parameters
@@ -55,13 +55,15 @@ def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView
         Views of a turntable: each is corrected by a turn about +y and a depth offset only (the
         first by its offset only).
         Otherwise by a small rotation (3) and translation (3).
+    samples : int
+        Surface points per view in the residuals.
 
     Returns
     -------
     list of FusionView
         The corrected views.
     """
-    fit = _Fit(views, turntable)
+    fit = _Fit(views, turntable, samples)
     per_view = fit.per_view
     # the first view's turn (a turntable) or whole pose fixes the frame; a turntable's first view
     # still has its depth offset to find (where its surface lies from the axis)
@@ -98,15 +100,56 @@ def refine_poses(views: list[FusionView], *, turntable: bool) -> list[FusionView
     return views
 
 
+def disagreement(
+    views: list[FusionView], *, turntable: bool, scale: float | None = None, samples: int = SAMPLES
+) -> tuple[float, float]:
+    """How much placed views disagree: the mean Tukey loss of their residuals (the refinement's
+    own, :meth:`_Fit.residuals`) at ``scale``, for comparing placements of the same views.
+
+    A point lying behind another view's surface by more than Tukey's cut-off is hidden from that
+    view (a lobe behind a lobe) and has no depth there to disagree with: it is not counted. The
+    refinement gives such points no weight; counted here, each would add the loss's ceiling and
+    favour placements that happen to hide fewer points. A point in front of the other view's
+    surface is counted: that view would have seen it.
+
+    Parameters
+    ----------
+    views : list of FusionView
+        Placed views.
+    turntable : bool
+        As for :func:`refine_poses` (the residuals are the same either way).
+    scale : float, optional
+        The residuals' robust scale, pixels; default: theirs (:func:`_scale`). Give the same
+        scale to every placement being compared.
+    samples : int
+        Surface points per view in the residuals.
+
+    Returns
+    -------
+    loss : float
+        The mean loss per counted residual.
+    scale : float
+        The scale used.
+    """
+    fit = _Fit(views, turntable, samples)
+    r = fit.residuals(views)
+    if scale is None:
+        scale = _scale(r)
+    counted = ~(fit.depth_rows() & (r < -TUKEY * scale))
+    return _tukey_cost(r[counted], scale) / max(int(counted.sum()), 1), scale
+
+
 class _Fit:
     """The residuals of a set of views and their Jacobian with respect to each view's correction
     (per view ``(turn, offset)`` on a turntable, else ``(omega, shift)``: ``R <- Rot(omega) R``,
     ``t <- t + shift``), taken at no correction."""
 
-    def __init__(self, views: list[FusionView], turntable: bool) -> None:
+    def __init__(self, views: list[FusionView], turntable: bool, samples: int = SAMPLES) -> None:
         self.turntable = turntable
         self.per_view = 2 if turntable else 6
-        self.samples = [_samples(view) for view in views]
+        self.samples = [_samples(view, samples) for view in views]
+        # each view's normals as three images, NaN-free, for the bilinear lookups
+        self.normals = [np.moveaxis(np.nan_to_num(view.normals), -1, 0).copy() for view in views]
         # the silhouette lies half a pixel beyond the outermost object pixels' centres
         self.outside = [np.maximum(ndimage.distance_transform_edt(~view.mask) - 0.5, 0.0) for view in views]
         # forward differences along rows and columns: the bilinear lookup's exact derivative
@@ -125,6 +168,19 @@ class _Fit:
             else:
                 out.append(view.at(_rotation(p[:3]) @ view.rotation, view.translation + p[3:], view.offset))
         return out
+
+    def depth_rows(self) -> np.ndarray:
+        """Which of :meth:`residuals`' rows are depth differences (the rest: silhouette
+        distances), in their order."""
+        count = len(self.samples)
+        return np.concatenate(
+            [
+                np.repeat([False, True], len(pixels))
+                for u, pixels in enumerate(self.samples)
+                for v in range(count)
+                if v != u
+            ]
+        )
 
     def residuals(self, views: list[FusionView], *, jacobian: bool = False):
         """All residuals, one block per ordered pair of views ``(u, v)``: ``u``'s points outside
@@ -148,10 +204,8 @@ class _Fit:
                 both = facing & other.inside(r, c) & (away == 0)
                 planes = np.stack(
                     [
-                        ndimage.map_coordinates(
-                            np.nan_to_num(other.normals[..., k]), [r, c], order=1, mode="nearest"
-                        )
-                        for k in range(3)
+                        ndimage.map_coordinates(normal, [r, c], order=1, mode="nearest")
+                        for normal in self.normals[v]
                     ],
                     axis=1,
                 )
@@ -229,11 +283,11 @@ def _cross_matrices(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def _samples(view: FusionView) -> np.ndarray:
-    """Pixels (row, col) of the view's trusted surface, evenly thinned to :data:`SAMPLES`."""
+def _samples(view: FusionView, count: int = SAMPLES) -> np.ndarray:
+    """Pixels (row, col) of the view's trusted surface, evenly thinned to about ``count``."""
     trusted = view.mask & (np.nan_to_num(view.normals[..., 2]) > TRUSTED_NZ)
     rows, cols = np.nonzero(trusted)
-    every = max(1, len(rows) // SAMPLES)
+    every = max(1, len(rows) // count)
     return np.stack([rows[::every], cols[::every]], axis=1)
 
 

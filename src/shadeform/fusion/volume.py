@@ -160,11 +160,7 @@ def hull_depth(view: FusionView, grid: Grid, inside: np.ndarray) -> np.ndarray:
         rows, cols = view.pixels(points)
         r, c = np.rint(rows).astype(np.int64), np.rint(cols).astype(np.int64)
         valid = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        pixel, z = r[valid] * w + c[valid], points[valid, 2]
-        order = np.argsort(z)  # assigned in increasing z: each pixel keeps its largest
-        slab = np.full(h * w, -np.inf)
-        slab[pixel[order]] = z[order]
-        np.maximum(front, slab, out=front)
+        np.maximum.at(front, r[valid] * w + c[valid], points[valid, 2])
     front += grid.spacing / 2
     return np.where(np.isfinite(front), front, np.nan).reshape(h, w)
 
@@ -206,11 +202,16 @@ def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> lis
         if not crossed(view, [other for m, other in enumerate(views) if m != n]):
             offsets.append(view.offset)
             continue
-        front = hull_depth(view, grid, inside)
-        gap = hull_gaps(front, view.depth + view.offset, view.mask, view.normals)
-        touch = float(np.percentile(gap, TOUCH_PERCENTILE)) if len(gap) else 0.0
-        offsets.append(view.offset + touch)
+        offsets.append(touching_offset(view, hull_depth(view, grid, inside)))
     return offsets
+
+
+def touching_offset(view: FusionView, front: np.ndarray) -> float:
+    """The offset that brings the view's surface forward until it touches the hull's front
+    ``front`` (:func:`hull_depth`), as :func:`view_offsets` finds it."""
+    gap = hull_gaps(front, view.depth + view.offset, view.mask, view.normals)
+    touch = float(np.percentile(gap, TOUCH_PERCENTILE)) if len(gap) else 0.0
+    return view.offset + touch
 
 
 def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) -> np.ndarray:
