@@ -61,6 +61,9 @@ CORRECTED = 10.0
 #: Surface points per view when :func:`_checked` tries readings (the refinement's own:
 #: :data:`shadeform.fusion.register.SAMPLES`); a third, for speed. Set by hand.
 TRIAL_SAMPLES = 500
+#: At most this many placements per view are tried by :func:`_checked` in all (each is a
+#: refinement of every view): a bound on the work, not a measurement.
+TRIALS_PER_VIEW = 2
 #: Truncation of the signed distance, in voxels (set by hand; checked only on the synthetic closed
 #: objects of benchmarks/results/fusion.md).
 TRUNCATION_VOXELS = 3.0
@@ -228,7 +231,8 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
     deeper than the other), and the refinement then turns the view, or all the others, to
     match. So the views' other readings are tried once more, one or two views changed at a time
     (the front and back views of a body can both be wrong, and agree): every view started
-    again from its given pose and refined (with :data:`TRIAL_SAMPLES` points a view), the
+    again from its given pose and refined (with :data:`TRIAL_SAMPLES` points a view, at most
+    :data:`TRIALS_PER_VIEW` trials a view, views seen from opposite sides paired first), the
     views' disagreement measured (:func:`~shadeform.fusion.register.disagreement`, at one
     scale for all). The trial that disagrees least replaces the placement if it disagrees less
     by more than a factor :data:`CLEARLY` and turns no view more than :data:`CORRECTED` degrees
@@ -261,6 +265,8 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
     def trial(tried, marked):
         key = tuple(id(reading) for reading in tried)
         if key not in trials:
+            if len(trials) >= TRIALS_PER_VIEW * len(recs):
+                return None
             views = [started(k, reading) for k, reading in enumerate(tried)]
             moved = refine_poses(views, turntable=turntable, samples=TRIAL_SAMPLES)
             loss, _ = disagreement(moved, turntable=turntable, scale=scale, samples=TRIAL_SAMPLES)
@@ -270,9 +276,14 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
         return trials[key]
 
     unsure = [i for i, choices in enumerate(options) if len(choices) > 1]
+    # two views' wrong readings agree when they see the object from opposite sides: those first
+    directions = [pose[:3, :3].T @ [0.0, 0.0, 1.0] for pose in given]
+    pairs = sorted(
+        itertools.combinations(unsure, 2), key=lambda p: float(directions[p[0]] @ directions[p[1]])
+    )
     for _ in range(len(recs)):
         candidates = [best]
-        for changed in (*itertools.combinations(unsure, 1), *itertools.combinations(unsure, 2)):
+        for changed in (*((i,) for i in unsure), *pairs):
             for choice in itertools.product(*(options[i] for i in changed)):
                 if any(
                     _alike(reading, best.readings[i], grid.spacing)
@@ -283,6 +294,7 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
                 for i, (chosen, reading) in zip(changed, choice):
                     tried[i], marked[i] = reading, tuple(chosen)
                 candidates.append(trial(tuple(tried), tuple(marked)))
+        candidates = [candidate for candidate in candidates if candidate is not None]
         kept = min(candidates, key=lambda candidate: candidate.loss)
         if kept.loss * CLEARLY >= best.loss:
             break
