@@ -255,6 +255,36 @@ class TestBivariate:
         np.testing.assert_allclose(work[3, :5], coefficients, atol=1e-5)  # SciPy stops at 1e-6 of a lobe
         assert (coefficients >= 0).all()
 
+    @pytest.mark.parametrize("error", [1.0, 1.1, 1 / 1.1])
+    def test_a_slant_error_common_to_the_lights_is_found(self, sphere, lights, error):
+        """Lights calibrated with every ``tan(slant)`` off by one factor (a chrome sphere read
+        too large or small): a Lambertian fit cannot see it (the normals tilt to match), the
+        gloss can; with the true lights the factor found is 1."""
+        from shadeform.photometric import lambertian
+
+        images = photos(sphere, lights, albedo=0.6, specular=0.4, shininess=30, noise=0.005, seed=3)
+        given = lambertian.scaled_lights(lights, 1 / error)
+        refined = photometric_stereo(images, given, sphere.mask)
+        plain = photometric_stereo(images, given, sphere.mask, refine_lights=False)
+        assert refined.light_scale == pytest.approx(error, rel=0.015)
+        found = angles(refined.normals, sphere.normals, sphere.mask).mean()
+        assert found < 0.5
+        if error != 1.0:
+            assert angles(plain.normals, sphere.normals, sphere.mask).mean() > 3 * found
+            np.testing.assert_allclose(
+                refined.lights, lambertian.scaled_lights(given, refined.light_scale), atol=1e-12
+            )
+        else:
+            assert plain.light_scale == 1.0 and plain.lights is None
+
+    def test_lights_at_one_slant_are_taken_as_given(self, sphere):
+        """With every light at one slant a common slant error is a uniform change of strength
+        (the albedo absorbs it): the photos cannot tell, so noisy 8-bit photos must not move
+        the lights (the search alone read 0.85 on such a set)."""
+        lights = ring(12, 45)
+        images = np.round(photos(sphere, lights, albedo=0.7, noise=0.01, seed=4) * 255) / 255
+        assert photometric_stereo(images, lights, sphere.mask).light_scale == 1.0
+
     def test_few_photos_keep_the_lambertian_fit(self, sphere):
         lights = ring(8, 30)
         images = photos(sphere, lights, albedo=0.7, specular=0.3, shininess=20)
@@ -386,7 +416,11 @@ def test_diligent_ball():
     plain = photometric_stereo(images, lights, mask, intensities=strengths, method="least_squares")
     assert abs(angles(plain.normals, truth, mask).mean() - 4.10) < 0.3
     assert angles(robust.normals, truth, mask).mean() < 2.0
-    assert angles(bivariate.normals, truth, mask).mean() < 1.85  # 1.79 measured (issue's bar: 1.7)
+    # the calibrated lights' slant is found 7 % short: 1.14 degrees measured, 1.79 as given
+    assert 1.03 < bivariate.light_scale < 1.12
+    assert angles(bivariate.normals, truth, mask).mean() < 1.3
+    given = photometric_stereo(images, lights, mask, intensities=strengths, refine_lights=False)
+    assert angles(given.normals, truth, mask).mean() < 1.85
 
 
 def _real(name):

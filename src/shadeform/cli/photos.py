@@ -229,6 +229,14 @@ def stereo(
             "robust (Lambertian, shadows and highlights left out) or least_squares (Woodham)."
         ),
     ] = "bivariate",
+    keep_lights: Annotated[
+        bool,
+        typer.Option(
+            "--keep-lights",
+            help="Take the lights exactly as given; by default a slant error common to all of them "
+            "(a calibration sphere read slightly too large or small) is corrected from the photos.",
+        ),
+    ] = False,
     integrator: Annotated[
         str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")
     ] = "poisson",
@@ -295,6 +303,7 @@ def stereo(
                 method=method,
                 integrator=integrator,
                 sphere=photos.sphere,
+                refine_lights=not keep_lights,
             )
         rec = replace(rec, info={**rec.info, "photo": photos.info})
         maps = _stereo_maps(rec, temps, albedo, confidence, gray=photos.channel != "rgb")
@@ -328,6 +337,11 @@ def stereo(
     if rec.info["photos_rescaled"]:
         listed = ", ".join(f"{i + 1} (x{f:.2f})" for i, f in rec.info["photos_rescaled"])
         out.print(f"  photos whose light was not as bright as its strength said, rescaled: {listed}")
+    if rec.info.get("light_scale", 1.0) != 1.0:
+        out.print(
+            f"  the lights' slant was refined: tan(slant) x{rec.info['light_scale']:.3f} "
+            "(--keep-lights takes them as given)"
+        )
     if rec.info["photos_dropped"]:
         listed = ", ".join(str(i + 1) for i in rec.info["photos_dropped"])
         out.print(f"  photos left out because they contradict the others: {listed}")

@@ -89,12 +89,18 @@ class StereoMethod:
         One line in the user's words.
     drops_photos : bool
         Whether photos that contradict the others are left out first.
+    slant_scale : str, optional
+        ``"module:function"`` naming ``slant_scale(lights (N, 3), readings (N, P), start (P, 3))
+        -> float``: the factor on the given lights' ``tan(slant)`` that the method's model
+        explains a sample of readings best with (1 where they cannot tell); None: the method
+        takes the lights as given.
     """
 
     name: str
     fit: str
     description: str
     drops_photos: bool = True
+    slant_scale: str | None = None
 
 
 _REGISTRY: dict[str, StereoMethod] = {}
@@ -110,10 +116,10 @@ def available_methods() -> dict[str, str]:
     return {name: method.description for name, method in _REGISTRY.items()}
 
 
-def _fit_function(name):
+def _fit_function(name, attribute="fit"):
     import importlib
 
-    module, function = _REGISTRY[name].fit.split(":")
+    module, function = getattr(_REGISTRY[name], attribute).split(":")
     return getattr(importlib.import_module(module), function)
 
 
@@ -126,6 +132,9 @@ CHUNK = 1 << 15
 FAULTY = 3.0
 #: Object pixels (evenly spaced) the search for contradicting photos fits: enough for a median.
 SAMPLE = 4096
+#: Object pixels (evenly spaced) on which the lights' slant is refined: a median's worth, kept
+#: small because the refinement fits them about ten times.
+SLANT_SAMPLE = 1024
 #: Object pixels (a regular grid of them) from which unknown lights are read.
 UNCALIBRATED_PIXELS = 1 << 17
 #: A photo whose typical residual is under this share of the albedo agrees with the others,
@@ -163,7 +172,11 @@ class PhotometricStereo:
         Photos whose light was brighter (factor > 1) or dimmer than the given strength said, and
         the factor their readings were divided by.
     lights : (N, 3) float64 or None
-        The light directions read from the photos when none were given (``lights=None``).
+        The unit light directions used where they are not the given ones: read from the photos
+        (``lights=None``) or with their slant refined (``light_scale != 1``); else None.
+    light_scale : float
+        The factor on the given lights' ``tan(slant)`` that the photos showed (1: taken as given;
+        ``refine_lights``).
     """
 
     normals: np.ndarray
@@ -174,6 +187,7 @@ class PhotometricStereo:
     photos_dropped: tuple[int, ...] = ()
     photos_rescaled: tuple[tuple[int, float], ...] = ()
     lights: np.ndarray | None = None
+    light_scale: float = 1.0
 
 
 def photometric_stereo(
@@ -186,6 +200,7 @@ def photometric_stereo(
     min_shading: float = MIN_SHADING,
     highlight_angle: float = HIGHLIGHT_ANGLE,
     iterations: int = ITERATIONS,
+    refine_lights: bool = True,
 ) -> PhotometricStereo:
     """Normals and albedo of a still object photographed under several known distant lights.
 
@@ -211,6 +226,11 @@ def photometric_stereo(
         normal does not count (0 keeps them all).
     iterations : int
         The same: classify-and-refit rounds, >= 0.
+    refine_lights : bool
+        With given lights and a method that models gloss (``"bivariate"``): correct a slant
+        error common to all the lights, as a chrome sphere read slightly too large or small
+        makes (:func:`shadeform.photometric.bivariate.slant_scale`); the factor found is
+        ``light_scale`` of the result. False takes the lights exactly as given.
 
     Returns
     -------
@@ -299,6 +319,20 @@ def photometric_stereo(
         kept = np.flatnonzero(np.isfinite(factors))
         scale = scale * np.where(np.isfinite(factors), factors, 1.0)[:, None]
     use = lights[kept]
+    light_scale = 1.0
+    if refine_lights and not estimated and _REGISTRY[method].slant_scale and len(use) > 3:
+        sample = where[np.linspace(0, where.size - 1, min(where.size, SLANT_SAMPLE)).astype(np.int64)]
+        gray = readings_of(sample, kept).mean(axis=2)
+        g, _ = lambertian.robust(
+            use, gray, min_shading=min_shading, highlight_cos=highlight_cos, iterations=int(iterations)
+        )
+        length = np.linalg.norm(g, axis=1)
+        solved = np.isfinite(length) & (length > 0)
+        if np.count_nonzero(solved) >= 3:
+            light_scale = _fit_function(method, "slant_scale")(use, gray[:, solved], g[solved])
+        if light_scale != 1.0:
+            lights = lambertian.scaled_lights(lights, light_scale)
+            use = lights[kept]
 
     normals = np.full((where.size, 3), np.nan)
     albedo = np.full((where.size, max(channels, 1)), np.nan)
@@ -350,7 +384,8 @@ def photometric_stereo(
         photos_rescaled=tuple(
             (int(i), float(factors[i])) for i in np.flatnonzero(np.isfinite(factors) & (factors != 1.0))
         ),
-        lights=lights if estimated else None,
+        lights=lights if estimated or light_scale != 1.0 else None,
+        light_scale=light_scale,
     )
 
 
@@ -531,6 +566,7 @@ def reconstruct_stereo(
     method: str = "bivariate",
     integrator: str = "poisson",
     sphere=None,
+    refine_lights: bool = True,
 ):
     """Photometric stereo, then depth: the several-photo counterpart of
     :func:`shadeform.reconstruct`.
@@ -548,6 +584,8 @@ def reconstruct_stereo(
     sphere : (3,) array_like, optional
         A calibration sphere's circle ``(column, row, radius)`` in the photos: left out of the
         automatic mask (with a rim of a tenth of its radius).
+    refine_lights : bool
+        As for :func:`photometric_stereo`.
 
     Returns
     -------
@@ -557,8 +595,9 @@ def reconstruct_stereo(
         photos,
         ``confidence`` the fit's (:class:`PhotometricStereo`, NaN off the mask); ``info`` holds
         ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel),
-        ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``lights`` (given or
-        read), ``light_directions`` (the unit directions used, a list of ``[x, y, z]``) and
+        ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
+        (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
+        directions used, a list of ``[x, y, z]``) and
         ``timings`` in seconds.
 
     Raises
@@ -588,12 +627,14 @@ def reconstruct_stereo(
             mask &= (cols - column) ** 2 + (rows - row) ** 2 > (1.1 * radius) ** 2
             if not mask.any():
                 raise InputError("the photos show nothing but the sphere; give a mask of the object")
-    result = photometric_stereo(images, lights, mask, intensities=intensities, method=method)
+    result = photometric_stereo(
+        images, lights, mask, intensities=intensities, method=method, refine_lights=refine_lights
+    )
     solved = np.isfinite(result.normals[..., 0])
     normals_time = time.perf_counter()
     depth = integrate(result.normals, solved, method=integrator)
     done = time.perf_counter()
-    directions = np.asarray(result.lights if lights is None else lights, dtype=np.float64)
+    directions = np.asarray(lights if result.lights is None else result.lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
     return Reconstruction(
         normals=result.normals,
@@ -608,6 +649,7 @@ def reconstruct_stereo(
             "lights_used": float(np.median(result.lights_used[solved])),
             "photos_rescaled": [[i, round(f, 4)] for i, f in result.photos_rescaled],
             "photos_dropped": list(result.photos_dropped),
+            "light_scale": round(result.light_scale, 4),
             "lights": "read from the photos" if lights is None else "given",
             "light_directions": (directions / np.linalg.norm(directions, axis=1, keepdims=True)).tolist(),
             "timings": {"normals": normals_time - start, "depth": done - normals_time},
@@ -621,6 +663,7 @@ register(
         "bivariate",
         "shadeform.photometric.bivariate:fit",
         "a reflectance model per pixel (falloff and gloss lobes), shadows and outliers weighted out",
+        slant_scale="shadeform.photometric.bivariate:slant_scale",
     )
 )
 register(

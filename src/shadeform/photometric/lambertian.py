@@ -85,6 +85,14 @@ def half_vectors(lights):
     return half / np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-12)
 
 
+def scaled_lights(lights, scale):
+    """Unit lights (N, 3) whose ``tan(slant)`` is ``scale`` times that of ``lights`` (N, 3): their
+    x and y components scaled, then normalised."""
+    out = np.array(lights, dtype=np.float64)
+    out[:, :2] *= scale
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
 def outer(weights, lights):
     """Per pixel ``sum_j w_j l_j l_j^T``: (P, 3, 3) from weights (N, P) and lights (N, 3)."""
     return (weights.T @ (lights[:, :, None] * lights[:, None, :]).reshape(len(lights), 9)).reshape(-1, 3, 3)
