@@ -734,6 +734,22 @@ class TestStereo:
         assert plain.exit_code == 0, plain.output
         np.testing.assert_array_equal(load_normal_map(out / "a.png"), load_normal_map(out / "b.png"))
 
+    def test_a_slant_error_in_the_light_file_is_refined_unless_kept(self, photo_set, inputs, out):
+        from shadeform.photometric.lambertian import scaled_lights
+
+        path = inputs / "short.txt"  # every light's tan(slant) 10 % short
+        np.savetxt(path, scaled_lights(np.loadtxt(photo_set["lights"]), 1 / 1.1))
+        refined = invoke("stereo", *photo_set["photos"], "--lights", path, "-o", out / "a.ply", "--json")
+        assert refined.exit_code == 0, refined.output
+        assert json.loads(refined.stdout)["info"]["light_scale"] == pytest.approx(1.1, rel=0.01)
+        shown = invoke("stereo", *photo_set["photos"], "--lights", path, "-o", out / "b.ply")
+        assert "slant was refined" in shown.stdout
+        kept = invoke(
+            "stereo", *photo_set["photos"], "--lights", path, "-o", out / "c.ply", "--keep-lights", "--json"
+        )
+        assert kept.exit_code == 0, kept.output
+        assert json.loads(kept.stdout)["info"]["light_scale"] == 1.0
+
     def test_needs_lights(self, photo_set, out):
         assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
 

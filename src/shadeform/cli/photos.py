@@ -337,7 +337,7 @@ def stereo(
     if rec.info["photos_rescaled"]:
         listed = ", ".join(f"{i + 1} (x{f:.2f})" for i, f in rec.info["photos_rescaled"])
         out.print(f"  photos whose light was not as bright as its strength said, rescaled: {listed}")
-    if rec.info.get("light_scale", 1.0) != 1.0:
+    if rec.info["light_scale"] != 1.0:
         out.print(
             f"  the lights' slant was refined: tan(slant) x{rec.info['light_scale']:.3f} "
             "(--keep-lights takes them as given)"
