@@ -285,7 +285,8 @@ def photometric_stereo(
 
     def readings_of(pixels, photos=slice(None)):
         """The object's readings at ``pixels``, divided by the lights' strengths: (N, P, C or 1)."""
-        values = flat[photos][:, pixels] / scale[photos][:, None, :]
+        # the pixels first: indexing the photos first would copy the whole stack
+        values = flat[:, pixels][photos] / scale[photos][:, None, :]
         if not np.isfinite(values).all():
             raise InputError("images contain NaN or inf on the object; give finite intensities")
         return values
