@@ -6,6 +6,11 @@ worker processes (the solvers are numba kernels that hold the interpreter, so th
 queue). A photo that is a user mistake (unreadable, all black, ...) fails alone: its result
 carries the one-line message and the other photos go on.
 
+The workers end with the batch, however it ends: an error or a signal terminates them (each
+removes its temporary files as it goes), and a worker whose batch process was killed outright
+(``kill -9``) notices within :data:`WATCH_SECONDS` (once a compiled kernel it is running
+returns) and ends itself the same way.
+
 Dask is optional (``pip install 'shadeform[dask]'``); without it :func:`reconstruct_files`
 raises an :class:`~shadeform.errors.InputError` naming the extra.
 """
@@ -13,6 +18,8 @@ raises an :class:`~shadeform.errors.InputError` naming the extra.
 from __future__ import annotations
 
 import os
+import signal
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -21,6 +28,9 @@ from pathlib import Path
 from typing import Any
 
 from shadeform.errors import InputError
+
+#: How often a worker checks that its batch process still runs (seconds).
+WATCH_SECONDS = 0.5
 
 #: Suffix of the depth and normal maps written beside each mesh.
 DEPTH_SUFFIX, NORMALS_SUFFIX = "_depth.tiff", "_normals.png"
@@ -68,6 +78,7 @@ def reconstruct_files(
     depth: bool = False,
     normals: bool = False,
     workers: int | None = None,
+    max_pixels: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     **options,
 ) -> list[BatchResult]:
@@ -97,6 +108,10 @@ def reconstruct_files(
     workers : int, optional
         Worker processes; default the CPU count. 1 runs the photos one after the other in this
         process.
+    max_pixels : int, optional
+        Refuse a photo whose header declares more pixels than this, before decoding it (that
+        photo's result carries the message); default
+        :data:`shadeform.io.images.MAX_PIXELS`.
     progress : callable, optional
         Called as ``progress(done, total)`` after each photo, in this process.
     **options
@@ -112,14 +127,14 @@ def reconstruct_files(
     ------
     InputError
         No photos, two photos with the same name, a missing output folder, an unknown mesh
-        suffix, ``workers < 1``, an unknown ``channel``, ``method`` or ``integrator``, a
+        suffix, ``workers < 1``, ``max_pixels < 1``, an unknown ``channel``, ``method`` or ``integrator``, a
         ``linear`` that is not a bool or None, a malformed ``filter``, or Dask not installed: all
         before any photo is read. Problems with one photo are reported in its result instead.
     """
     from shadeform._checks import check_choice
     from shadeform.integration import available_integrators
     from shadeform.io.exporters import available_formats
-    from shadeform.io.images import CHANNELS
+    from shadeform.io.images import CHANNELS, MAX_PIXELS
     from shadeform.preprocess import parse_filter
     from shadeform.solvers import available_methods
 
@@ -150,6 +165,9 @@ def reconstruct_files(
     workers = (os.cpu_count() or 1) if workers is None else workers
     if int(workers) != workers or workers < 1:
         raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    max_pixels = MAX_PIXELS if max_pixels is None else max_pixels
+    if not isinstance(max_pixels, int) or isinstance(max_pixels, bool) or max_pixels < 1:
+        raise InputError(f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
     try:
         import dask
         from dask.callbacks import Callback
@@ -170,7 +188,7 @@ def reconstruct_files(
         for photo in photos
     ]
     tasks = [
-        dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, linear, options)
+        dask.delayed(_reconstruct_one, pure=False)(photo, files, step, channel, linear, max_pixels, options)
         for photo, files in jobs
     ]
     done = [0]
@@ -180,10 +198,39 @@ def reconstruct_files(
         if progress is not None:
             progress(min(done[0], len(tasks)), len(tasks))
 
-    scheduler = "synchronous" if workers == 1 else "processes"
     with Callback(posttask=finished):
-        results = dask.compute(*tasks, scheduler=scheduler, num_workers=int(workers))
+        if workers == 1:
+            return list(dask.compute(*tasks, scheduler="synchronous"))
+        import multiprocessing
+
+        # a pool of our own, not Dask's default: its workers watch this process, and it can be
+        # terminated (an executor's shutdown would wait for the running tasks)
+        pool = multiprocessing.get_context("spawn").Pool(
+            int(workers), initializer=_start_worker, initargs=(os.getpid(),)
+        )
+        try:
+            results = dask.compute(*tasks, scheduler="processes", pool=pool)
+        finally:
+            pool.terminate()  # idle after a full run; after an error or a signal, ends the tasks
+            pool.join()
     return list(results)
+
+
+def _start_worker(batch: int) -> None:
+    """A worker's set-up: a SIGTERM (the pool terminated) removes the task's temporaries and
+    ends the worker (Dask's task runner would catch an exception and take the next task), and a
+    thread does the same soon after the batch process ``batch`` is gone."""
+    from shadeform.io.atomic import exit_on_signals
+
+    exit_on_signals(unwind=False)
+    threading.Thread(target=_watch, args=(batch,), daemon=True, name="shadeform-watch").start()
+
+
+def _watch(batch: int) -> None:
+    """Wait until this worker's parent is no longer ``batch``, then end the worker."""
+    while os.getppid() == batch:
+        time.sleep(WATCH_SECONDS)
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def _reconstruct_one(
@@ -192,6 +239,7 @@ def _reconstruct_one(
     step: int,
     channel: str | None,
     linear: bool | None,
+    max_pixels: int,
     options: dict,
 ) -> BatchResult:
     """One photo: load, reconstruct, mesh, write; a user mistake becomes the result's error."""
@@ -205,7 +253,7 @@ def _reconstruct_one(
     try:
         with OutputSet() as outputs:  # a photo's files appear together or not at all
             temps = [outputs.temp(path) for path in files]
-            read = read_photo(photo, channel=channel, linear=linear)
+            read = read_photo(photo, channel=channel, linear=linear, max_pixels=max_pixels)
             rec = shadeform.reconstruct(read.image, **options)
             mesh = shadeform.to_mesh(rec, step=step)
             shadeform.export(mesh, temps[0])

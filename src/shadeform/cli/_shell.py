@@ -72,6 +72,9 @@ app = typer.Typer(
 
 def main() -> None:
     """Console-script entry point (``[project.scripts] shadeform``)."""
+    from shadeform.io.atomic import exit_on_signals
+
+    exit_on_signals()  # a kill or a closed terminal still removes the temporary files
     app(prog_name="shadeform")
 
 
@@ -335,5 +338,21 @@ FilterOption = Annotated[
         "--filter",
         metavar="KIND:SIZE",
         help="Smoothing: gaussian:SIGMA, mean:R, median:R, minimum:R or none.",
+    ),
+]
+
+#: The loader's one pixel limit, :data:`shadeform.io.images.MAX_PIXELS`, written out here so that
+#: the command starts without importing the image decoders (tests/test_cli_max_pixels.py checks
+#: that the two agree).
+MAX_PIXELS = 8192 * 8192
+# every command that reads photos or masks takes it; `app` defaults to the server's own limit
+MaxPixelsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--max-pixels",
+        min=1,
+        metavar="PIXELS",
+        help="Refuse a photo or mask whose header declares more pixels than this, before decoding "
+        "it (a damaged file or a decompression bomb); raise it for larger photos you trust.",
     ),
 ]

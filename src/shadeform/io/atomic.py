@@ -2,13 +2,22 @@
 
 A reader (or a crash) never sees a half-written file, and a failed write never clobbers an
 existing good file (``docs/conventions.md``, "Errors").
+
+Every temporary is named ``.<target name>.shadeform-<pid>-<random>.partial<suffix>`` (an
+:class:`OutputSet`'s) or ``...tmp`` (:func:`atomic_write`'s): hidden, recognisable, and naming
+the process that writes it. It is removed on every exit that runs Python's clean-up (an
+exception, Ctrl-C, and SIGTERM or SIGHUP where the command line turns them into an exit); what a
+process killed outright (``kill -9``, a power cut) leaves is swept from a folder by the next
+process that writes there (:func:`sweep`), once the process named in it no longer runs.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
+import signal
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -18,7 +27,14 @@ from typing import IO
 
 from shadeform.errors import InputError
 
-__all__ = ["OutputSet", "atomic_write"]
+__all__ = ["OutputSet", "atomic_write", "exit_on_signals", "remove_temporaries", "sweep"]
+
+#: A temporary's name: the target's name, the writing process, a random part, the kind.
+_TEMPORARY = re.compile(r"^\..+\.shadeform-(\d+)-[0-9a-z_]+\.(?:partial.*|tmp)$")
+#: This process's temporaries not yet renamed or deleted (for :func:`remove_temporaries`).
+_LIVE: set[Path] = set()
+#: Folders this process has swept already (once each is enough: later leftovers are its own).
+_SWEPT: set[Path] = set()
 
 
 def _read_umask() -> int:
@@ -82,15 +98,17 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
         permissions = 0o666 & ~_UMASK
     text_options = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
 
+    sweep(parent)
     tmp = tempfile.NamedTemporaryFile(  # noqa: SIM115 (the with below closes it)
         mode=mode,
         delete=False,
         dir=parent,
-        prefix=f".{path.name}.",
+        prefix=f".{path.name}.shadeform-{os.getpid()}-",
         suffix=".tmp",
         **text_options,
     )
     tmp_path = Path(tmp.name)
+    _LIVE.add(tmp_path)
     try:
         with tmp:
             yield tmp
@@ -102,7 +120,99 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
         # BaseException too: a KeyboardInterrupt mid-write must not leave the temporary behind.
         tmp_path.unlink(missing_ok=True)
         raise
+    finally:
+        _LIVE.discard(tmp_path)
     _fsync_folder(parent)
+
+
+def sweep(folder: str | os.PathLike[str]) -> list[Path]:
+    """Delete the temporaries that processes no longer running left in ``folder``.
+
+    Called by every writer before its first temporary in a folder (once per folder and process),
+    so the leftovers of a run killed outright go with the next run that writes there. A
+    temporary whose process still runs (another command writing beside this one) is kept.
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The folder to sweep; a folder that cannot be listed is left alone.
+
+    Returns
+    -------
+    list of Path
+        The files deleted.
+    """
+    folder = Path(folder)
+    key = folder.resolve()
+    if key in _SWEPT:
+        return []
+    _SWEPT.add(key)
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        found = _TEMPORARY.match(entry.name) if ".shadeform-" in entry.name else None
+        if found is None or _running(int(found.group(1))):
+            continue
+        with contextlib.suppress(OSError):
+            os.unlink(entry.path)
+            removed.append(Path(entry.path))
+    return removed
+
+
+def remove_temporaries() -> None:
+    """Delete every temporary this process has open, for an exit that skips clean-up
+    (``os._exit`` in a worker whose parent is gone)."""
+    for path in list(_LIVE):
+        with contextlib.suppress(OSError):
+            path.unlink()
+        _LIVE.discard(path)
+
+
+def exit_on_signals(*, unwind: bool = True) -> None:
+    """Make SIGTERM and SIGHUP (``kill``, a closed terminal, a pool ending its workers) remove
+    this process's temporaries before it ends; Python's default for them ends the process
+    without any clean-up. Call from the main thread.
+
+    Parameters
+    ----------
+    unwind : bool, keyword-only
+        True: end as an exception would (``SystemExit``), so ``with`` blocks clean up as they
+        leave. False, for a worker process whose task runner catches every exception (Dask's
+        does, and would go on to the next task): remove the temporaries and end at once.
+    """
+    handler = _raise_exit if unwind else _end_now
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), handler)
+
+
+def _raise_exit(signum, frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _end_now(signum, frame) -> None:
+    remove_temporaries()
+    os._exit(128 + signum)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` is alive (not a zombie); True when that cannot be told."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True  # another user's process; or an id no process can have, left alone
+    try:  # a killed process its parent has not reaped yet is no longer writing
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True
+    return state not in ("Z", "X")
 
 
 def _fsync_folder(folder: Path) -> None:
@@ -155,8 +265,12 @@ class OutputSet:
             raise InputError(f"output path '{target}' is a folder; give a file name")
         if any(target.resolve() == final.resolve() for _, final in self._pending):
             raise InputError(f"'{target}' is given for two outputs; give each output its own file")
-        tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.partial{target.suffix}")
+        sweep(target.parent)
+        tmp = target.with_name(
+            f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial{target.suffix}"
+        )
         self._pending.append((tmp, target))
+        _LIVE.add(tmp)
         return tmp
 
     def commit(self) -> list[Path]:
@@ -167,6 +281,7 @@ class OutputSet:
                 if existed:  # keep the permissions of the file being replaced
                     os.chmod(tmp, stat.S_IMODE(target.stat().st_mode))
                 os.replace(tmp, target)
+                _LIVE.discard(tmp)
                 if not existed:
                     created.append(target)
         except BaseException:
@@ -178,3 +293,4 @@ class OutputSet:
     def _discard(self) -> None:
         for tmp, _ in self._pending:
             tmp.unlink(missing_ok=True)
+            _LIVE.discard(tmp)
