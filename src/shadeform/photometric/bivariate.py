@@ -549,7 +549,8 @@ def slant_scale(lights, readings, start):
     can: a highlight sits where the normal meets a half vector, which tilts the other way. So
     the scale is the one whose per-pixel fits (:func:`_refine`, from the Lambertian ``start``
     turned by the ambiguity) leave the least median residual, a golden-section search on its
-    logarithm within :data:`SLANT_BOUND`. It gives 1 where the photos cannot tell: lights all at
+    logarithm within :data:`SLANT_BOUND`, over the pixels lit often enough for the model
+    (:data:`READINGS_PER_UNKNOWN`). It gives 1 where the photos cannot tell: lights all at
     nearly one slant (:data:`SLANT_SPREAD`), a minimum on the bound, or a scale that explains
     no more pixels better than chance would (a sign test, :data:`SIGN_TEST`).
 
@@ -572,7 +573,13 @@ def slant_scale(lights, readings, start):
     if np.std(np.degrees(np.arccos(np.clip(lights[:, 2], -1.0, 1.0)))) < SLANT_SPREAD:
         return 1.0
     albedo = np.linalg.norm(start, axis=1)
-    readings = np.ascontiguousarray(readings, dtype=np.float64)
+    # only pixels lit often enough for the model to be fitted at all (as in :func:`fit`)
+    lit = (lights @ (start / albedo[:, None]).T > 0) & (readings > 0)
+    modelled = lit.sum(axis=0) >= READINGS_PER_UNKNOWN * (POWERS + LOBES + 2)
+    if np.count_nonzero(modelled) <= SIGN_TEST**2:
+        return 1.0  # too few for the sign test below ever to pass
+    start, albedo = start[modelled], albedo[modelled]
+    readings = np.ascontiguousarray(readings[:, modelled], dtype=np.float64)
 
     def costs(log_scale):
         scale = np.exp(log_scale)
