@@ -45,6 +45,7 @@ _EXPORTS = {
     "calibrate_lights": "shadeform.light.sphere",
     "LightCalibration": "shadeform.light.sphere",
     "fuse": "shadeform.fusion",
+    "maps": "shadeform.texture",
 }
 _SUBMODULES = {
     "synth",
@@ -61,6 +62,7 @@ _SUBMODULES = {
     "examples",
     "photometric",
     "fusion",
+    "texture",
 }
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
