@@ -79,3 +79,69 @@ def test_a_reconstruction_without_object_is_refused():
         texture.maps(Empty())
     with pytest.raises(InputError, match="reach"):
         texture.ambient_occlusion(np.zeros((4, 4)), np.ones((4, 4), dtype=bool), reach=0.5)
+
+
+class TestMaterial:
+    """Material mode: photos of a textured surface filling the frame."""
+
+    @staticmethod
+    def photo(light, *, seed=0, size=128):
+        from shadeform.light import light_from_slant_tilt
+
+        height, truth = synth.material_surface(size, seed=seed)
+        image = synth.render(truth, np.ones((size, size), dtype=bool), light=light_from_slant_tilt(*light),
+                             albedo=0.7, noise=0.01, seed=seed)  # fmt: skip
+        y, x = np.mgrid[:size, :size] / (size - 1) - 0.5
+        return image * np.exp(0.4 * x - 0.3 * y - 0.5 * (x * x + y * y)), truth  # a lighting gradient
+
+    def test_normals_from_shading_under_a_given_light(self):
+        from shadeform.light import light_from_slant_tilt
+
+        for light in ((45, 135), (60, 20)):
+            image, truth = self.photo(light)
+            result = texture.material(image, light=light_from_slant_tilt(*light))
+            error = np.degrees(
+                np.arccos(np.clip(np.sum((result.maps["normal_opengl"] * 2 - 1) * truth, -1), -1, 1))
+            )
+            flat = np.degrees(np.arccos(truth[..., 2]))
+            assert error.mean() < 0.5 * flat.mean(), (light, error.mean(), flat.mean())
+            assert not result.light_estimated and set(result.maps) == {*texture.MAPS, "albedo"}
+
+    def test_the_light_axis_is_read_and_its_side_taken_from_above(self):
+        for tilt in (60, 135, 300):
+            image, _ = self.photo((45, tilt), seed=1)
+            result = texture.material(image)
+            read = np.degrees(np.arctan2(result.light[1], result.light[0])) % 360
+            axis_error = min(abs(read - tilt) % 180, 180 - abs(read - tilt) % 180)
+            assert axis_error < 10, (tilt, read)
+            assert result.light_estimated and result.light[1] > 0  # above: tilt 300 comes out as 120
+            assert result.light[2] == pytest.approx(np.cos(np.radians(texture.MATERIAL_SLANT)))
+
+    def test_maps_tile_without_seams(self):
+        image, _ = self.photo((45, 100))
+        result = texture.material(image, light=[-0.1, 0.7, 0.7], tile=True)
+        for name in ("height", "albedo", "normal_opengl"):
+            values = result.maps[name]
+            across = np.abs(values[:, 0] - values[:, -1]).mean() + np.abs(values[0] - values[-1]).mean()
+            inside = np.abs(np.diff(values, axis=1)).mean() + np.abs(np.diff(values, axis=0)).mean()
+            assert across < 1.5 * inside, name  # an edge pair is no more different than neighbours
+        # the raw photo's lighting gradient makes its opposite edges differ far more
+        raw = np.abs(image[:, 0] - image[:, -1]).mean()
+        assert raw > 3 * np.abs(np.diff(image, axis=1)).mean()
+
+    def test_the_periodic_component_removes_only_a_harmonic_field(self):
+        rng = np.random.default_rng(3)
+        image = rng.normal(size=(40, 56)) + np.linspace(0, 5, 56)  # noise on a ramp
+        smooth = image - texture.periodic_component(image)
+        inner = smooth[1:-1, 1:-1]
+        laplacian = smooth[:-2, 1:-1] + smooth[2:, 1:-1] + smooth[1:-1, :-2] + smooth[1:-1, 2:] - 4 * inner
+        assert np.abs(laplacian).max() < 1e-10
+
+    def test_what_it_cannot_do_is_refused(self):
+        image, _ = self.photo((45, 100))
+        with pytest.raises(InputError, match="oblique light"):
+            texture.material(image, light=[0, 0, 1])
+        with pytest.raises(InputError, match="mostly black"):
+            texture.material(np.zeros((32, 32)))
+        with pytest.raises(InputError, match="at least 8x8"):
+            texture.material(np.ones((4, 40)))

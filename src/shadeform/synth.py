@@ -1129,3 +1129,45 @@ _CLOSED = {
     "waisted": (_waisted_f, _waisted_grad, _waisted_volume),
     "lumpy": (_lumpy_f, _lumpy_grad, _lumpy_volume),
 }
+
+
+def material_surface(size: int = 256, *, seed: int = 0, slope: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+    """A rough, periodic surface filling the frame (stone, plaster): for material-mode maps.
+
+    Gaussian noise filtered to a ``1 / f^1.8`` amplitude spectrum (a fractal roughness) below a
+    quarter of the sampling frequency, scaled so that the slopes' root mean square is ``slope``.
+
+    Parameters
+    ----------
+    size : int, optional
+        Side in pixels.
+    seed : int, keyword-only
+        Random seed.
+    slope : float, keyword-only
+        Root mean square of the height's gradient.
+
+    Returns
+    -------
+    height : (size, size) float64
+        Height in pixels, mean 0, periodic.
+    normals : (size, size, 3) float64
+        Its unit normals (spectral derivatives, so periodic too).
+    """
+    size = _check_size(size)
+    slope = _finite_float(slope, "slope")
+    rng = np.random.default_rng(seed)
+    f = np.fft.fftfreq(size)
+    radius = np.hypot(f[:, None], f[None, :])
+    amplitude = np.where(radius < 0.25, np.maximum(radius, 1.0 / size) ** -1.8, 0.0)
+    amplitude[0, 0] = 0.0
+    height = np.fft.ifft2(
+        amplitude * (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size)))
+    ).real
+    w = 2 * np.pi * f
+    spectrum = np.fft.fft2(height)
+    dx = np.fft.ifft2(1j * w[None, :] * spectrum).real  # x = column
+    dy = -np.fft.ifft2(1j * w[:, None] * spectrum).real  # y = -row
+    scale = slope / np.sqrt(np.mean(dx * dx + dy * dy))
+    if not slope > 0:
+        raise InputError(f"slope must be positive, got {slope!r}")
+    return height * scale, np.stack(_normalise(-scale * dx, -scale * dy, np.ones_like(height)), axis=-1)

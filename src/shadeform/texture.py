@@ -21,13 +21,33 @@ curvature maps, each an image in [0, 1] the size of the photo.
 Outside the object the maps hold what a flat, open surface would: normal ``(0, 0, 1)``,
 height 0, occlusion 1, curvature 0.5.
 
+**Material mode** (:func:`material`): a photo of a textured surface filling the frame (stone,
+bark, fabric), no outline. The lighting's large-scale variation (a gradient across the frame, a
+flash's fall-off) is removed by dividing out a quadratic fitted to the log image; the periodic
+component of what remains (Moisan's periodic plus smooth decomposition) leaves no seams at the
+frame's edges; and the height comes from the fine-scale shading by linear shape from shading
+(Pentland 1990): for small slopes, ``I / mean(I) - 1 = -(l_x h_x + l_y h_y) / l_z``, solved
+for ``h`` in the Fourier domain. The shading says nothing at first order about slopes across
+the light, nor anything about the light's side (a bump lit from the left looks like a pit lit
+from the right; exactly so for Lambertian shading, whatever the slopes): the light's axis is read
+from the shading gradients' dominant direction, its side is the one nearer to above, slightly
+left (:data:`PRIOR_TILT`: the prior people themselves use, Sun and Perona 1998; photos are mostly
+lit from above), and its slant (which scales the relief) is 45 degrees unless given. Texture tools instead take the brightness
+itself for height, which under an oblique light is the slope along the light, not the height
+(``benchmarks/results/material.md`` compares the two against rendered surfaces).
+
 References
 ----------
 .. [1] L. Bavoil, M. Sainz, R. Dimitrov, "Image-space horizon-based ambient occlusion",
    SIGGRAPH 2008 talks.
+.. [2] A. P. Pentland, "Linear shape from shading", IJCV 4, 1990.
+.. [3] L. Moisan, "Periodic plus smooth image decomposition", J. Math. Imaging Vis. 39, 2011.
+.. [4] J. Sun, P. Perona, "Where is the sun?", Nature Neuroscience 1(3), 1998.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -36,7 +56,7 @@ from scipy import ndimage
 
 from shadeform.errors import InputError
 
-__all__ = ["DIRECTIONS", "MAPS", "ambient_occlusion", "curvature", "maps"]
+__all__ = ["DIRECTIONS", "MAPS", "Material", "ambient_occlusion", "curvature", "maps", "material"]
 
 #: Azimuths the occlusion is averaged over (every 22.5 degrees); not swept.
 DIRECTIONS = 16
@@ -44,6 +64,16 @@ DIRECTIONS = 16
 CURVATURE_PERCENTILE = 98.0
 #: The maps :func:`maps` returns, in order.
 MAPS = ("normal_opengl", "normal_directx", "height", "ambient_occlusion", "curvature")
+#: Material mode: the light's slant (degrees) when it is not given; it scales the relief.
+MATERIAL_SLANT = 45.0
+#: Material mode: of the two sides of the light's axis read from a photo, the one nearer this
+#: tilt (degrees, from +x toward +y: up and 12 degrees to the left, the light people assume,
+#: Sun and Perona 1998).
+PRIOR_TILT = 102.0
+#: Material mode: Tikhonov weight on the height's gradient, relative to the shading's own
+#: weight, which damps the frequencies the light barely sees (within about 6 degrees of across
+#: it); not swept.
+MATERIAL_DAMPING = 0.01
 
 
 def maps(reconstruction, *, reach: float | None = None) -> dict[str, np.ndarray]:
@@ -199,3 +229,172 @@ def _check(normals, depth, mask):
     if not mask.any():
         raise InputError("the reconstruction has no object pixels to make maps of")
     return normals, depth, mask
+
+
+@dataclass(frozen=True)
+class Material:
+    """The maps of a photo of a material (:func:`material`).
+
+    Attributes
+    ----------
+    maps : dict of str to ndarray
+        :data:`MAPS` as :func:`maps` makes them, and ``albedo`` (H, W) or (H, W, 3): the photo
+        with the shading and the lighting's large-scale variation divided out, in [0, 1].
+    light : (3,) float64
+        The light direction used.
+    light_estimated : bool
+        Whether the light's tilt was read from the photo (up to its side, taken nearer
+        :data:`PRIOR_TILT`; its slant is then :data:`MATERIAL_SLANT`): if the relief comes out inverted, give the
+        light with its tilt turned by 180 degrees.
+    """
+
+    maps: dict
+    light: np.ndarray
+    light_estimated: bool
+
+
+def material(image: np.ndarray, *, light=None, tile: bool = False, reach: float | None = None) -> Material:
+    """Texture maps of a photo of a textured surface that fills the frame (module docstring).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) array_like
+        Linear intensities (:func:`shadeform.load_image_rgb` or :func:`shadeform.load_image`);
+        colour is used for the albedo map, its luma for the shape.
+    light : (3,) array_like, optional
+        Direction toward the light in the camera frame; default: tilt read from the photo, slant
+        :data:`MATERIAL_SLANT`.
+    tile : bool, keyword-only
+        Make the albedo map tile seamlessly too (the shape maps always do).
+    reach : float, optional
+        The occlusion's reach in pixels (:func:`ambient_occlusion`); default a sixteenth of the
+        shorter side.
+
+    Returns
+    -------
+    Material
+    """
+    from shadeform.light import as_light
+
+    pixels = np.asarray(image, dtype=np.float64)
+    if pixels.ndim not in (2, 3) or (pixels.ndim == 3 and pixels.shape[2] != 3) or min(pixels.shape[:2]) < 8:
+        raise InputError(f"a material photo must be (H, W) or (H, W, 3), at least 8x8, got {pixels.shape}")
+    if not np.isfinite(pixels).all() or (pixels < 0).any():
+        raise InputError("the photo has negative, NaN or infinite values; give linear intensities")
+    gray = pixels if pixels.ndim == 2 else pixels @ np.array([0.2126, 0.7152, 0.0722])
+    if np.count_nonzero(gray > 0) < gray.size / 2:
+        raise InputError(
+            "the photo is mostly black; a material photo must show the lit surface across the frame"
+        )
+    lighting = _lighting(gray)
+    shading = periodic_component(gray / lighting)
+    shading = shading / shading.mean() - 1.0
+    estimated = light is None
+    if estimated:
+        tilt = _tilt_axis(shading)
+        if np.cos(tilt - np.radians(PRIOR_TILT)) < 0:  # the other side of the axis
+            tilt += np.pi
+        light = np.array([np.cos(tilt), np.sin(tilt), 1 / np.tan(np.radians(MATERIAL_SLANT))])
+    light = as_light(light)
+    if light[0] == 0 and light[1] == 0:
+        raise InputError(
+            "a light straight from the viewer shows no slopes at first order; give an oblique light "
+            "(--slant, --tilt) or a photo lit from one side"
+        )
+    height = linear_shading_height(shading, light)
+    mask = np.ones(gray.shape, dtype=bool)
+    reach = max(1.0, min(gray.shape) / 16) if reach is None else reach
+    normals = _spectral_normals(height)
+    shape_maps = maps(_Surface(normals, height, mask), reach=reach)
+    predicted = np.clip(normals @ light, 1e-3, None) / light[2]  # shading relative to a flat patch
+    source = pixels / (lighting if pixels.ndim == 2 else lighting[..., None])
+    if tile:
+        source = (
+            periodic_component(source)
+            if source.ndim == 2
+            else np.dstack([periodic_component(source[..., c]) for c in range(3)])
+        )
+    albedo = source / (predicted if source.ndim == 2 else predicted[..., None])
+    albedo = np.clip(albedo / (2 * np.median(albedo)), 0.0, 1.0)  # the median albedo at mid-grey
+    return Material({**shape_maps, "albedo": albedo}, light, estimated)
+
+
+@dataclass(frozen=True)
+class _Surface:
+    normals: np.ndarray
+    depth: np.ndarray
+    mask: np.ndarray
+
+
+def _lighting(gray: np.ndarray) -> np.ndarray:
+    """The lighting's large-scale variation: ``exp`` of a quadratic in ``x, y`` fitted to the
+    log intensities (least squares over the lit pixels)."""
+    rows, cols = gray.shape
+    y, x = np.mgrid[:rows, :cols]
+    x, y = x / cols - 0.5, y / rows - 0.5
+    terms = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+    lit = gray > 0
+    coefficients, *_ = np.linalg.lstsq(terms[lit], np.log(gray[lit]), rcond=None)
+    return np.exp(terms @ coefficients)
+
+
+def periodic_component(image: np.ndarray) -> np.ndarray:
+    """Moisan's periodic component of ``image`` (H, W): the image less the smooth field whose
+    Laplacian is the jump across the frame's opposite edges, so that it tiles without seams and
+    its Fourier transform has no cross of edge artefacts."""
+    u = np.asarray(image, dtype=np.float64)
+    rows, cols = u.shape
+    jump = np.zeros_like(u)
+    jump[0, :] += u[-1, :] - u[0, :]
+    jump[-1, :] += u[0, :] - u[-1, :]
+    jump[:, 0] += u[:, -1] - u[:, 0]
+    jump[:, -1] += u[:, 0] - u[:, -1]
+    laplacian = (
+        2 * np.cos(2 * np.pi * np.fft.fftfreq(rows))[:, None]
+        + 2 * np.cos(2 * np.pi * np.fft.fftfreq(cols))
+        - 4
+    )
+    laplacian[0, 0] = 1.0
+    smooth = np.fft.fft2(jump) / laplacian
+    smooth[0, 0] = 0.0
+    return u - np.fft.ifft2(smooth).real
+
+
+def _frequencies(shape):
+    """Angular frequencies along rows and columns (radians per pixel), broadcastable."""
+    rows, cols = shape
+    return 2 * np.pi * np.fft.fftfreq(rows)[:, None], 2 * np.pi * np.fft.fftfreq(cols)[None, :]
+
+
+def linear_shading_height(shading: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """Pentland's linear shape from shading: the periodic height (H, W) in pixels, mean 0, whose
+    slopes explain ``shading = I / mean(I) - 1 = -(l_x h_x + l_y h_y) / l_z`` in least squares,
+    with :data:`MATERIAL_DAMPING` on the gradient (``x`` = column, ``y`` = -row)."""
+    a = np.asarray(light[:2], dtype=np.float64) / light[2]
+    w_row, w_col = _frequencies(shading.shape)
+    # d/dx = i w_col, d/dy = -d/drow = -i w_row
+    response = -1j * (a[0] * w_col - a[1] * w_row)
+    damping = MATERIAL_DAMPING * (a @ a) * (w_row**2 + w_col**2)
+    spectrum = np.conj(response) * np.fft.fft2(shading) / (np.abs(response) ** 2 + damping + 1e-300)
+    spectrum[0, 0] = 0.0
+    return np.fft.ifft2(spectrum).real
+
+
+def _spectral_normals(height: np.ndarray) -> np.ndarray:
+    """Unit normals (H, W, 3) of a periodic height field, its slopes by spectral derivatives."""
+    w_row, w_col = _frequencies(height.shape)
+    spectrum = np.fft.fft2(height)
+    slope_x = np.fft.ifft2(1j * w_col * spectrum).real
+    slope_y = -np.fft.ifft2(1j * w_row * spectrum).real
+    normals = np.stack([-slope_x, -slope_y, np.ones_like(height)], axis=-1)
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
+def _tilt_axis(shading: np.ndarray) -> float:
+    """The light's tilt (radians, up to a half turn) as the dominant direction of the shading's
+    gradients: under a light of tilt ``t`` the shading varies with the slope along ``t`` only."""
+    gx = np.gradient(shading, axis=1)
+    gy = -np.gradient(shading, axis=0)
+    tensor = np.array([[np.sum(gx * gx), np.sum(gx * gy)], [np.sum(gx * gy), np.sum(gy * gy)]])
+    _, vectors = np.linalg.eigh(tensor)
+    return float(np.arctan2(vectors[1, 1], vectors[0, 1]))
