@@ -57,7 +57,12 @@ export interface PaneEvents {
   hover(pixel: { row: number; col: number } | null): void;
   /** A short hint about what the current tool does next. */
   hint(text: string): void;
+  /** A message about what the tool refused (shown until the next edit of the draft), or null. */
+  notice(text: string | null): void;
 }
+
+/** Said when a region is closed with fewer than three corners (it is kept, not dropped). */
+export const TOO_FEW_CORNERS = 'A region needs at least three points; click more points or press Escape';
 
 export interface Sources {
   photo: string;
@@ -135,6 +140,7 @@ export class ImagePane {
     this.height = height;
     this.sources = sources;
     this.draft = [];
+    this.events.notice(null);
     if (!sameSize) {
       this.maskLayer = null;
       this.fitted = false;
@@ -187,6 +193,7 @@ export class ImagePane {
 
   setTool(tool: Tool): void {
     if (tool !== 'polygon') this.draft = [];
+    this.events.notice(null);
     this.tool = tool;
     this.canvas.dataset.tool = tool;
     this.events.hint(this.hintText());
@@ -216,8 +223,8 @@ export class ImagePane {
     if (this.tool === 'mask' && this.maskEditor?.key(event)) return true;
     if (this.tool === 'polygon' && this.draft.length) {
       if (event.key === 'Enter') return this.closeDraft(), true;
-      if (event.key === 'Escape') return (this.draft = []), this.hintAndDraw(), true;
-      if (event.key === 'Backspace') return this.draft.pop(), this.hintAndDraw(), true;
+      if (event.key === 'Escape') return (this.draft = []), this.draftEdited(), true;
+      if (event.key === 'Backspace') return this.draft.pop(), this.draftEdited(), true;
     }
     if ((event.key === 'Delete' || event.key === 'Backspace') && this.selected !== null) {
       this.removeRegion(this.selected);
@@ -309,17 +316,28 @@ export class ImagePane {
   }
 
   private polygonClick(at: Point): void {
-    if (this.draft.length >= 3 && this.screenDistance(at, this.draft[0]) <= SNAP) return this.closeDraft();
+    // a click on the first corner closes the region (and is refused, saying so, under three)
+    if (this.draft.length && this.screenDistance(at, this.draft[0]) <= SNAP) return this.closeDraft();
     this.draft.push(this.clampToImage(at));
-    this.hintAndDraw();
+    this.draftEdited();
   }
 
   private closeDraft(): void {
-    if (this.draft.length < 3) return;
+    if (this.draft.length < 3) {
+      // the corners stay: the user adds more, or Escape drops them
+      this.events.notice(TOO_FEW_CORNERS);
+      return;
+    }
     this.regionList.push({ polygon: this.draft, axis: this.newAxis });
     this.draft = [];
     this.select(this.regionList.length - 1);
     this.events.regions(this.regionList, true);
+    this.draftEdited();
+  }
+
+  /** The draft changed: a refusal said about the old one no longer holds. */
+  private draftEdited(): void {
+    this.events.notice(null);
     this.hintAndDraw();
   }
 

@@ -8,12 +8,17 @@
 // is large enough for it to pay, then the full solve under the same id. A newer request aborts
 // the one in flight, and a response whose request_id is not the newest is dropped, so a stale
 // model never arrives last.
+//
+// What the model on screen is (up to date, computing, out of date, failed) is each session's
+// ModelState (modelState.ts); the badge by the 3D view, the export menu and the dimming are drawn
+// from the shown session's state and nothing else.
 import './style.css';
 import * as api from './api';
 import type { ExampleInfo, ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
 import { MaskTool } from './maskTool';
+import { ModelState, statusText, type ModelStateView } from './modelState';
 import {
   download,
   loadImageBytes,
@@ -32,6 +37,7 @@ import {
   type ViewSettings,
 } from './state';
 import { StereoSession } from './stereo';
+import { bindToasts, toast, toasts } from './toast';
 import { PART_COLOURS, ViewsSession } from './views';
 import { Viewer } from './viewer';
 
@@ -74,6 +80,8 @@ class App {
   private dragWaiting = false; // a drag moved on while a request was out
   private readonly tasks: string[] = [];
   private initialId: string | null = null;
+  /** The one photo's model (the photo set's and the views' are theirs). */
+  private readonly model = new ModelState(() => this.showModelState());
   private readonly pane: ImagePane;
   private readonly viewer: Viewer;
   private readonly panel: Panel;
@@ -91,6 +99,7 @@ class App {
       selection: () => this.showRegions(),
       hover: (pixel) => ($('pixel').textContent = pixel ? `row ${pixel.row}, col ${pixel.col}` : ''),
       hint: (text) => ($('hint').textContent = text),
+      notice: (text) => this.notice(text),
     });
     this.viewer = new Viewer($('view-host'));
     this.maskTool = new MaskTool({
@@ -106,6 +115,7 @@ class App {
       },
       download: (blob, filename) => download(blob, filename),
       stem: () => this.stem(),
+      notice: (text) => this.notice(text),
     });
     this.pane.maskEditor = this.maskTool;
     this.stereo = new StereoSession(options, {
@@ -125,6 +135,7 @@ class App {
       solving: (on) => this.setSolving(on),
       toast: (message, kind) => this.toast(message, kind),
       changed: () => this.persist(),
+      modelChanged: () => this.showModelState(),
     });
     this.views = new ViewsSession(options, {
       showFused: (result, fused, parts, refit) => {
@@ -150,6 +161,7 @@ class App {
         if (document.body.classList.contains('views-mode')) this.showViewsTitle();
         this.persist();
       },
+      modelChanged: () => this.showModelState(),
     });
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
@@ -167,6 +179,7 @@ class App {
       markUnsure: (i) => this.markUnsure(i),
     });
     this.buildMenus();
+    bindToasts();
     this.bindToolbar();
     this.bindFiles();
     this.bindKeys();
@@ -176,6 +189,7 @@ class App {
     this.showReferences();
     this.showRegions();
     this.showEditing();
+    this.showModelState();
   }
 
   /** Reopen what the last visit had open: the server may have forgotten the image. */
@@ -295,6 +309,7 @@ class App {
     this.result = null;
     this.mesh = null;
     this.refitNext = true;
+    this.model.changed('another image opened');
     this.params = structuredClone(params ?? { ...this.options.defaults, ...(info.suggested ?? {}) });
     $('image-empty').hidden = true;
     $('image-title').innerHTML = '';
@@ -319,6 +334,7 @@ class App {
   private setStereoMode(on: boolean): void {
     if (on) this.setViewsMode(false);
     document.body.classList.toggle('stereo-mode', on);
+    this.showModelState();
     if (!on) {
       this.stereo.close();
       return;
@@ -337,6 +353,7 @@ class App {
     const was = document.body.classList.contains('views-mode');
     if (on) this.setStereoMode(false);
     document.body.classList.toggle('views-mode', on);
+    this.showModelState();
     if (!on) {
       if (was) {
         this.views.close();
@@ -364,6 +381,7 @@ class App {
     this.image = null;
     this.source = null;
     this.result = null;
+    this.model.reset();
     $('image-empty').hidden = true;
     this.clearModel();
   }
@@ -375,16 +393,56 @@ class App {
     this.viewer.setParts([], PART_COLOURS);
     $('view-empty').hidden = false;
     $('view-host').classList.remove('has-model');
-    $<HTMLButtonElement>('export-button').disabled = true;
     $('mesh-info').textContent = '';
     $('timing').textContent = '';
+    this.showModelState();
   }
 
-  /** A model is on screen: the 3D view's controls and the exports are on. */
+  /** A model is on screen: the 3D view's controls are on (the exports follow the model's state). */
   private modelShown(): void {
     $('view-empty').hidden = true;
     $('view-host').classList.add('has-model');
-    $<HTMLButtonElement>('export-button').disabled = false;
+  }
+
+  /** The state of the model the 3D view shows: the mode's session's. */
+  private shownModel(): ModelState {
+    const body = document.body.classList;
+    if (body.contains('stereo-mode')) return this.stereo.model;
+    if (body.contains('views-mode')) return this.views.model;
+    return this.model;
+  }
+
+  /**
+   * Everything that tells what the model on screen is, from its ModelState alone: the badge,
+   * the export menu (only a current model may be exported: the file would otherwise not be what
+   * is shown, or the server would refuse it) and the dimming of a model that is not current.
+   */
+  private showModelState(): void {
+    // called by the sessions' states, the first time before the sessions exist
+    if (!this.stereo || !this.views) return;
+    const { status, message } = this.shownModel();
+    const onScreen = $('view-host').classList.contains('has-model');
+    const badge = $('model-badge');
+    badge.hidden = status === 'none';
+    badge.dataset.status = status;
+    badge.textContent = statusText(status, message);
+    badge.title = status === 'failed' ? 'The model shown is an older one: change a setting to try again' : '';
+    $('view-host').dataset.modelStatus = status;
+    $('view-host').classList.toggle('outdated', onScreen && status !== 'current');
+    const exportable = onScreen && status === 'current';
+    const button = $<HTMLButtonElement>('export-button');
+    button.disabled = !exportable;
+    button.title = exportable
+      ? 'Download the current mesh in one of the library\'s formats'
+      : 'Export is off until the model on screen is up to date with the settings';
+    if (!exportable) $('export-menu').classList.remove('open');
+  }
+
+  /** A message over the image about what its tool refused; null takes it away. */
+  private notice(text: string | null): void {
+    const box = $('image-notice');
+    box.hidden = text === null;
+    box.textContent = text ?? '';
   }
 
   async openViewPhotos(files: File[]): Promise<void> {
@@ -445,6 +503,7 @@ class App {
   private change(patch: Partial<Params>, urgency: Urgency): void {
     const before = this.params;
     this.params = { ...this.params, ...structuredClone(patch) };
+    if (this.image) this.model.changed();
     this.panel.show(this.params);
     if ('references' in patch) this.showReferences();
     if (patch.channel !== undefined && patch.channel !== before.channel) this.maskTool.channelChanged();
@@ -459,6 +518,7 @@ class App {
 
   private regionsEdited(regions: Region[], final: boolean): void {
     this.params = { ...this.params, concave: { regions: structuredClone(regions) } };
+    if (this.image) this.model.changed('regions changed');
     this.showRegions();
     if (final) {
       this.persist();
@@ -552,6 +612,7 @@ class App {
     this.latestSent = id;
     const changed = this.changedAt ?? performance.now();
     this.changedAt = null;
+    const version = this.model.computing();
     this.setSolving(true);
     try {
       // ask for a quick look first (the server gives the full result instead where a quick look
@@ -565,6 +626,7 @@ class App {
         const mesh = api.decodeMesh(result.mesh);
         const decoded = performance.now();
         this.applyResult(result, mesh);
+        this.model.arrived(version, !result.preview);
         const rendered = await this.viewer.rendered();
         if (id !== this.latestSent) return;
         this.appliedCount += 1;
@@ -588,6 +650,8 @@ class App {
           return this.solve(true);
         }
       }
+      // the old model stays on screen, dimmed and not exportable, until the next change
+      this.model.failed(version, (err as Error).message);
       this.toast((err as Error).message);
     } finally {
       if (id === this.latestSent) {
@@ -628,6 +692,11 @@ class App {
   // --------------------------------------------------------------------------- files
 
   private async exportFormat(suffix: string): Promise<void> {
+    const { status, message } = this.shownModel();
+    if (status !== 'current') {
+      const now = status === 'none' ? 'no model yet' : statusText(status, message);
+      return this.toast(`Nothing exported: the model on screen is not up to date (${now}); export once it is`);
+    }
     if (document.body.classList.contains('views-mode')) {
       return this.busy(`Exporting ${suffix}…`, async () => {
         const { blob, filename } = await this.views.exportFormat(suffix);
@@ -735,14 +804,8 @@ class App {
     }
   }
 
-  private toastTimer = 0;
   toast(message: string, kind: 'error' | 'info' = 'error'): void {
-    const toast = $('toast');
-    toast.textContent = message;
-    toast.className = `toast ${kind === 'info' ? 'info' : ''}`;
-    toast.hidden = false;
-    clearTimeout(this.toastTimer);
-    this.toastTimer = window.setTimeout(() => (toast.hidden = true), kind === 'info' ? 2500 : 7000);
+    toast(message, kind);
   }
 
   private buildMenus(): void {
@@ -895,11 +958,16 @@ class App {
     });
   }
 
+  /**
+   * Shortcuts, at the document level, wherever the focus is: a clicked checkbox, button, select
+   * or slider keeps focus but must not swallow them. Only typing is left alone (a text or number
+   * field), and so are the keys a focused control uses itself (see ownKey).
+   */
   private bindKeys(): void {
     document.addEventListener('keydown', (event) => {
       const target = event.target as HTMLElement;
       if ($<HTMLDialogElement>('help-dialog').open) return;
-      if (target.closest('input, select, textarea')) return;
+      if (typing(target) || ownKey(target, event.key)) return;
       const openMenus = document.querySelectorAll('.menu.open');
       if (event.key === 'Escape' && openMenus.length) {
         openMenus.forEach((menu) => menu.classList.remove('open'));
@@ -962,7 +1030,17 @@ class App {
         tool: this.pane.tool,
         selectedRegion: this.pane.selection,
         busy: !$('busy').hidden,
+        /** The one photo's model: current, computing, stale, failed or none. */
+        model: this.model.status,
       }),
+      /** The one photo's model state (message, whether shown, the statuses so far). */
+      modelState: (): ModelStateView => this.model.view(),
+      /** The state of the model the 3D view shows now, whichever mode, as the badge says it. */
+      shownModelState: () => ({ ...this.shownModel().view(), badge: $('model-badge').hidden ? null : $('model-badge').textContent }),
+      /** The messages at the bottom of the window, oldest first. */
+      toasts: () => toasts(),
+      /** The message over the image about what its tool refused, or null. */
+      notice: () => ($('image-notice').hidden ? null : $('image-notice').textContent),
       lastResult: () => {
         const r = this.result;
         if (!r) return null;
@@ -1014,6 +1092,27 @@ class App {
 
 type Hook = ReturnType<App['hook']>;
 
+/** Input types that take no typing: keys there are shortcuts. */
+const NOT_TYPED = new Set(['checkbox', 'radio', 'range', 'button', 'submit', 'reset', 'color', 'file', 'image']);
+
+/** Whether keys at ``target`` are text being typed (a text or number field, a text area). */
+function typing(target: HTMLElement): boolean {
+  if (target.isContentEditable || target instanceof HTMLTextAreaElement) return true;
+  return target instanceof HTMLInputElement && !NOT_TYPED.has(target.type);
+}
+
+/**
+ * Whether a focused control uses ``key`` itself: arrows (and Home, End, Page keys) move a slider
+ * or a select's choice; Enter and Space press a button or tick a box. Other keys stay shortcuts
+ * there (and are kept from a select's type-to-choose by the handler's preventDefault).
+ */
+function ownKey(target: HTMLElement, key: string): boolean {
+  const slider = target instanceof HTMLInputElement && target.type === 'range';
+  if ((slider || target instanceof HTMLSelectElement) && /^(Arrow|Page|Home$|End$)/.test(key)) return true;
+  const pressable = target instanceof HTMLButtonElement || target instanceof HTMLSelectElement || target instanceof HTMLInputElement;
+  return pressable && (key === 'Enter' || key === ' ');
+}
+
 declare global {
   interface Window {
     /** Read-only test hook; ``ready`` settles once the last session is restored. */
@@ -1037,9 +1136,7 @@ async function start(): Promise<void> {
     await app.restore();
     resolveReady();
   } catch (err) {
-    const toast = $('toast');
-    toast.textContent = `Cannot reach the shadeform server: ${(err as Error).message}. Start it with \`shadeform app\`, then reload.`;
-    toast.hidden = false;
+    toast(`Cannot reach the shadeform server: ${(err as Error).message}. Start it with \`shadeform app\`, then reload.`);
     rejectReady(err);
   }
 }

@@ -235,7 +235,12 @@ export interface MaskHost {
   download(blob: Blob, filename: string): void;
   /** The current image's name without its suffix, for file names. */
   stem(): string;
+  /** A message about what the tool refused (until the next edit of the polygon), or null. */
+  notice(text: string | null): void;
 }
+
+/** Said when a mask polygon is closed with fewer than three corners (they are kept). */
+export const TOO_FEW_MASK_CORNERS = 'A mask polygon needs at least three points; click more points or press Escape';
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
@@ -295,6 +300,7 @@ export class MaskTool {
     this.solvedPng = '';
     this.user = png !== null;
     this.draft = [];
+    this.host.notice(null);
     this.clearClicks();
     this.host.show(null);
     this.clearError();
@@ -357,6 +363,7 @@ export class MaskTool {
   setMode(mode: MaskMode): void {
     this.mode = mode;
     this.draft = [];
+    this.host.notice(null);
     if (mode !== 'object') this.clearClicks();
     this.showControls();
     this.host.hint(this.hint());
@@ -643,9 +650,16 @@ export class MaskTool {
     const image = this.host.image();
     if (!image) return;
     const point: Point = [Math.min(image.width - 0.5, Math.max(-0.5, at[0])), Math.min(image.height - 0.5, Math.max(-0.5, at[1]))];
-    if (this.draft.length >= 3 && this.nearFirst(at)) return this.closePolygon();
+    // a click on the first corner closes the polygon (and is refused, saying so, under three)
+    if (this.draft.length && this.nearFirst(at)) return this.closePolygon();
     if (!this.draft.length) this.polygonAdd = add;
     this.draft.push(point);
+    this.draftEdited();
+  }
+
+  /** The draft changed: a refusal said about the old one no longer holds. */
+  private draftEdited(): void {
+    this.host.notice(null);
     this.host.hint(this.hint());
     this.host.redraw();
   }
@@ -657,14 +671,15 @@ export class MaskTool {
   }
 
   private closePolygon(): void {
+    if (this.draft.length < 3) return this.host.notice(TOO_FEW_MASK_CORNERS);
     const mask = this.editable();
-    if (!mask || this.draft.length < 3) return;
+    if (!mask) return;
     this.clearClicks();
     const dirty = mask.polygon(this.draft, this.polygonAdd ? 1 : 0);
     const added = this.polygonAdd;
     this.draft = [];
     this.show(mask, dirty);
-    this.host.hint(this.hint());
+    this.draftEdited();
     this.commit(added ? 'polygon added' : 'polygon cut');
   }
 
@@ -672,8 +687,8 @@ export class MaskTool {
   key(event: KeyboardEvent): boolean {
     if (this.mode === 'polygon' && this.draft.length) {
       if (event.key === 'Enter') return this.closePolygon(), true;
-      if (event.key === 'Escape') return (this.draft = []), this.host.hint(this.hint()), this.host.redraw(), true;
-      if (event.key === 'Backspace') return this.draft.pop(), this.host.hint(this.hint()), this.host.redraw(), true;
+      if (event.key === 'Escape') return (this.draft = []), this.draftEdited(), true;
+      if (event.key === 'Backspace') return this.draft.pop(), this.draftEdited(), true;
     }
     if (event.key === 'Escape' && (this.inside.length || this.outside.length)) {
       this.clearClicks();

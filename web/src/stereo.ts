@@ -9,6 +9,7 @@
 // redraws at most once per animation frame.
 import * as api from './api';
 import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
+import { ModelState } from './modelState';
 
 export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
 
@@ -20,6 +21,8 @@ export interface StereoHost {
   toast(message: string, kind?: 'error' | 'info'): void;
   /** The settings changed: keep them for a reload. */
   changed(): void;
+  /** The model's state changed (the badge, the export menu and the dimming follow it). */
+  modelChanged(): void;
 }
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
@@ -127,6 +130,8 @@ export class StereoSession {
   brightness = 1;
   photoIndex = 0;
   appliedCount = 0;
+  /** What the photo set's model on screen is: current, computing, stale or failed. */
+  readonly model: ModelState;
   private maps: Maps | null = null;
   private photo: ImageData | null = null;
   private requestCounter = 0;
@@ -141,6 +146,7 @@ export class StereoSession {
     private readonly host: StereoHost,
   ) {
     this.params = structuredClone(options.stereo_defaults);
+    this.model = new ModelState(() => host.modelChanged());
     this.canvas = $<HTMLCanvasElement>('stereo-canvas');
     this.dome = $<HTMLCanvasElement>('light-dome');
     this.buildPanel();
@@ -201,6 +207,7 @@ export class StereoSession {
     this.info = null;
     this.result = null;
     this.maps = null;
+    this.model.reset();
   }
 
   /** What a reload needs to show the set again. */
@@ -216,6 +223,7 @@ export class StereoSession {
     this.photo = null;
     this.photoIndex = 0;
     this.refitNext = true;
+    this.model.changed('another photo set opened');
     this.canvas.width = info.width;
     this.canvas.height = info.height;
     $<HTMLInputElement>('stereo-photo').max = String(info.count);
@@ -243,6 +251,7 @@ export class StereoSession {
     const controller = new AbortController();
     this.inFlight = controller;
     const body = this.request();
+    const version = this.model.computing();
     this.host.solving(true);
     try {
       const result = await api.stereo(body, controller.signal);
@@ -253,6 +262,7 @@ export class StereoSession {
       this.result = result;
       this.maps = maps;
       this.host.showMesh(result, mesh, this.refitNext);
+      this.model.arrived(version);
       this.refitNext = false;
       this.appliedCount += 1;
       this.setError(null);
@@ -260,11 +270,12 @@ export class StereoSession {
       this.draw();
     } catch (err) {
       if ((err as Error).name === 'AbortError') return;
-      if (err instanceof api.ApiError && err.status === 404) {
-        this.setError(`The server no longer has these photos (it was restarted or forgot them): open them again with Open photos`);
-        return;
-      }
-      this.setError((err as Error).message);
+      const message =
+        err instanceof api.ApiError && err.status === 404
+          ? 'The server no longer has these photos (it was restarted or forgot them): open them again with Open photos'
+          : (err as Error).message;
+      this.setError(message);
+      this.model.failed(version, message);
     } finally {
       if (this.inFlight === controller) {
         this.inFlight = null;
@@ -280,6 +291,7 @@ export class StereoSession {
   private change(patch: Partial<StereoParams>): void {
     const onlyStep = Object.keys(patch).every((key) => key === 'step');
     this.params = { ...this.params, ...patch };
+    this.model.changed();
     this.showParams();
     this.host.changed();
     if (!onlyStep) this.refitNext = true;
@@ -525,6 +537,8 @@ export class StereoSession {
       show: () => this.show,
       light: () => [...this.light],
       applied: () => this.appliedCount,
+      /** The photo set's model: current, computing, stale or failed (modelState.ts). */
+      modelState: () => this.model.view(),
       error: () => ($('stereo-error').hidden ? null : $('stereo-error').textContent),
       note: () => $('stereo-note').textContent,
       lastResult: () => {

@@ -11,6 +11,7 @@
 // whose settings changed (it keeps each view's reconstruction).
 import * as api from './api';
 import type { FuseRequest, FuseResult, ImageInfo, Options } from './api.gen';
+import { ModelState } from './modelState';
 import type { ImageSource, Params } from './state';
 
 /** One view: a stored photo, where it came from (to reopen it), its angle and its settings. */
@@ -46,6 +47,8 @@ export interface ViewsHost {
   toast(message: string, kind?: 'error' | 'info'): void;
   /** The views or their settings changed: keep them for a reload. */
   changed(): void;
+  /** The fused model's state changed (the badge, the export menu and the dimming follow it). */
+  modelChanged(): void;
 }
 
 /** The partial models' colours, view by view (the cards' swatches show the same). */
@@ -97,6 +100,8 @@ export class ViewsSession {
   editing: number | null = null;
   result: FuseResult | null = null;
   appliedCount = 0;
+  /** What the fused model on screen is: current, computing, stale or failed. */
+  readonly model: ModelState;
   private requestCounter = 0;
   private inFlight: AbortController | null = null;
   private refitNext = true;
@@ -106,6 +111,7 @@ export class ViewsSession {
     private readonly options: Options,
     private readonly host: ViewsHost,
   ) {
+    this.model = new ModelState(() => host.modelChanged());
     this.bindPanel();
   }
 
@@ -162,6 +168,7 @@ export class ViewsSession {
   /** Add the photo open in single-photo mode, with its settings; returns its index. */
   add(view: View): number {
     this.views.push(structuredClone(view));
+    this.model.changed('a view was added');
     this.host.changed();
     this.render();
     return this.views.length - 1;
@@ -207,6 +214,7 @@ export class ViewsSession {
   /** The panel is left: nothing is fused any more. */
   close(): void {
     this.inFlight?.abort();
+    this.model.reset();
   }
 
   /** What the user changed while editing a view in single-photo mode goes into the view. */
@@ -224,6 +232,7 @@ export class ViewsSession {
     this.views = views;
     this.editing = null;
     this.result = null;
+    this.model.changed('other views opened');
     this.refitNext = true;
     this.host.changed();
     this.render();
@@ -247,6 +256,9 @@ export class ViewsSession {
     if (this.views.length < 2) {
       this.result = null;
       this.setError(null);
+      // a fused model still on screen is no longer the views': it stays, out of date
+      if (this.model.shown) this.model.changed('fusing needs at least two views');
+      else this.model.reset();
       $('views-note').textContent = this.views.length
         ? 'Add a photo of the object from another side: fusing needs at least two views.'
         : '';
@@ -255,6 +267,7 @@ export class ViewsSession {
     const controller = new AbortController();
     this.inFlight = controller;
     const body = this.request();
+    const version = this.model.computing();
     this.host.solving(true);
     try {
       const result = await api.fuse(body, controller.signal);
@@ -266,6 +279,7 @@ export class ViewsSession {
       this.result = result;
       this.retried = false;
       this.host.showFused(result, fused, parts, this.refitNext);
+      this.model.arrived(version);
       this.refitNext = false;
       this.appliedCount += 1;
       this.setError(null);
@@ -273,8 +287,9 @@ export class ViewsSession {
       this.render();
     } catch (err) {
       if ((err as Error).name === 'AbortError' || body.request_id !== this.requestCounter) return;
-      if (err instanceof api.ApiError && err.status === 404 && (await this.reopenForgotten(err.message))) return;
+      if (err instanceof api.ApiError && err.status === 404 && (await this.reopenForgotten(err.message, version))) return;
       this.setError((err as Error).message);
+      this.model.failed(version, (err as Error).message);
     } finally {
       if (this.inFlight === controller) {
         this.inFlight = null;
@@ -285,14 +300,16 @@ export class ViewsSession {
 
   /** The server forgot a view's photo ("view N: unknown image id ..."): reopen it if it is an
    * example and fuse again (once), or say which photo to open again. */
-  private async reopenForgotten(message: string): Promise<boolean> {
+  private async reopenForgotten(message: string, version: number): Promise<boolean> {
     const found = /^view (\d+):/.exec(message);
     const index = found ? Number(found[1]) - 1 : -1;
     const view = this.views[index];
     if (!view) return false;
     const info = this.retried ? null : await this.host.reopen(view.source).catch(() => null);
     if (!info) {
-      this.setError(`The server no longer has view ${index + 1}'s photo, ${view.image.name} (it was restarted or forgot it): remove the view and add the photo again, or open the view photos again`);
+      const said = `The server no longer has view ${index + 1}'s photo, ${view.image.name} (it was restarted or forgot it): remove the view and add the photo again, or open the view photos again`;
+      this.setError(said);
+      this.model.failed(version, said);
       return true;
     }
     this.retried = true;
@@ -334,6 +351,7 @@ export class ViewsSession {
     const resolution = $<HTMLSelectElement>('views-resolution');
     resolution.addEventListener('change', () => {
       this.resolution = resolution.value === 'auto' ? null : Number(resolution.value);
+      this.model.changed();
       this.host.changed();
       this.solve();
     });
@@ -341,6 +359,7 @@ export class ViewsSession {
       const box = $<HTMLInputElement>(id);
       box.addEventListener('change', () => {
         this[key] = box.checked;
+        this.model.changed();
         this.host.changed();
         this.solve();
       });
@@ -368,12 +387,14 @@ export class ViewsSession {
 
   private edit(index: number): void {
     this.inFlight?.abort();
+    this.model.changed('a view is being edited');
     this.editing = index;
     this.host.edit(index);
   }
 
   private remove(index: number): void {
     this.views.splice(index, 1);
+    this.model.changed('a view was removed');
     this.result = null;
     this.host.changed();
     this.render();
@@ -386,6 +407,7 @@ export class ViewsSession {
     const view = this.views[index];
     const regions = [...view.params.concave.regions, ...structuredClone(settled)];
     view.params = { ...view.params, concave: { regions } };
+    this.model.changed('regions changed');
     this.host.changed();
     this.render();
     this.solve();
@@ -398,6 +420,7 @@ export class ViewsSession {
       return;
     }
     this.views[index].angle = angle;
+    this.model.changed('an angle changed');
     this.host.changed();
     this.solve();
   }
@@ -479,6 +502,8 @@ export class ViewsSession {
     return {
       views: () => this.views.map((view) => ({ image_id: view.image.image_id, name: view.image.name, angle: view.angle, params: structuredClone(view.params) })),
       applied: () => this.appliedCount,
+      /** The fused model: current, computing, stale or failed (modelState.ts). */
+      modelState: () => this.model.view(),
       editing: () => this.editing,
       error: () => ($('views-error').hidden ? null : $('views-error').textContent),
       note: () => $('views-note').textContent,

@@ -1,0 +1,114 @@
+// The state of a session's model (one photo, a photo set, the views): the one source the badge by
+// the 3D view, the export menu and the dimming of an outdated model are drawn from.
+//
+//   none       nothing asked, no model of this session on screen
+//   computing  a request for the current inputs is out (the model on screen, if any, is older)
+//   current    the model on screen was made from the current inputs: it may be exported
+//   stale      the inputs changed since the model on screen was made, and no request for them is
+//              out yet (a drag's pause, fewer than two views, a view being edited)
+//   failed     the server refused or failed the request for the current inputs; message says why
+//
+// Every change of the inputs bumps a version; a request remembers the version it was sent for,
+// so an answer to older inputs can never make the model "current".
+
+export type ModelStatus = 'none' | 'computing' | 'current' | 'stale' | 'failed';
+
+export interface ModelStateView {
+  status: ModelStatus;
+  /** failed: the server's one-line message; stale: what changed. */
+  message: string | null;
+  /** Whether a model of this session is on screen (perhaps an outdated one). */
+  shown: boolean;
+  /** The statuses so far, oldest first (the last 100): lets a test see a short-lived state. */
+  history: ModelStatus[];
+}
+
+const HISTORY = 100;
+
+export class ModelState {
+  private state: ModelStatus = 'none';
+  private why: string | null = null;
+  private shownModel = false;
+  private version = 0;
+  private readonly log: ModelStatus[] = ['none'];
+
+  constructor(private readonly onChange: () => void) {}
+
+  get status(): ModelStatus {
+    return this.state;
+  }
+
+  get message(): string | null {
+    return this.why;
+  }
+
+  get shown(): boolean {
+    return this.shownModel;
+  }
+
+  view(): ModelStateView {
+    return { status: this.state, message: this.why, shown: this.shownModel, history: [...this.log] };
+  }
+
+  /** What the model is made from changed: the model on screen no longer matches it. */
+  changed(reason = 'parameters changed'): void {
+    this.version += 1;
+    this.set('stale', reason);
+  }
+
+  /** A request for the current inputs goes out; returns the version it is for. */
+  computing(): number {
+    this.set('computing', null);
+    return this.version;
+  }
+
+  /** A model made from the inputs of ``version`` is drawn; ``final`` is false for a quick look. */
+  arrived(version: number, final = true): void {
+    this.shownModel = true;
+    if (version !== this.version) {
+      this.onChange(); // still stale or computing: the inputs moved on meanwhile
+      return;
+    }
+    this.set(final ? 'current' : 'computing', null);
+  }
+
+  /** The request for the inputs of ``version`` was refused or failed: ``message`` says why. */
+  failed(version: number, message: string): void {
+    if (version !== this.version) return; // about inputs the user has already changed
+    this.set('failed', message);
+  }
+
+  /** No model of this session on screen any more (another mode took the 3D view). */
+  reset(): void {
+    this.version += 1;
+    this.shownModel = false;
+    this.set('none', null);
+  }
+
+  private set(status: ModelStatus, message: string | null): void {
+    if (status === this.state && message === this.why) return;
+    this.state = status;
+    this.why = message;
+    if (this.log.at(-1) !== status) {
+      this.log.push(status);
+      if (this.log.length > HISTORY) this.log.shift();
+    }
+    this.onChange();
+  }
+}
+
+/** The badge's words for a state. */
+export function statusText(status: ModelStatus, message: string | null): string {
+  switch (status) {
+    case 'current':
+      return 'Up to date';
+    case 'computing':
+      return 'Computing…';
+    case 'stale':
+      return `Out of date: ${message ?? 'parameters changed'}`;
+    case 'failed':
+      return `Failed: ${message ?? 'the server could not make the model'}`;
+    default:
+      return '';
+  }
+}
