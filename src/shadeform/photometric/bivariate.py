@@ -549,8 +549,9 @@ def slant_scale(lights, readings, start):
     can: a highlight sits where the normal meets a half vector, which tilts the other way. So
     the scale is the one whose per-pixel fits (:func:`_refine`, from the Lambertian ``start``
     turned by the ambiguity) leave the least median residual, a golden-section search on its
-    logarithm within :data:`SLANT_BOUND`, over the pixels lit often enough for the model
-    (:data:`READINGS_PER_UNKNOWN`). It gives 1 where the photos cannot tell: lights all at
+    logarithm within :data:`SLANT_BOUND`; a pixel lit too rarely for the model
+    (:data:`READINGS_PER_UNKNOWN`) is judged by the Lambertian fit the fit itself keeps there
+    (where the lights' strengths are known, a wrong slant leaves it a residual too). It gives 1 where the photos cannot tell: lights all at
     nearly one slant (:data:`SLANT_SPREAD`), a minimum on the bound, or a scale that explains
     no more pixels better than chance would (a sign test, :data:`SIGN_TEST`).
 
@@ -573,22 +574,30 @@ def slant_scale(lights, readings, start):
     if np.std(np.degrees(np.arccos(np.clip(lights[:, 2], -1.0, 1.0)))) < SLANT_SPREAD:
         return 1.0
     albedo = np.linalg.norm(start, axis=1)
-    # only pixels lit often enough for the model to be fitted at all (as in :func:`fit`)
+    # each pixel judged by the model the fit gives it (:func:`fit`): this one where it is lit
+    # often enough, the Lambertian one where it is lit in more photos than g has unknowns
     lit = (lights @ (start / albedo[:, None]).T > 0) & (readings > 0)
-    modelled = lit.sum(axis=0) >= READINGS_PER_UNKNOWN * (POWERS + LOBES + 2)
-    if np.count_nonzero(modelled) <= SIGN_TEST**2:
+    count = lit.sum(axis=0)
+    modelled = count >= READINGS_PER_UNKNOWN * (POWERS + LOBES + 2)
+    plain = ~modelled & (count > 3)
+    if np.count_nonzero(modelled | plain) <= SIGN_TEST**2:
         return 1.0  # too few for the sign test below ever to pass
-    start, albedo = start[modelled], albedo[modelled]
-    readings = np.ascontiguousarray(readings[:, modelled], dtype=np.float64)
+    albedo = np.concatenate([albedo[modelled], albedo[plain]])
+    model_start = start[modelled]
+    model_readings = np.ascontiguousarray(readings[:, modelled], dtype=np.float64)
+    plain_readings, plain_lit = readings[:, plain], lit[:, plain].astype(np.float64)
 
     def costs(log_scale):
         scale = np.exp(log_scale)
         tilted = lambertian.scaled_lights(lights, scale)
-        normals = start / np.array([scale, scale, 1.0])  # the ambiguity's normals for these lights
+        normals = model_start / np.array([scale, scale, 1.0])  # the ambiguity's normals for these lights
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
         half = lambertian.half_vectors(tilted)
-        normals, _, _ = _refine(normals, readings, tilted, half)
-        return _costs(normals, readings, tilted, half) / albedo**2
+        normals, _, _ = _refine(normals, model_readings, tilted, half)
+        g = np.nan_to_num(lambertian.fit(tilted, plain_readings, plain_lit)[0])
+        residuals = plain_readings - np.maximum(tilted @ g.T, 0.0)  # every reading, unlit as dark
+        both = np.concatenate([_costs(normals, model_readings, tilted, half), np.sum(residuals**2, axis=0)])
+        return both / albedo**2
 
     def loss(log_scale):
         return float(np.median(costs(log_scale)))
