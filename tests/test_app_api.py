@@ -747,11 +747,92 @@ class TestGuard:
         evil = {"origin": "http://attacker.example"}
         assert_error(upload_with(client, evil), 403, "other sites")
         assert_error(client.post("/api/reconstruct", json={"image_id": bowl["image_id"]}, headers=evil), 403)
-        assert client.get("/api/options", headers={"origin": "http://localhost:5173"}).status_code == 200
+
+    @pytest.mark.parametrize(
+        "origin",
+        [
+            "null",  # a sandboxed page, a local file
+            "NULL",
+            "http://localhost:5173",  # another server on this machine: another origin
+            "http://127.0.0.1:8001",
+            "http://127.0.0.1",  # port 80
+            "https://127.0.0.1:8000",  # another scheme
+            "http://localhost:8000",  # another host name for the same machine
+            "http://127.0.0.1:8000.attacker.example",
+            "http://attacker.example#127.0.0.1:8000",
+            "http://127.0.0.1:8000/",  # not an origin
+            "http://user@127.0.0.1:8000",
+            "file://",
+            "chrome-extension://abcdef",
+            "127.0.0.1:8000",
+            "",
+        ],
+    )
+    def test_only_the_apps_own_origin(self, client, bowl, origin):
+        headers = {"origin": origin}
+        for response in (
+            client.get("/api/options", headers=headers),
+            client.post("/api/reconstruct", json={"image_id": bowl["image_id"]}, headers=headers),
+            upload_with(client, headers),
+            client.get("/", headers=headers),
+        ):
+            detail = assert_error(response, 403, "refused", "open the app at the address it printed")
+        assert ("null" in detail.lower()) == (origin.lower() == "null")
+
+    def test_own_origin_served(self, client, bowl):
+        for origin in ("http://127.0.0.1:8000", "HTTP://127.0.0.1:8000"):
+            assert client.get("/api/options", headers={"origin": origin}).status_code == 200
+        response = upload_with(client, {"origin": LOCAL})
+        assert response.status_code == 201, response.text
+        # another address of this machine, asked for by the page itself (Host and Origin agree)
+        for host, origin in (("localhost:5173", "http://localhost:5173"), ("[::1]:80", "http://[::1]")):
+            response = client.get("/api/options", headers={"host": host, "origin": origin})
+            assert response.status_code == 200, (host, response.text)
+
+    def test_cross_site_fetch_refused(self, client, bowl):
+        # browsers say where a request comes from even where they send no Origin
+        for site in ("cross-site", "same-site"):
+            for mode in ("cors", "no-cors", "navigate"):
+                headers = {"sec-fetch-site": site, "sec-fetch-mode": mode}
+                assert_error(upload_with(client, headers), 403, "refused", site)
+            headers = {"sec-fetch-site": site, "sec-fetch-mode": "no-cors"}
+            # an <img> of another site showing the user's photo
+            assert_error(client.get(f"/api/images/{bowl['image_id']}/photo.png", headers=headers), 403)
+            # a link to the app from another site still opens it
+            link = {"sec-fetch-site": site, "sec-fetch-mode": "navigate"}
+            assert client.get("/", headers=link).status_code == 200
+        for site in ("same-origin", "none"):
+            headers = {"sec-fetch-site": site, "sec-fetch-mode": "cors", "origin": LOCAL}
+            assert upload_with(client, headers).status_code == 201
+
+    def test_one_host_header(self):
+        # a Host header sent twice is ambiguous: refused before any check reads either
+        scope = {
+            "type": "http",
+            "method": "GET",
+            "path": "/api/options",
+            "scheme": "http",
+            "headers": [(b"host", b"127.0.0.1:8000"), (b"host", b"attacker.example")],
+        }
+        sent = []
+
+        async def send(message):
+            sent.append(message)
+
+        async def receive():
+            return {"type": "http.request", "body": b""}
+
+        asyncio.run(create_app()(scope, receive, send))
+        assert sent[0]["status"] == 400
 
     def test_any_host_when_allowed(self):
         with TestClient(create_app(allowed_hosts=None), base_url="http://192.168.1.20:8000") as test_client:
             assert test_client.get("/api/options").status_code == 200
+            origin = {"origin": "http://192.168.1.20:8000"}
+            assert test_client.get("/api/options", headers=origin).status_code == 200
+            # any host, but still only the app's own pages
+            for origin in ("http://attacker.example", "null", "http://192.168.1.20:8001"):
+                assert_error(test_client.get("/api/options", headers={"origin": origin}), 403, "refused")
 
 
 def upload_with(client, headers):

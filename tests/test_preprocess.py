@@ -260,6 +260,16 @@ class TestApplyFilter:
         with pytest.raises(InputError, match="inside the mask"):
             apply_filter(bad, None, "mean:1")
 
+    @pytest.mark.parametrize("size", [9, 1e9, 1e300])
+    @pytest.mark.parametrize("kind", ["gaussian", "mean", "median", "minimum"])
+    def test_larger_than_the_image(self, kind, size):
+        # refused before scipy allocates a kernel of that size (1e9: MemoryError, 1e300: OverflowError)
+        with pytest.raises(
+            InputError, match=r"larger than the image \(8x5 pixels\); choose a size of at most 8"
+        ):
+            apply_filter(np.ones((5, 8)), None, Filter(kind, size))
+        assert apply_filter(np.ones((5, 8)), None, Filter(kind, 8)).shape == (5, 8)
+
 
 class TestNoiseLevel:
     @pytest.mark.parametrize("noise", [0.01, 0.03])

@@ -205,7 +205,8 @@ def apply_filter(image: np.ndarray, mask: np.ndarray | None, filter: Filter | st
     ------
     InputError
         If ``image`` is not 2-D, ``mask`` has another shape or is empty, ``image`` is not finite
-        inside the mask, or ``filter`` is not a valid filter.
+        inside the mask, or ``filter`` is not a valid filter or its size is larger than the
+        image's longer side.
     """
     spec = parse_filter(filter)
     image = np.array(image, dtype=np.float64)  # a copy: the result, where no filtering happens
@@ -218,6 +219,14 @@ def apply_filter(image: np.ndarray, mask: np.ndarray | None, filter: Filter | st
         raise InputError("image has NaN or infinite values inside the mask; fix them or the mask")
     if spec.kind == "none" or spec.size == 0:
         return image
+    longest = max(image.shape)
+    if spec.size > longest:
+        # a window (or a Gaussian's reach) wider than the image adds nothing, and scipy would
+        # allocate its kernel first (a size of 1e9 ended in MemoryError, 1e300 in OverflowError)
+        raise InputError(
+            f"{spec.kind} filter size {spec.size:g} is larger than the image "
+            f"({image.shape[1]}x{image.shape[0]} pixels); choose a size of at most {longest}"
+        )
 
     radius = int(spec.size)
     if spec.kind in ("gaussian", "mean"):

@@ -18,6 +18,8 @@ from shadeform.app.schema import MeshData
 
 __all__ = [
     "MEDIA_TYPES",
+    "PNG_RESPONSES",
+    "FILE_RESPONSES",
     "json_response",
     "base64_array",
     "png",
@@ -38,6 +40,18 @@ MEDIA_TYPES = {
     ".obj": "model/obj",
     ".stl": "model/stl",
     ".glb": "model/gltf-binary",
+}
+
+
+#: OpenAPI ``responses`` of a route that answers a PNG.
+PNG_RESPONSES: dict[int | str, dict] = {200: {"content": {"image/png": {}}, "description": "An 8-bit PNG."}}
+
+#: OpenAPI ``responses`` of a route that answers a mesh file (:func:`download`).
+FILE_RESPONSES: dict[int | str, dict] = {
+    200: {
+        "content": {media: {} for media in (*MEDIA_TYPES.values(), "application/octet-stream")},
+        "description": "The mesh file, as a download.",
+    }
 }
 
 

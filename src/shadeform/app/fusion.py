@@ -32,7 +32,15 @@ from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
-from shadeform.app.encoding import download, format_suffix, json_response, mesh_bytes, mesh_data, safe_stem
+from shadeform.app.encoding import (
+    FILE_RESPONSES,
+    download,
+    format_suffix,
+    json_response,
+    mesh_bytes,
+    mesh_data,
+    safe_stem,
+)
 from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
 from shadeform.errors import InputError
 
@@ -75,7 +83,7 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
     async def post_fuse(body: FuseRequest, request: Request) -> Response:
         return await state.solve_json(request, _result, state, _entries(state, body), body)
 
-    @router.post("/api/fuse/export", response_class=Response)
+    @router.post("/api/fuse/export", response_class=Response, responses=FILE_RESPONSES)
     async def post_fuse_export(
         body: FuseRequest,
         format: str = Query(..., description="A suffix from Options.formats, e.g. .glb."),

@@ -13,7 +13,17 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException
 
+from shadeform.app.schema import ErrorBody
 from shadeform.errors import InputError
+
+#: Every operation's error responses in the OpenAPI schema: any 4xx is one JSON line
+#: (:class:`~shadeform.app.schema.ErrorBody`); FastAPI's list-shaped 422 is never sent.
+ERROR_RESPONSES: dict[int | str, dict] = {
+    "4XX": {
+        "model": ErrorBody,
+        "description": "What was wrong with the request and what to do, in one line.",
+    }
+}
 
 
 @dataclass(frozen=True)
@@ -60,6 +70,8 @@ def add_error_handlers(app: FastAPI) -> None:
         detail = err.detail if isinstance(err.detail, str) else json.dumps(err.detail)
         if err.status_code == 404 and detail == "Not Found":
             detail = f"nothing at {request.url.path}; open / for the app"
+        elif err.status_code == 400 and detail == "There was an error parsing the body":
+            detail = _unreadable_body(err.__cause__)
         elif err.status_code == 405:
             detail = f"{request.method} is not allowed on {request.url.path}; see /api/openapi.json"
         return _error(err.status_code, detail, getattr(err, "headers", None))
@@ -73,6 +85,8 @@ def add_error_handlers(app: FastAPI) -> None:
         return _error(413 if isinstance(err, ImageTooLargeError) else 422, str(err))
 
     async def server_error(request: Request, err: Exception) -> Response:
+        # a bug, not the user's mistake: Starlette raises it on after this answer, so the server
+        # (uvicorn) logs the traceback; the client gets one line without it
         return _error(
             500,
             f"internal error ({type(err).__name__}) in shadeform; please report it with "
@@ -87,6 +101,19 @@ def add_error_handlers(app: FastAPI) -> None:
 
 def _error(status: int, detail: str, headers: dict | None = None) -> Response:
     return JSONResponse({"detail": " ".join(str(detail).split())}, status_code=status, headers=headers)
+
+
+def _unreadable_body(cause: BaseException | None) -> str:
+    """What was wrong with a body FastAPI could not parse (its own message names no cause)."""
+    if isinstance(cause, UnicodeDecodeError):
+        return "the request body is not UTF-8 text; send JSON encoded as UTF-8"
+    if isinstance(cause, RecursionError):
+        return "the request body is nested too deeply; send the JSON objects the API describes"
+    reason = " ".join(str(cause).split())[:80] if cause is not None else ""
+    return (
+        f"the request body could not be read{f' ({reason})' if reason else ''}; send a JSON object, "
+        "or the multipart form the API describes for uploads"
+    )
 
 
 def _validation_message(errors: Sequence[dict]) -> str:
@@ -108,6 +135,8 @@ def _validation_message(errors: Sequence[dict]) -> str:
             f"at least {ctx.get('min_length')}" if kind == "too_short" else f"at most {ctx.get('max_length')}"
         )
         message = f"{where or 'body'}: give {bound}, got {ctx.get('actual_length')}"
+    elif "Expected UploadFile" in str(first.get("msg", "")):
+        message = f"{where}: not a file; send it as a file in the multipart form (a part with a filename)"
     elif kind == "extra_forbidden":
         message = f"{where}: unknown field; remove it (see /api/openapi.json for the fields)"
     else:
@@ -121,15 +150,31 @@ def _validation_message(errors: Sequence[dict]) -> str:
 
 # --- the guard: hosts, origins, body sizes -----------------------------------------------------
 
+#: Methods that change nothing: another site's page may still navigate the browser to them.
+_SAFE_METHODS = ("GET", "HEAD")
+
+#: Ports an origin or a ``Host`` header leaves out.
+_DEFAULT_PORTS = {"http": 80, "https": 443}
+
+_OPEN_IT_HERE = "open the app at the address it printed"
+
 
 class Guard:
     """ASGI middleware run before anything else sees a request.
 
-    - ``Host`` (and ``Origin``, when a browser sends one) must name an allowed host: a page from
-      another site, or a DNS name rebound to 127.0.0.1, cannot use the app.
+    - ``Host`` must name an allowed host: a DNS name rebound to 127.0.0.1 cannot reach the app.
+    - ``Origin``, when a browser sends one, must be exactly the app's own origin: the scheme,
+      host and port the request was addressed to. Another site's page, a page on another port
+      of this machine, and a sandboxed page or local file (``Origin: null``) are refused; so is
+      a request the browser marks ``Sec-Fetch-Site: cross-site`` or ``same-site``, unless it is
+      a plain navigation (a link followed to the app). The app's own client, served from the
+      same origin, passes; so does the Vite dev server (``npm run dev``), whose proxy forwards
+      the page's ``Host`` with its ``Origin``.
     - Request bodies are read here up to their limit (the upload limit plus form overhead for
-      ``/api/images`` and, for all photos together, ``/api/photosets``; the JSON limit elsewhere) and refused with 413 beyond it, before any parser
-      runs or anything is spooled to disk.
+      ``/api/images`` and, for all photos together, ``/api/photosets``; the JSON limit
+      elsewhere) and refused with 413 beyond it, before any parser runs or anything is spooled
+      to disk: a ``Content-Length`` over the limit before a byte is read, a body streamed
+      without one as soon as it passes the limit.
     """
 
     _FORM_OVERHEAD = 64 * 1024
@@ -142,27 +187,19 @@ class Guard:
     async def __call__(self, scope, receive, send) -> None:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
-        headers = {key.decode("latin-1").lower(): value.decode("latin-1") for key, value in scope["headers"]}
-        refusal = self._refusal(headers)
+        headers: dict[str, list[str]] = {}
+        for key, value in scope["headers"]:
+            headers.setdefault(key.decode("latin-1").lower(), []).append(value.decode("latin-1"))
+        if len(headers.get("host", ())) > 1:
+            return await _send_error(send, 400, "the request has more than one Host header; send one")
+        refusal = self._refusal(scope, headers)
         if refusal is not None:
             return await _send_error(send, 403, refusal)
-        if scope["method"] not in ("POST", "PUT", "PATCH"):
-            return await self.app(scope, receive, send)
 
-        limit = self.limits.max_json_bytes
-        if scope["path"] in ("/api/images", "/api/photosets"):
-            limit = self.limits.max_upload_bytes + self._FORM_OVERHEAD
-        if scope["path"] == "/api/images":
-            too_large = file_too_large(self.limits)
-        elif scope["path"] == "/api/photosets":
-            too_large = (
-                f"the photos together are larger than {size_text(self.limits.max_upload_bytes)}; "
-                "open fewer or smaller photos"
-            )
-        else:
-            too_large = f"the request body is larger than {size_text(limit)}; send fewer or simpler regions"
-        declared = headers.get("content-length", "")
-        if declared.isdigit() and int(declared) > limit:
+        # every method: a body on a GET is read (and capped) like any other
+        limit, too_large = self._body_limit(scope["path"])
+        declared = headers.get("content-length", [""])[-1].strip()
+        if re.fullmatch(r"[0-9]+", declared) and int(declared) > limit:
             return await _send_error(send, 413, too_large)
         chunks, total = [], 0
         while True:
@@ -188,27 +225,84 @@ class Guard:
 
         return await self.app(scope, replay, send)
 
-    def _refusal(self, headers: dict[str, str]) -> str | None:
-        if self.allowed is None:
-            return None
-        host = _host_name(headers.get("host", ""))
-        if host not in self.allowed:
+    def _body_limit(self, path: str) -> tuple[int, str]:
+        """The most bytes a request body to ``path`` may have, and the refusal beyond it."""
+        if path == "/api/images":
+            return self.limits.max_upload_bytes + self._FORM_OVERHEAD, file_too_large(self.limits)
+        if path == "/api/photosets":
+            return self.limits.max_upload_bytes + self._FORM_OVERHEAD, (
+                f"the photos together are larger than {size_text(self.limits.max_upload_bytes)}; "
+                "open fewer or smaller photos"
+            )
+        limit = self.limits.max_json_bytes
+        return limit, f"the request body is larger than {size_text(limit)}; send fewer or simpler regions"
+
+    def _refusal(self, scope, headers: dict[str, list[str]]) -> str | None:
+        """Why a request must be refused (one line for the user), or None to serve it."""
+        host_header = headers.get("host", [""])[0]
+        own = _authority(host_header)
+        if self.allowed is not None and (own is None or own[0] not in self.allowed):
             return (
                 f"this server only answers requests addressed to {', '.join(sorted(self.allowed))}; "
                 "open it at the address it printed (or start it with --host and --allow-remote)"
             )
-        origin = headers.get("origin")
-        if origin and origin != "null" and _host_name(origin.split("://", 1)[-1]) not in self.allowed:
-            return "requests from other sites' pages are refused; open the app at the address it printed"
+        origins = headers.get("origin", [])
+        if origins:
+            origin = origins[0].strip()
+            if origin.lower() == "null":
+                return (
+                    "requests from sandboxed pages and local files (Origin: null) are refused; "
+                    + _OPEN_IT_HERE
+                )
+            scheme = scope.get("scheme", "http")
+            if len(origins) > 1 or own is None or _origin(origin) != _with_port(scheme, *own):
+                shown = origin if len(origin) <= 60 else origin[:57] + "..."
+                return (
+                    f"requests from other sites' pages are refused (this one came from {shown!r}, "
+                    f"not from the app at {scheme}://{host_header}); {_OPEN_IT_HERE}"
+                )
+        site = headers.get("sec-fetch-site", [""])[0].strip().lower()
+        if site in ("cross-site", "same-site"):
+            mode = headers.get("sec-fetch-mode", [""])[0].strip().lower()
+            if scope["method"] not in _SAFE_METHODS or mode != "navigate":
+                return f"requests from other sites' pages are refused (the browser marked this one {site}); {_OPEN_IT_HERE}"
         return None
 
 
-def _host_name(authority: str) -> str:
-    """The host of ``host[:port]`` or ``[v6]:port``, lower case, without brackets."""
-    authority = authority.strip().lower().split("/", 1)[0]
-    if authority.startswith("["):
-        return authority[1:].split("]", 1)[0]
-    return authority.rsplit(":", 1)[0] if authority.count(":") == 1 else authority
+def _authority(text: str) -> tuple[str, int | None] | None:
+    """``host[:port]`` or ``[v6]:port`` as (host in lower case without brackets, port or None);
+    None when it is not an authority (a path, user info, a port that is not a number)."""
+    text = text.strip().lower()
+    if not text or any(ch in text for ch in "/?#@\\ "):
+        return None
+    if text.startswith("["):
+        host, bracket, rest = text[1:].partition("]")
+        if not bracket:
+            return None
+    elif text.count(":") > 1:  # a bare IPv6 address
+        host, rest = text, ""
+    else:
+        host, colon, port = text.partition(":")
+        rest = colon + port
+    if rest in ("", ":"):  # RFC 3986 allows an empty port: the default one
+        return host, None
+    if not re.fullmatch(r":[0-9]{1,5}", rest):
+        return None
+    return host, int(rest[1:])
+
+
+def _origin(text: str) -> tuple[str, str, int] | None:
+    """An ``Origin`` header as (scheme, host, port), the default port filled in; None if it is
+    not a web origin."""
+    scheme, sep, rest = text.strip().lower().partition("://")
+    if not sep or scheme not in _DEFAULT_PORTS:
+        return None
+    authority = _authority(rest)
+    return None if authority is None else _with_port(scheme, *authority)
+
+
+def _with_port(scheme: str, host: str, port: int | None) -> tuple[str, str, int]:
+    return scheme, host, _DEFAULT_PORTS.get(scheme, 0) if port is None else port
 
 
 async def _send_error(send: Callable, status: int, detail: str) -> None:

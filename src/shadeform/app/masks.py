@@ -27,10 +27,11 @@ from fastapi import APIRouter, FastAPI
 from fastapi.responses import Response
 
 from shadeform.app.encoding import png_base64
+from shadeform.app.guard import ERROR_RESPONSES
 from shadeform.app.schema import AutoMaskRequest, MaskFileRequest, MaskResult, SeedMaskRequest
 from shadeform.errors import InputError
 
-__all__ = ["add_mask_routes", "user_mask"]
+__all__ = ["add_mask_routes", "mask_from_file", "user_mask"]
 
 
 def add_mask_routes(app: FastAPI, state: Any) -> None:
@@ -44,7 +45,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
     state : shadeform.app.server._State
         The app's store: its images (``state.image(id)``), limits and mask cache.
     """
-    router = APIRouter(prefix="/api/images/{image_id}/mask")
+    router = APIRouter(prefix="/api/images/{image_id}/mask", responses=ERROR_RESPONSES)
 
     @router.post("/auto", response_model=MaskResult)
     def post_auto(image_id: str, body: AutoMaskRequest) -> Response:
@@ -129,14 +130,40 @@ def _channel(state: Any, entry: Any, channel: str) -> tuple[np.ndarray, np.ndarr
 
 
 def _decode(text: str, shape: tuple[int, ...], max_pixels: int) -> np.ndarray:
-    from shadeform.io.images import load_pixels
-
     try:
         data = base64.b64decode(text, validate=True)
     except (binascii.Error, ValueError):
         raise InputError(
             "mask is not base64 text of an image file; send the file's bytes in base64"
         ) from None
+    return mask_from_file(data, shape, max_pixels)
+
+
+def mask_from_file(data: bytes, shape: tuple[int, ...], max_pixels: int) -> np.ndarray:
+    """A mask file a client sent, read from memory and checked.
+
+    Parameters
+    ----------
+    data : bytes
+        The file's content (PNG, TIFF, BMP, ...); non-zero in any channel = object.
+    shape : tuple of int
+        The image's ``(H, W)``: the mask must have it.
+    max_pixels : int
+        The server's pixel limit, checked from the file's header before anything is decoded.
+
+    Returns
+    -------
+    (H, W) bool
+
+    Raises
+    ------
+    InputError
+        If the file is empty or not an image, has another size or no non-zero pixel;
+        :class:`~shadeform.io.images.ImageTooLargeError` if its header declares more than
+        ``max_pixels``.
+    """
+    from shadeform.io.images import load_pixels
+
     if not data:
         raise InputError("mask is an empty file; send a PNG of the image's size")
     try:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 import sys
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.json_schema import models_json_schema
@@ -62,6 +62,10 @@ FilterKind = TypeAliasType("FilterKind", Literal["none", "gaussian", "mean", "me
 LightMode = TypeAliasType("LightMode", Literal["z", "slant_tilt", "estimate"])
 Axis = TypeAliasType("Axis", Literal["x", "y", "both"])
 StereoLights = TypeAliasType("StereoLights", Literal["file", "sphere", "unknown"])
+
+# a pixel row or column a client sends: no image is 2**31 pixels wide, and a larger number would
+# wrap around in numpy's int64 and be reported as another pixel
+_PixelIndex = Annotated[int, Field(ge=-(2**31), lt=2**31)]
 
 
 class _Model(BaseModel):
@@ -126,7 +130,7 @@ class ReconstructParams(_Model):
         ge=1,
         description="Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve.",
     )
-    references: list[tuple[int, int]] = Field(
+    references: list[tuple[_PixelIndex, _PixelIndex]] = Field(
         default_factory=list,
         description="Reference pixels ``[row, col]`` chosen by the user; the automatic ones are added.",
     )
@@ -470,10 +474,10 @@ class SeedMaskRequest(_Model):
     """The object under the user's clicks (:func:`shadeform.masks.segment_from_seeds`)."""
 
     channel: Channel = "luma"
-    inside: list[tuple[int, int]] = Field(
+    inside: list[tuple[_PixelIndex, _PixelIndex]] = Field(
         min_length=1, max_length=1000, description="Pixels ``[row, col]`` on the object."
     )
-    outside: list[tuple[int, int]] = Field(
+    outside: list[tuple[_PixelIndex, _PixelIndex]] = Field(
         default_factory=list, max_length=1000, description="Pixels ``[row, col]`` on the background."
     )
     radius: int = Field(default=2, ge=0, le=64, description="Each click marks a disk of this radius, pixels.")

@@ -21,11 +21,14 @@ Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a
 id 404, malformed requests 4xx; nothing else of an exception (no traceback) reaches the client.
 
 Safety: the server binds to loopback unless told otherwise (``shadeform app --allow-remote``);
-requests whose ``Host`` (or ``Origin``) names another machine are refused, which stops DNS
-rebinding and other sites' pages from driving it; request bodies are capped before they are
-read; uploads are decoded from memory, never from a path a client sent; downloads are named by
-the server (a registry suffix and a sanitised stem). The limits, the guard and the error handlers
-live in :mod:`shadeform.app.guard`.
+requests whose ``Host`` names another machine are refused (DNS rebinding), and so are requests
+from any page but the app's own: an ``Origin`` other than exactly the scheme, host and port the
+request came to (another site, another port of this machine, ``null`` for a sandboxed page or a
+local file), or a browser's ``Sec-Fetch-Site: cross-site``. Request bodies are capped before
+they are read, images by pixels from their header before they are decoded; uploads are decoded
+from memory, never from a path a client sent; downloads are named by the server (a registry
+suffix and a sanitised stem). The limits, the guard and the error handlers live in
+:mod:`shadeform.app.guard`.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
 from shadeform.app.encoding import (
+    FILE_RESPONSES,
+    PNG_RESPONSES,
     display_name,
     download,
     format_suffix,
@@ -58,7 +63,7 @@ from shadeform.app.encoding import (
     png_base64,
 )
 from shadeform.app.fusion import add_fusion_routes
-from shadeform.app.guard import AppLimits, Guard, add_error_handlers, file_too_large
+from shadeform.app.guard import ERROR_RESPONSES, AppLimits, Guard, add_error_handlers, file_too_large
 from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.schema import (
     ExampleInfo,
@@ -110,8 +115,8 @@ def create_app(
     limits : AppLimits
         Upload and memory limits.
     allowed_hosts : sequence of str or None
-        Host names a request's ``Host`` and ``Origin`` may name; None allows any (for
-        ``--allow-remote``).
+        Host names a request's ``Host`` may name; None allows any (for ``--allow-remote``).
+        Either way a request with an ``Origin`` must come from the app's own origin.
     warm : bool
         Compile (or load from numba's cache) the solvers' kernels in a background thread at
         start-up, so that the first reconstruction does not wait for them.
@@ -138,6 +143,7 @@ def create_app(
         redoc_url=None,
         openapi_url="/api/openapi.json",
         lifespan=_lifespan(warm),
+        responses=ERROR_RESPONSES,
     )
     add_error_handlers(app)
     app.add_middleware(Guard, allowed_hosts=allowed_hosts, limits=limits)
@@ -174,7 +180,7 @@ def create_app(
         entry = state.example(name, size)
         return json_response(_image_info(entry), status_code=201)
 
-    @app.get("/api/images/{image_id}/photo.png", response_class=Response)
+    @app.get("/api/images/{image_id}/photo.png", response_class=Response, responses=PNG_RESPONSES)
     def get_photo(image_id: str) -> Response:
         entry = state.image(image_id)
         encoded = state.pngs.get((image_id, "photo"))
@@ -185,7 +191,7 @@ def create_app(
             state.pngs.put((image_id, "photo"), encoded, len(encoded))
         return Response(encoded, media_type="image/png", headers={"Cache-Control": "no-cache"})
 
-    @app.get("/api/images/{image_id}/channel.png", response_class=Response)
+    @app.get("/api/images/{image_id}/channel.png", response_class=Response, responses=PNG_RESPONSES)
     def get_channel(
         image_id: str,
         channel: str = Query("luma", description="luma, r, g, b or max."),
@@ -206,7 +212,7 @@ def create_app(
     async def post_reconstruct(body: ReconstructRequest, request: Request) -> Response:
         return await state.solve_json(request, _reconstruct_result, state, state.image(body.image_id), body)
 
-    @app.post("/api/export", response_class=Response)
+    @app.post("/api/export", response_class=Response, responses=FILE_RESPONSES)
     async def post_export(
         body: ReconstructRequest,
         format: str = Query(..., description="A suffix from Options.formats, e.g. .wrl."),

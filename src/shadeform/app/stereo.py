@@ -32,6 +32,8 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
 from shadeform.app.encoding import (
+    FILE_RESPONSES,
+    PNG_RESPONSES,
     display_name,
     download,
     format_suffix,
@@ -43,6 +45,7 @@ from shadeform.app.encoding import (
     png_base64,
 )
 from shadeform.app.guard import size_text
+from shadeform.app.masks import mask_from_file
 from shadeform.app.schema import PhotoSetInfo, StereoParams, StereoRequest, StereoResult
 from shadeform.app.store import new_image_id
 from shadeform.errors import InputError
@@ -137,7 +140,9 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         state.images.put(entry.photoset_id, entry, entry.nbytes)
         return json_response(_info(entry), status_code=201)
 
-    @router.get("/api/photosets/{photoset_id}/photos/{index}.png", response_class=Response)
+    @router.get(
+        "/api/photosets/{photoset_id}/photos/{index}.png", response_class=Response, responses=PNG_RESPONSES
+    )
     def get_photoset_photo(photoset_id: str, index: int) -> Response:
         entry = _photoset(state, photoset_id)
         if not 0 <= index < len(entry.images):
@@ -155,7 +160,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
     async def post_stereo(body: StereoRequest, request: Request) -> Response:
         return await state.solve_json(request, _result, state, _photoset(state, body.photoset_id), body)
 
-    @router.post("/api/stereo/export", response_class=Response)
+    @router.post("/api/stereo/export", response_class=Response, responses=FILE_RESPONSES)
     async def post_stereo_export(
         body: StereoRequest,
         format: str = Query(..., description="A suffix from Options.formats, e.g. .glb."),
@@ -177,7 +182,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
 
 def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
     """The uploads as a :class:`StoredPhotoSet`; every failure a one-line 4xx."""
-    from shadeform.io.images import ImageTooLargeError, load_mask
+    from shadeform.io.images import ImageTooLargeError
     from shadeform.io.photoset import match_lp, parse_lp, parse_rows, read_photos
 
     limits = state.limits
@@ -224,8 +229,9 @@ def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
             else:
                 directions = parse_rows(text, "lights", label, len(names), (3,))
         if mask is not None:
+            # the server's pixel limit, checked from the header (load_mask's own is far larger)
             data = mask.file.read(limits.max_upload_bytes + 1)
-            object_mask = load_mask(data, shape=(height, width))
+            object_mask = mask_from_file(data, (height, width), limits.max_pixels)
     except ImageTooLargeError as err:
         raise HTTPException(413, str(err)) from None
     except InputError as err:
