@@ -32,8 +32,31 @@ NORMAL_SUFFIXES = (".png",)
 DEPTH_SUFFIXES = (".tif", ".tiff", ".npy")
 
 
+# the base of click's usage errors, whichever click typer runs on (its own copy, or click itself)
+_CLICK_ERROR = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
+
+
 class _Group(TyperGroup):
     """The app's command group; the one place where errors become ``error: ...`` and exit 2."""
+
+    def main(self, *args, **kwargs):
+        """Run the command line; a usage error (a missing or malformed option, an unknown
+        command, a number out of range) is one line on stderr and exit code 2, like every other
+        user mistake, instead of click's boxed block."""
+        import sys
+
+        kwargs["standalone_mode"] = False  # click's exceptions reach us instead of its printer
+        try:
+            code = super().main(*args, **kwargs)
+        except typer.Abort:
+            typer.echo("error: stopped", err=True)
+            sys.exit(1)
+        except _CLICK_ERROR as err:
+            where = err.ctx.command_path if getattr(err, "ctx", None) is not None else "shadeform"
+            message = " ".join(err.format_message().split()).rstrip(".")
+            typer.echo(f"error: {message}; see '{where} --help'", err=True)
+            sys.exit(err.exit_code)
+        sys.exit(code if isinstance(code, int) else 0)
 
     def invoke(self, ctx):
         try:
@@ -355,4 +378,30 @@ MaxPixelsOption = Annotated[
         help="Refuse a photo or mask whose header declares more pixels than this, before decoding "
         "it (a damaged file or a decompression bomb); raise it for larger photos you trust.",
     ),
+]
+
+# the options of one photo's reconstruction that every command making something of it shares
+LightOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="X,Y,Z",
+        help='Direction toward the light in the camera frame, or "estimate" to estimate it from the image; 0,0,1 if not given.',
+    ),
+]
+ConcaveOption = Annotated[
+    Path | None,
+    typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False),
+]
+ReferenceOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--reference",
+        metavar="ROW,COL",
+        help="Reference pixel ROW,COL (or ROW,COL,NX,NY,NZ with its normal); repeat for several.",
+        show_default=False,
+    ),
+]
+MaskFileOption = Annotated[
+    Path | None,
+    typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
 ]

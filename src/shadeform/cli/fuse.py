@@ -12,10 +12,12 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from shadeform.cli._shell import (
+    MAX_PIXELS,
     ChannelOption,
     FilterOption,
     IntegratorOption,
     JsonOption,
+    MaxPixelsOption,
     MethodOption,
     SlantOption,
     TiltOption,
@@ -114,6 +116,7 @@ def fuse(
         ),
     ] = True,
     as_json: JsonOption = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Fuse photos of one object from several sides into one closed, watertight model."""
     import shadeform
@@ -161,10 +164,12 @@ def fuse(
             task = bar.add_task("views", total=len(entries))
             lap = time.perf_counter()
             for i, entry in enumerate(entries):
-                photo = read_photo(entry.photo, channel=channel)
+                photo = read_photo(entry.photo, channel=channel, max_pixels=max_pixels)
                 images.append(photo.image)
                 object_masks.append(
-                    shadeform.load_mask(entry.mask, shape=photo.image.shape) if entry.mask else None
+                    shadeform.load_mask(entry.mask, shape=photo.image.shape, max_pixels=max_pixels)
+                    if entry.mask
+                    else None
                 )
                 try:
                     drawn.append(list(as_regions(entry.concave)))

@@ -15,12 +15,18 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from shadeform.cli._shell import (
+    MAX_PIXELS,
     ChannelOption,
+    ConcaveOption,
     FilterOption,
     IntegratorOption,
     JsonOption,
+    LightOption,
     LinearOption,
+    MaskFileOption,
+    MaxPixelsOption,
     MethodOption,
+    ReferenceOption,
     RefineOption,
     SlantOption,
     StepOption,
@@ -61,34 +67,14 @@ def reconstruct(
     ],
     step: StepOption = 1,
     filter: FilterOption = None,
-    light: Annotated[
-        str | None,
-        typer.Option(
-            metavar="X,Y,Z",
-            help='Direction toward the light in the camera frame, or "estimate" to estimate it from the image; 0,0,1 if not given.',
-        ),
-    ] = None,
+    light: LightOption = None,
     slant: SlantOption = None,
     tilt: TiltOption = None,
     channel: ChannelOption = "auto",
     linear: LinearOption = None,
-    concave: Annotated[
-        Path | None,
-        typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False),
-    ] = None,
-    reference: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--reference",
-            metavar="ROW,COL",
-            help="Reference pixel ROW,COL (or ROW,COL,NX,NY,NZ with its normal); repeat for several.",
-            show_default=False,
-        ),
-    ] = None,
-    mask: Annotated[
-        Path | None,
-        typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
-    ] = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
@@ -97,10 +83,9 @@ def reconstruct(
     method: MethodOption = "auto",
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
-    import shadeform
-    from shadeform.io.images import read_photo
     from shadeform.regions import parse_regions
 
     # everything the user typed is checked before any work
@@ -114,23 +99,23 @@ def reconstruct(
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        with stage(err, f"loading {escape(str(image))}", timings, "load"):
-            photo = read_photo(image, channel=channel, linear=linear)
-            pixels = photo.image
-            object_mask = shadeform.load_mask(mask, shape=pixels.shape) if mask is not None else None
-        with stage(err, f"reconstructing ({method})", timings, "reconstruct"):
-            rec = shadeform.reconstruct(
-                pixels,
-                light=light_vector,
-                method=method,
-                mask=object_mask,
-                filter=filter,
-                references=references or None,
-                concave=regions,
-                integrator=integrator,
-                refine=refine,
-            )
-        rec = replace(rec, info={**rec.info, "photo": photo.info})
+        photo, rec = reconstruct_photo(
+            err,
+            timings,
+            image,
+            channel=channel,
+            linear=linear,
+            max_pixels=max_pixels,
+            mask=mask,
+            light=light_vector,
+            method=method,
+            filter=filter,
+            references=references or None,
+            concave=regions,
+            integrator=integrator,
+            refine=refine,
+        )
+        pixels = photo.image
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
         )
@@ -172,6 +157,27 @@ def reconstruct(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, **options):
+    """Load a photo (and its mask file, if given) and reconstruct it, each under a spinner: the
+    part of ``reconstruct`` that the commands making other things from one photo share.
+
+    Returns the :class:`~shadeform.io.images.Photo` and the reconstruction, whose ``info`` holds
+    the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
+    import shadeform
+    from shadeform.io.images import read_photo
+
+    with stage(err, f"loading {escape(str(image))}", timings, "load"):
+        photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
+        object_mask = (
+            shadeform.load_mask(mask, shape=photo.image.shape, max_pixels=max_pixels)
+            if mask is not None
+            else None
+        )
+    with stage(err, f"reconstructing ({options.get('method', 'auto')})", timings, "reconstruct"):
+        rec = shadeform.reconstruct(photo.image, mask=object_mask, **options)
+    return photo, replace(rec, info={**rec.info, "photo": photo.info})
 
 
 # --- stereo ------------------------------------------------------------------------------------
@@ -263,6 +269,7 @@ def stereo(
         typer.Option(help="Also write each normal's confidence (16-bit grey .png, 0 to 1)."),
     ] = None,
     as_json: JsonOption = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
     from shadeform._checks import check_choice
@@ -293,6 +300,7 @@ def stereo(
                 linear=linear,
                 channel=channel,
                 sphere=circle,
+                max_pixels=max_pixels,
             )
         with stage(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
             rec = reconstruct_stereo(
@@ -423,6 +431,7 @@ def lights(
     ] = None,
     linear: LinearOption = None,
     as_json: JsonOption = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Read each photo's light direction and strength from the highlight on a shiny sphere (light calibration, as for RTI)."""
     from shadeform.io.atomic import atomic_write
@@ -438,7 +447,7 @@ def lights(
     err = stderr_console()
     timings: dict[str, float] = {}
     with stage(err, "loading the photos", timings, "load"):
-        images = read_photos(paths, linear=linear)[0]
+        images = read_photos(paths, linear=linear, max_pixels=max_pixels)[0]
     with stage(err, "finding the sphere and its highlights", timings, "calibrate"):
         found = calibrate_lights(images, sphere=None if circle == "auto" else circle)
     with OutputSet() as outputs:
@@ -528,6 +537,7 @@ def batch(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object instead of the table.")
     ] = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
     from shadeform.batch import reconstruct_files
@@ -560,6 +570,7 @@ def batch(
             depth=depth,
             normals=normals,
             workers=workers,
+            max_pixels=max_pixels,
             progress=lambda done, _: bar.update(task, completed=done),
             light=light_vector,
             method=method,

@@ -16,6 +16,7 @@ from rich.table import Table
 
 from shadeform.cli._shell import (
     JsonOption,
+    MaxPixelsOption,
     SlantOption,
     TiltOption,
     app,
@@ -450,6 +451,7 @@ def app_command(
         ),
     ] = False,
     no_browser: Annotated[bool, typer.Option("--no-browser", help="Do not open a web browser.")] = False,
+    max_pixels: MaxPixelsOption = None,
 ) -> None:
     """Start the browser app: open a photo, draw concave regions, see and export the 3D model."""
     import ipaddress
@@ -460,6 +462,7 @@ def app_command(
     try:
         import uvicorn
 
+        from shadeform.app.guard import AppLimits
         from shadeform.app.server import LOOPBACK_HOSTS, create_app
     except ImportError as missing:
         raise InputError(
@@ -492,8 +495,13 @@ def app_command(
     err = stderr_console()
     with err.status("opening the image", spinner="dots"):
         # warm: the numba kernels compile (or load) in the background, so the first click does not wait
+        # the server's own pixel limit (it keeps several photos in memory) unless raised
+        limits = AppLimits() if max_pixels is None else AppLimits(max_pixels=max_pixels)
         application = create_app(
-            initial_image=initial, allowed_hosts=None if allow_remote else LOOPBACK_HOSTS, warm=True
+            initial_image=initial,
+            allowed_hosts=None if allow_remote else LOOPBACK_HOSTS,
+            warm=True,
+            limits=limits,
         )
     # bind first, so that the printed address (and port 0's pick) is the one that answers
     family = socket.AF_INET6 if ":" in host else socket.AF_INET

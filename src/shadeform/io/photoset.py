@@ -21,7 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from shadeform.errors import InputError
-from shadeform.io.images import CALIBRATED_SET_FILE, CHANNELS, load_mask, read_photo, select_channel
+from shadeform.io.images import (
+    CALIBRATED_SET_FILE,
+    CHANNELS,
+    MAX_PIXELS,
+    load_mask,
+    read_photo,
+    select_channel,
+)
 
 #: Files a folder's photos may be, when it has no filenames.txt.
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
@@ -90,6 +97,7 @@ def load_photo_set(
     linear: bool | None = None,
     channel: str | None = None,
     sphere=None,
+    max_pixels: int = MAX_PIXELS,
 ) -> PhotoSet:
     """Read photos and their light files, or read their lights from a shiny sphere in them.
 
@@ -116,6 +124,9 @@ def load_photo_set(
         to the photometric stereo (``lights`` is then None). Not with ``lights`` or
         ``intensities``; a folder's light files are then ignored, and its mask (or the caller's)
         is kept.
+    max_pixels : int
+        Refuse a photo or mask that declares more pixels than this, before decoding it
+        (:func:`shadeform.io.images.read_photo`).
 
     Returns
     -------
@@ -149,7 +160,7 @@ def load_photo_set(
     decided = "user"
     if linear is None and len(sources) == 1 and (sources[0] / CALIBRATED_SET_FILE).is_file():
         linear, decided = True, "set"
-    images, bits, encoding, read_from, colour = read_photos(photos, linear=linear)
+    images, bits, encoding, read_from, colour = read_photos(photos, linear=linear, max_pixels=max_pixels)
     decided = read_from if linear is None else decided
     circle = None
     if sphere is not None and not (isinstance(sphere, str) and sphere == "unknown"):
@@ -168,7 +179,7 @@ def load_photo_set(
             images /= strengths[:, None, None, :].astype(np.float32)
             strengths = None
         images = np.stack([select_channel(image, channel) for image in images])
-    found_mask = load_mask(mask, shape=images.shape[1:3]) if mask is not None else None
+    found_mask = load_mask(mask, shape=images.shape[1:3], max_pixels=max_pixels) if mask is not None else None
     return PhotoSet(
         tuple(photos),
         images,

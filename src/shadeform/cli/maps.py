@@ -1,0 +1,227 @@
+"""``shadeform maps``: one photo -> texture maps (normal, height, ambient occlusion, curvature);
+with ``--material``, of a textured surface filling the frame (and its albedo)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.markup import escape
+
+from shadeform.cli._shell import (
+    MAX_PIXELS,
+    ChannelOption,
+    ConcaveOption,
+    FilterOption,
+    IntegratorOption,
+    JsonOption,
+    LightOption,
+    LinearOption,
+    MaskFileOption,
+    MaxPixelsOption,
+    MethodOption,
+    ReferenceOption,
+    RefineOption,
+    SlantOption,
+    TiltOption,
+    app,
+    format_seconds,
+    note_channel,
+    note_unsure,
+    parse_reference,
+    print_files,
+    print_json,
+    resolve_light,
+    stderr_console,
+    stdout_console,
+)
+from shadeform.cli.photos import reconstruct_photo
+from shadeform.io.atomic import OutputSet
+
+#: Each map's file ending, bits per sample and legend (what its values mean).
+LEGEND = {
+    "normal_opengl": (16, "normal map, OpenGL convention (green up): Blender, Unity, glTF"),
+    "normal_directx": (16, "normal map, DirectX convention (green down): Unreal, 3ds Max"),
+    "height": (16, "height / displacement: black lowest, white highest{range}"),
+    "ambient_occlusion": (8, "ambient occlusion: white open sky, dark cavities"),
+    "curvature": (8, "curvature: mid-grey flat, brighter convex edges, darker cavities"),
+}
+ALBEDO = (8, "albedo: the photo with its shading and uneven lighting divided out")
+
+
+@app.command()
+def maps(
+    image: Annotated[
+        Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
+    ],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the maps (created if missing).")],
+    reach: Annotated[
+        float | None,
+        typer.Option(
+            min=1.0,
+            metavar="PIXELS",
+            help="How far the ambient occlusion looks for occluders; default the object's half-width.",
+        ),
+    ] = None,
+    material: Annotated[
+        bool,
+        typer.Option(
+            "--material",
+            help="The photo shows a textured surface filling the frame (stone, bark, fabric), not an object: "
+            "uneven lighting removed, shape from the fine shading, an albedo map too.",
+        ),
+    ] = False,
+    tile: Annotated[
+        bool, typer.Option("--tile", help="With --material: make the albedo map tile seamlessly too.")
+    ] = False,
+    filter: FilterOption = None,
+    light: LightOption = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
+    as_json: JsonOption = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
+) -> None:
+    """Make texture maps of one photo: normal maps (OpenGL and DirectX), height, ambient occlusion
+    and curvature, as PNG files named after the photo."""
+    import shadeform
+    from shadeform.errors import InputError
+    from shadeform.io.maps import save_gray
+    from shadeform.regions import parse_regions
+
+    if tile and not material:
+        raise InputError(
+            "--tile makes material maps tile; add --material (a photo of a surface filling the frame)"
+        )
+    if material:
+        return _material(image, out, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
+                         channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
+    light_vector = resolve_light(light, slant, tilt)
+    references = [parse_reference(text) for text in reference or ()]
+    regions = parse_regions(concave) if concave is not None else None
+
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        outputs.make_folder(out)
+        files = {name: out / f"{image.stem}_{name}.png" for name in LEGEND}
+        temps = {name: outputs.temp(path) for name, path in files.items()}
+        photo, rec = reconstruct_photo(
+            err,
+            timings,
+            image,
+            channel=channel,
+            linear=linear,
+            max_pixels=max_pixels,
+            mask=mask,
+            light=light_vector,
+            method=method,
+            filter=filter,
+            references=references or None,
+            concave=regions,
+            integrator=integrator,
+            refine=refine,
+        )
+        start = time.perf_counter()
+        with err.status("making the maps", spinner="dots"):
+            made = shadeform.maps(rec, reach=reach)
+        timings["maps"] = time.perf_counter() - start
+        start = time.perf_counter()
+        for name, values in made.items():
+            save_gray(values, temps[name], bitdepth=LEGEND[name][0])
+        outputs.commit()
+        timings["write"] = time.perf_counter() - start
+    timings["total"] = time.perf_counter() - total
+
+    relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
+    note_channel(err, photo.info)
+    note_unsure(err, rec.info)
+    rows = [
+        (files[name], text.format(range=f" ({relief:.3g} px of relief)"))
+        for name, (_, text) in LEGEND.items()
+    ]
+    if as_json:
+        print_json(
+            {
+                "command": "maps",
+                "input": {"path": image, "width": photo.image.shape[1], "height": photo.image.shape[0]},
+                "maps": {name: {"path": files[name], "bits": LEGEND[name][0]} for name in LEGEND},
+                "height_range_px": relief,
+                "info": rec.info,
+                "timings": timings,
+            }
+        )
+        return
+    console = stdout_console()
+    console.print(
+        f"[bold]maps of[/] {escape(str(image))} ({photo.image.shape[1]}x{photo.image.shape[0]}), "
+        f"{rec.info['method']}, in {format_seconds(timings['total'])}"
+    )
+    print_files(console, rows)
+
+
+def _material(image, out, *, reach, tile, light, slant, tilt, channel, linear, as_json, max_pixels):
+    """``maps --material``: the maps of a photo of a surface filling the frame."""
+    from shadeform.io.images import read_photo
+    from shadeform.io.maps import save_gray
+    from shadeform.texture import material
+
+    given = None
+    if not (light is None or light.strip().lower() == "estimate") or slant is not None or tilt is not None:
+        given = resolve_light(light, slant, tilt)
+    err = stderr_console()
+    total = time.perf_counter()
+    legend = {**LEGEND, "albedo": ALBEDO}
+    with OutputSet() as outputs:
+        outputs.make_folder(out)
+        files = {name: out / f"{image.stem}_{name}.png" for name in legend}
+        temps = {name: outputs.temp(path) for name, path in files.items()}
+        with err.status(f"loading {escape(str(image))}", spinner="dots"):
+            photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
+        colour = photo.pixels if photo.pixels.shape[2] == 3 else photo.image
+        with err.status("making the maps", spinner="dots"):
+            result = material(colour, light=given, tile=tile, reach=reach)
+        for name, values in result.maps.items():
+            save_gray(values, temps[name], bitdepth=legend[name][0])
+        outputs.commit()
+    seconds = time.perf_counter() - total
+    height = result.maps["height"]
+    tilt_read = float(np.degrees(np.arctan2(result.light[1], result.light[0])) % 360)
+    if result.light_estimated:
+        err.print(
+            f"the light's tilt was read from the photo as {tilt_read:.0f} degrees, on the side nearer "
+            f"above; if the relief looks inverted, give --tilt {(tilt_read + 180) % 360:.0f} "
+            "(and --slant to set its strength)"
+        )
+    if as_json:
+        print_json(
+            {
+                "command": "maps",
+                "material": True,
+                "input": {"path": image, "width": height.shape[1], "height": height.shape[0]},
+                "maps": {name: {"path": files[name], "bits": legend[name][0]} for name in legend},
+                "light": result.light,
+                "light_estimated": result.light_estimated,
+                "seconds": seconds,
+            }
+        )
+        return
+    console = stdout_console()
+    console.print(
+        f"[bold]material maps of[/] {escape(str(image))} ({height.shape[1]}x{height.shape[0]}), light tilt "
+        f"{tilt_read:.0f} degrees{' (read from the photo)' if result.light_estimated else ''}, in "
+        f"{format_seconds(seconds)}"
+    )
+    rows = [(files[name], text.format(range="")) for name, (_, text) in legend.items()]
+    print_files(console, rows)
