@@ -76,6 +76,7 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
         The app's store: its images, its reconstructions (each view's is kept there) and fusions.
     """
     router = APIRouter()
+    state.rebuilders["view"] = lambda key, recipe, blobs: _example_views(recipe["name"], key, recipe["index"])
     # example name -> its images' ids and angles (rendered once, while the server keeps the images)
     view_sets: dict[str, tuple[tuple[str, ...], tuple[float, ...]]] = {}
 
@@ -100,8 +101,8 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
 
     @router.post("/api/viewsets/examples/{name}", response_model=ViewSetInfo, status_code=201)
     def post_view_set_example(name: str) -> Response:
-        from shadeform.app.server import _image_info, _suggested
-        from shadeform.examples import VIEW_SET_EXAMPLES, load_view_set_example
+        from shadeform.app.server import _image_info
+        from shadeform.examples import VIEW_SET_EXAMPLES
 
         if name not in VIEW_SET_EXAMPLES:
             shown = name if len(name) <= 40 else name[:37] + "..."
@@ -111,13 +112,10 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
         ids, angles = view_sets.get(name, ((), ()))
         known = [state.images.get(image_id) for image_id in ids]
         if not known or any(entry is None for entry in known):
-            images, masks, angles, settings = load_view_set_example(name)
-            suggested = _suggested(settings)
-            stem = name.split(":")[-1]
-            known = [
-                state.add(f"{stem} {angle:g}°", image[:, :, None], mask=mask, suggested=suggested)
-                for image, mask, angle in zip(images, masks, angles)
-            ]
+            known, angles = _example_views(name)
+            for index, entry in enumerate(known):
+                state.images.put(entry.image_id, entry, entry.nbytes)
+                state.remember(entry.image_id, "view", {"name": name, "index": index})
             view_sets[name] = (tuple(entry.image_id for entry in known), angles)
         info = ViewSetInfo(name=name, images=[_image_info(entry) for entry in known], angles=list(angles))
         return json_response(info, status_code=201)
@@ -261,3 +259,24 @@ def _moved(mesh, transform: np.ndarray):
 
     rotation, shift = transform[:3, :3], transform[:3, 3]
     return Mesh(mesh.vertices @ rotation.T + shift, mesh.faces, mesh.normals @ rotation.T, mesh.uv)
+
+
+def _example_views(name: str, key: str | None = None, index: int | None = None):
+    """A view-set example's views as stored images with new ids and their angles; or, given
+    ``key`` and ``index``, that one view under that id (made again from the session store)."""
+    from shadeform.app.server import _suggested
+    from shadeform.app.store import StoredImage, new_image_id
+    from shadeform.examples import load_view_set_example
+
+    images, masks, angles, settings = load_view_set_example(name)
+    suggested = _suggested(settings)
+    stem = name.split(":")[-1]
+    views = [
+        StoredImage(new_image_id(), f"{stem} {angle:g}°", image[:, :, None], mask, suggested)
+        for image, mask, angle in zip(images, masks, angles)
+    ]
+    if key is None:
+        return views, angles
+    from dataclasses import replace
+
+    return replace(views[index], image_id=key)

@@ -43,6 +43,8 @@ class AppLimits:
         models: every view of a fusion keeps its own, so that editing one view re-solves only it.
     max_json_bytes : int
         Largest JSON request body (regions with many points still fit).
+    max_stored_bytes : int
+        Most bytes of uploaded files the session store keeps on disk (with ``sessions=``).
     """
 
     max_upload_bytes: int = 64 * 2**20
@@ -52,6 +54,7 @@ class AppLimits:
     max_results: int = 32
     max_result_bytes: int = 1024 * 2**20
     max_json_bytes: int = 4 * 2**20
+    max_stored_bytes: int = 2 * 2**30
 
 
 def size_text(nbytes: int) -> str:

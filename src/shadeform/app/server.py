@@ -34,6 +34,8 @@ suffix and a sanitised stem). The limits, the guard and the error handlers live 
 from __future__ import annotations
 
 import asyncio
+import logging
+import sqlite3
 import threading
 import time
 from collections.abc import Sequence
@@ -78,11 +80,14 @@ from shadeform.app.schema import (
     ReconstructRequest,
     ReconstructResult,
 )
+from shadeform.app.sessions import SessionStore
 from shadeform.app.stereo import add_stereo_routes
 from shadeform.app.store import LRU, StoredImage, new_image_id
 from shadeform.errors import InputError
 
 __all__ = ["AppLimits", "LOOPBACK_HOSTS", "STATIC_DIR", "create_app", "warm_up"]
+
+logger = logging.getLogger(__name__)
 
 #: Where ``make web`` (and the package build) put the built client.
 STATIC_DIR = Path(__file__).with_name("static")
@@ -103,6 +108,7 @@ def create_app(
     allowed_hosts: Sequence[str] | None = LOOPBACK_HOSTS,
     warm: bool = False,
     static_dir: Path | None = None,
+    sessions: str | Path | None = None,
 ) -> FastAPI:
     """Build the app's ASGI application.
 
@@ -123,6 +129,10 @@ def create_app(
     static_dir : Path, optional
         The built client; :data:`STATIC_DIR` by default. Looked up per request, so a client
         built while the server runs is served without a restart.
+    sessions : str or Path, optional
+        An SQLite file that keeps what the clients opened (:class:`shadeform.app.sessions.
+        SessionStore`), so that their sessions outlive a restart of the server; ``shadeform
+        app`` gives one in the user's data folder. None: memory only.
 
     Returns
     -------
@@ -134,7 +144,9 @@ def create_app(
         If ``initial_image`` cannot be read or is not an example.
     """
     static_dir = STATIC_DIR if static_dir is None else Path(static_dir)
-    state = _State(limits)
+    state = _State(
+        limits, None if sessions is None else SessionStore(sessions, max_bytes=limits.max_stored_bytes)
+    )
     initial = _store_initial(state, initial_image) if initial_image is not None else None
 
     app = FastAPI(
@@ -171,6 +183,7 @@ def create_app(
         except InputError as err:
             raise HTTPException(415, str(err)) from None
         entry = state.add(display_name(file.filename), photo.pixels, photo=_read_as(photo))
+        state.remember(entry.image_id, "upload", {"name": entry.name}, [data])
         return json_response(_image_info(entry), status_code=201)
 
     @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
@@ -265,10 +278,14 @@ def create_app(
 
 
 class _State:
-    """What one app holds: images, recent reconstructions, encoded PNGs, the solver lock."""
+    """What one app holds: images, recent reconstructions, encoded PNGs, the solver lock, and
+    (with a session store) how to make again what its clients opened."""
 
-    def __init__(self, limits: AppLimits) -> None:
+    def __init__(self, limits: AppLimits, sessions: SessionStore | None = None) -> None:
         self.limits = limits
+        self.sessions = sessions
+        # kind of a remembered entry -> (key, recipe, blobs) -> the entry, made again
+        self.rebuilders: dict[str, Any] = {"upload": self._rebuild_upload, "example": self._rebuild_example}
         self.images = LRU(max_items=limits.max_images, max_bytes=limits.max_image_bytes)
         self.results = LRU(max_items=limits.max_results, max_bytes=limits.max_result_bytes)
         self.pngs = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
@@ -294,8 +311,49 @@ class _State:
         self.images.put(entry.image_id, entry, entry.nbytes, pinned=pinned)
         return entry
 
+    def remember(self, key: str, kind: str, recipe: dict, blobs=()) -> None:
+        """Keep how to make entry ``key`` again (a no-op without a session store). A store that
+        cannot be written (a full disk) only costs the entry its life after a restart."""
+        if self.sessions is None:
+            return
+        try:
+            self.sessions.put(key, kind, recipe, blobs)
+        except sqlite3.Error as err:
+            logger.warning("could not keep %s in the session store %s: %s", key, self.sessions.path, err)
+
+    def recall(self, key: str):
+        """The entry ``key`` from memory, else made again from the session store and kept in
+        memory; None if neither has it (or it can no longer be made: a lowered limit)."""
+        entry = self.images.get(key)
+        if entry is not None or self.sessions is None:
+            return entry
+        try:
+            found = self.sessions.get(key)
+        except sqlite3.Error:
+            return None
+        if found is None or found[0] not in self.rebuilders:
+            return None
+        kind, recipe, blobs = found
+        try:
+            entry = self.rebuilders[kind](key, recipe, blobs)
+        except (InputError, HTTPException):
+            return None
+        self.images.put(key, entry, entry.nbytes)
+        return entry
+
+    def _rebuild_upload(self, key: str, recipe: dict, blobs: list[bytes]) -> StoredImage:
+        from shadeform.io.images import read_photo
+
+        photo = read_photo(blobs[0], max_pixels=self.limits.max_pixels)
+        return StoredImage(key, recipe["name"], photo.pixels, photo=_read_as(photo))
+
+    def _rebuild_example(self, key: str, recipe: dict, blobs: list[bytes]) -> StoredImage:
+        from dataclasses import replace
+
+        return replace(self._example_entry(recipe["name"], recipe["size"]), image_id=key)
+
     def image(self, image_id: str) -> StoredImage:
-        entry = self.images.get(image_id)
+        entry = self.recall(image_id)
         if not isinstance(entry, StoredImage):
             shown = image_id if len(image_id) <= 40 else image_id[:37] + "..."
             raise HTTPException(
@@ -306,7 +364,7 @@ class _State:
         return entry
 
     def example(self, name: str, size: int | None, *, pinned: bool = False) -> StoredImage:
-        from shadeform.examples import EXAMPLES, load_example
+        from shadeform.examples import EXAMPLES
 
         if name not in EXAMPLES:
             shown = name if len(name) <= 40 else name[:37] + "..."
@@ -320,12 +378,17 @@ class _State:
         known = self._examples.get((name, size))
         if known is not None and self.images.get(known) is not None:
             return self.images.get(known)
-        image, info = load_example(name, size=size)
-        entry = self.add(
-            name, image[:, :, None], mask=info["mask"], suggested=_suggested(info), pinned=pinned
-        )
+        entry = self._example_entry(name, size)
+        self.images.put(entry.image_id, entry, entry.nbytes, pinned=pinned)
         self._examples[(name, size)] = entry.image_id
+        self.remember(entry.image_id, "example", {"name": name, "size": size})
         return entry
+
+    def _example_entry(self, name: str, size: int | None) -> StoredImage:
+        from shadeform.examples import load_example
+
+        image, info = load_example(name, size=size)
+        return StoredImage(new_image_id(), name, image[:, :, None], info["mask"], _suggested(info))
 
 
 def _read_as(photo) -> dict[str, Any]:
@@ -350,7 +413,9 @@ def _store_initial(state: _State, source: str | Path) -> StoredImage:
         from shadeform.io.images import read_photo
 
         photo = read_photo(source, max_pixels=state.limits.max_pixels)
-        return state.add(display_name(source.name), photo.pixels, pinned=True, photo=_read_as(photo))
+        entry = state.add(display_name(source.name), photo.pixels, pinned=True, photo=_read_as(photo))
+        state.remember(entry.image_id, "upload", {"name": entry.name}, [source.read_bytes()])
+        return entry
     try:
         return state.example(source, None, pinned=True)
     except HTTPException as err:

@@ -109,6 +109,8 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         The app's store: it keeps photo sets beside images, and their results.
     """
     router = APIRouter()
+    state.rebuilders["photoset"] = lambda key, recipe, blobs: _replace(_reread_set(state, recipe, blobs), key)
+    state.rebuilders["photoset-example"] = lambda key, recipe, blobs: _example_set(key, recipe["name"])
 
     @router.post("/api/photosets", response_model=PhotoSetInfo, status_code=201)
     def post_photoset(
@@ -121,23 +123,30 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         ),
         mask: UploadFile | None = File(None, description="The object's mask, the photos' size."),
     ) -> Response:
+        files = [photos, lights, intensities, mask]
+        kept = _contents(photos), *(None if f is None else _contents([f])[0] for f in files[1:])
         entry = _read_set(state, photos, lights, intensities, mask)
         state.images.put(entry.photoset_id, entry, entry.nbytes)
+        recipe = {
+            "photos": [photo.filename for photo in photos],
+            **{name: None if f is None else f.filename for name, f in zip(_EXTRAS, files[1:])},
+        }
+        blobs = [*kept[0], *(blob for blob in kept[1:] if blob is not None)]
+        state.remember(entry.photoset_id, "photoset", recipe, blobs)
         return json_response(_info(entry), status_code=201)
 
     @router.post("/api/photosets/examples/{name}", response_model=PhotoSetInfo, status_code=201)
     def post_photoset_example(name: str) -> Response:
-        from shadeform.examples import PHOTO_SET_EXAMPLES, load_photo_set_example
+        from shadeform.examples import PHOTO_SET_EXAMPLES
 
         if name not in PHOTO_SET_EXAMPLES:
             shown = name if len(name) <= 40 else name[:37] + "..."
             raise HTTPException(
                 404, f"unknown photo set {shown!r}; choose one of: {', '.join(PHOTO_SET_EXAMPLES)}"
             )
-        images, directions, object_mask = load_photo_set_example(name)
-        names = tuple(f"{name.split(':')[-1]}-{i + 1:02d}.png" for i in range(len(images)))
-        entry = StoredPhotoSet(new_image_id(), name, images, names, directions, None, object_mask)
+        entry = _example_set(new_image_id(), name)
         state.images.put(entry.photoset_id, entry, entry.nbytes)
+        state.remember(entry.photoset_id, "photoset-example", {"name": name})
         return json_response(_info(entry), status_code=201)
 
     @router.get(
@@ -256,8 +265,51 @@ def _text(upload: UploadFile, label: str, what: str) -> str:
         raise HTTPException(422, f"{what} file {label} is not text; give a text file of numbers") from None
 
 
+#: The optional files of a photo set's upload, in the order they are remembered.
+_EXTRAS = ("lights", "intensities", "mask")
+
+
+def _contents(uploads) -> list[bytes]:
+    """The bytes of uploaded files, each left rewound for its reader."""
+    out = []
+    for upload in uploads:
+        out.append(upload.file.read())
+        upload.file.seek(0)
+    return out
+
+
+def _reread_set(state, recipe: dict, blobs: list[bytes]) -> StoredPhotoSet:
+    """A photo set's upload read again from the remembered files (with today's limits)."""
+    from io import BytesIO
+
+    from starlette.datastructures import UploadFile as Upload
+
+    count = len(recipe["photos"])
+    photos = [Upload(BytesIO(blob), filename=name) for name, blob in zip(recipe["photos"], blobs)]
+    rest = iter(blobs[count:])
+    extras = [
+        None if recipe[name] is None else Upload(BytesIO(next(rest)), filename=recipe[name])
+        for name in _EXTRAS
+    ]
+    return _read_set(state, photos, *extras)
+
+
+def _example_set(key: str, name: str) -> StoredPhotoSet:
+    from shadeform.examples import load_photo_set_example
+
+    images, directions, object_mask = load_photo_set_example(name)
+    names = tuple(f"{name.split(':')[-1]}-{i + 1:02d}.png" for i in range(len(images)))
+    return StoredPhotoSet(key, name, images, names, directions, None, object_mask)
+
+
+def _replace(entry: StoredPhotoSet, key: str) -> StoredPhotoSet:
+    from dataclasses import replace
+
+    return replace(entry, photoset_id=key)
+
+
 def _photoset(state, photoset_id: str) -> StoredPhotoSet:
-    entry = state.images.get(photoset_id)
+    entry = state.recall(photoset_id)
     if not isinstance(entry, StoredPhotoSet):
         shown = photoset_id if len(photoset_id) <= 40 else photoset_id[:37] + "..."
         raise HTTPException(

@@ -451,11 +451,23 @@ def app_command(
         ),
     ] = False,
     no_browser: Annotated[bool, typer.Option("--no-browser", help="Do not open a web browser.")] = False,
+    sessions: Annotated[
+        Path | None,
+        typer.Option(
+            help="SQLite file that keeps the photos opened, so that sessions outlive a restart "
+            "(default: app.sqlite3 in the user's data folder).",
+            show_default=False,
+        ),
+    ] = None,
+    no_sessions: Annotated[
+        bool, typer.Option("--no-sessions", help="Keep nothing on disk: a restart forgets the photos opened.")
+    ] = False,
     max_pixels: MaxPixelsOption = None,
 ) -> None:
     """Start the browser app: open a photo, draw concave regions, see and export the 3D model."""
     import ipaddress
     import socket
+    import sqlite3
     import threading
     import webbrowser
 
@@ -464,6 +476,7 @@ def app_command(
 
         from shadeform.app.guard import AppLimits
         from shadeform.app.server import LOOPBACK_HOSTS, create_app
+        from shadeform.app.sessions import data_folder
     except ImportError as missing:
         raise InputError(
             f"the app needs {missing.name or 'its web server'}, which is not installed; "
@@ -497,12 +510,21 @@ def app_command(
         # warm: the numba kernels compile (or load) in the background, so the first click does not wait
         # the server's own pixel limit (it keeps several photos in memory) unless raised
         limits = AppLimits() if max_pixels is None else AppLimits(max_pixels=max_pixels)
-        application = create_app(
-            initial_image=initial,
-            allowed_hosts=None if allow_remote else LOOPBACK_HOSTS,
-            warm=True,
-            limits=limits,
-        )
+        if no_sessions and sessions is not None:
+            raise InputError("give --sessions FILE or --no-sessions, not both")
+        store = None if no_sessions else sessions or data_folder() / "app.sqlite3"
+        try:
+            application = create_app(
+                initial_image=initial,
+                allowed_hosts=None if allow_remote else LOOPBACK_HOSTS,
+                warm=True,
+                limits=limits,
+                sessions=store,
+            )
+        except sqlite3.Error as err:
+            raise InputError(
+                f"cannot use the session file '{store}' ({err}); give another with --sessions FILE, or --no-sessions"
+            ) from None
     # bind first, so that the printed address (and port 0's pick) is the one that answers
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)

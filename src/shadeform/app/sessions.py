@@ -1,0 +1,133 @@
+"""What the app's sessions opened, kept in SQLite so that they outlive a server restart.
+
+The server holds images and photo sets in memory (:class:`shadeform.app.store.LRU`); this store
+keeps, for each id a client was given, how to make it again: the uploaded files' bytes (decoded
+again, with the same limits) or the example's name. Decoded pixels are not stored: a 12-Mpx
+photo is a few MB as the JPEG the user sent and 144 MB as floats. A client that comes back after
+a restart (or after the memory store let the entry go) names its id, and the server makes the
+entry again from here.
+
+One SQLite file in the user's data folder (:func:`data_folder`), in WAL mode (a reader never
+waits for a writer; a crash never leaves it half-written), bounded by bytes: the least recently
+used entries go first.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+__all__ = ["SessionStore", "data_folder"]
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS entries (
+    key TEXT PRIMARY KEY,
+    kind TEXT NOT NULL,
+    recipe TEXT NOT NULL,
+    nbytes INTEGER NOT NULL,
+    used REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS blobs (
+    key TEXT NOT NULL REFERENCES entries(key) ON DELETE CASCADE,
+    position INTEGER NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (key, position)
+);
+"""
+
+
+def data_folder() -> Path:
+    """The user's data folder for shadeform: ``$XDG_DATA_HOME/shadeform`` (default
+    ``~/.local/share/shadeform``) on Linux, ``~/Library/Application Support/shadeform`` on
+    macOS, ``%LOCALAPPDATA%\\shadeform`` on Windows."""
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Application Support"
+    else:
+        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    return base / "shadeform"
+
+
+class SessionStore:
+    """Recipes for the entries the app's clients were given, in one SQLite file.
+
+    Parameters
+    ----------
+    path : path-like
+        The database file (its folder is created).
+    max_bytes : int
+        Most bytes of blobs kept; the least recently used entries go first (the one just put is
+        always kept).
+    """
+
+    def __init__(self, path: str | os.PathLike, *, max_bytes: int) -> None:
+        self.path = Path(path)
+        self.max_bytes = int(max_bytes)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        # one connection, shared by the server's worker threads under a lock
+        self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        self._lock = threading.Lock()
+        with self._lock:
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._db.executescript(_SCHEMA)
+
+    @property
+    def journal_mode(self) -> str:
+        with self._lock:
+            return self._db.execute("PRAGMA journal_mode").fetchone()[0]
+
+    def put(self, key: str, kind: str, recipe: dict, blobs: Sequence[bytes] = ()) -> None:
+        """Keep how to make entry ``key`` again: its ``kind``, a JSON-able ``recipe`` and the
+        files' bytes; then let the least recently used others go to fit :attr:`max_bytes`."""
+        nbytes = sum(len(blob) for blob in blobs)
+        with self._lock, self._db:
+            self._db.execute("BEGIN")
+            self._db.execute("DELETE FROM entries WHERE key = ?", (key,))
+            self._db.execute(
+                "INSERT INTO entries VALUES (?, ?, ?, ?, ?)",
+                (key, kind, json.dumps(recipe), nbytes, time.time()),
+            )
+            self._db.executemany(
+                "INSERT INTO blobs VALUES (?, ?, ?)",
+                [(key, i, sqlite3.Binary(b)) for i, b in enumerate(blobs)],
+            )
+            total = self._db.execute("SELECT COALESCE(SUM(nbytes), 0) FROM entries").fetchone()[0]
+            if total > self.max_bytes:
+                for old, size in self._db.execute(
+                    "SELECT key, nbytes FROM entries WHERE key != ? ORDER BY used", (key,)
+                ).fetchall():
+                    if total <= self.max_bytes:
+                        break
+                    self._db.execute("DELETE FROM entries WHERE key = ?", (old,))
+                    total -= size
+
+    def get(self, key: str) -> tuple[str, dict, list[bytes]] | None:
+        """``(kind, recipe, blobs)`` of entry ``key`` (now the most recently used), or None."""
+        with self._lock:
+            row = self._db.execute("SELECT kind, recipe FROM entries WHERE key = ?", (key,)).fetchone()
+            if row is None:
+                return None
+            self._db.execute("UPDATE entries SET used = ? WHERE key = ?", (time.time(), key))
+            blobs = [
+                bytes(data)
+                for (data,) in self._db.execute(
+                    "SELECT data FROM blobs WHERE key = ? ORDER BY position", (key,)
+                ).fetchall()
+            ]
+        return row[0], json.loads(row[1]), blobs
+
+    def __len__(self) -> int:
+        with self._lock:
+            return self._db.execute("SELECT COUNT(*) FROM entries").fetchone()[0]
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
