@@ -186,7 +186,7 @@ class TestSurface:
 
     @pytest.mark.parametrize("size", [8, 15, 0, -3, 32.0, True, "64"])
     def test_bad_size(self, size):
-        with pytest.raises(InputError, match="size must be an integer >= 16"):
+        with pytest.raises(InputError, match="size must be a whole number from 16"):
             surface("sphere", size=size)
 
 

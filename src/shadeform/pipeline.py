@@ -29,6 +29,10 @@ MIN_SIDE = 3
 SATURATED_FRACTION = 0.9
 
 
+#: Most integrability refinement iterations (``refine``) accepted; the app's limit too.
+MAX_REFINE = 100
+
+
 def reconstruct(
     image: np.ndarray,
     *,
@@ -123,6 +127,8 @@ def reconstruct(
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
     refine = whole(refine, "refine")
+    if refine > MAX_REFINE:  # each iteration is a pass over the image: refuse before any work
+        raise InputError(f"refine must be at most {MAX_REFINE} iterations, got {refine}")
     user_filter = parse_filter(filter) if filter else None
 
     mask = object_mask(image) if mask is None else check_mask(mask, image.shape)

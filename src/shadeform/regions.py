@@ -205,6 +205,10 @@ def _loads(text: str, where: str):
         raise InputError(
             f"{where} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
         ) from None
+    except RecursionError:  # the decoder recurses once per level of nesting
+        raise InputError(
+            f"{where} nests lists or objects too deeply; a regions file is a flat list of polygons"
+        ) from None
 
 
 def _region(entry, index: int) -> Region:

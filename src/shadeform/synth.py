@@ -57,6 +57,9 @@ from shadeform.errors import InputError
 SCENES = ("sphere", "ellipsoid", "cylinder", "vase", "bowl", "saddle", "bumps")
 
 _MIN_SIZE = 16
+#: The largest side a synthetic scene is made at (64 Mpx, the loader's pixel limit): checked
+#: before anything is allocated.
+_MAX_SIZE = 8192
 
 # Zhang et al. (1999) vase profile on 0 <= u <= 1 (units of the image width): positive on the
 # whole domain, 0.15 at both ends, belly ~0.286 at u ~0.366, neck ~0.107 at u ~0.808.
@@ -532,8 +535,8 @@ def _check_name(name) -> None:
 
 
 def _check_size(size) -> int:
-    if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < _MIN_SIZE:
-        raise InputError(f"size must be an integer >= {_MIN_SIZE}, got {size!r}")
+    if isinstance(size, bool) or not isinstance(size, numbers.Integral) or not _MIN_SIZE <= size <= _MAX_SIZE:
+        raise InputError(f"size must be a whole number from {_MIN_SIZE} to {_MAX_SIZE}, got {size!r}")
     return int(size)
 
 

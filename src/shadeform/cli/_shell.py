@@ -336,7 +336,10 @@ IntegratorOption = Annotated[
     ),
 ]
 RefineOption = Annotated[
-    int, typer.Option(min=0, help="Integrability refinement iterations (0: the 2002 field).")
+    int,
+    typer.Option(
+        min=0, max=100, help="Integrability refinement iterations (0: the 2002 field; at most 100)."
+    ),
 ]
 LinearOption = Annotated[
     bool | None,

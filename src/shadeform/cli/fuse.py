@@ -280,6 +280,10 @@ def _views_file(path: Path) -> list[ViewEntry]:
         raise InputError(f"views file '{path}' does not exist; check the path") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise InputError(f"views file '{path}' is not valid JSON ({err})") from None
+    except RecursionError:  # the decoder recurses once per level of nesting
+        raise InputError(
+            f"views file '{path}' nests lists or objects too deeply; see docs/conventions.md"
+        ) from None
     items = document.get("views") if isinstance(document, dict) else None
     if not isinstance(items, list) or not all(isinstance(item, dict) for item in items):
         raise InputError(
