@@ -1,7 +1,9 @@
 // The HTTP API of `shadeform app` (all under /api), typed with the generated schema.
 //
 // Every error body is {"detail": "<one line>"}; ApiError carries that line and the status so
-// the UI can show it as it is and react to 404 (the server forgot an image) specially.
+// the UI can show it as it is and react to 404 (the server forgot an image) specially. Every
+// request goes through connection.send: one that cannot reach the server is a NetworkError, and
+// the connection says so and waits for the server to come back.
 import type {
   AutoMaskRequest,
   FuseRequest,
@@ -19,6 +21,7 @@ import type {
   StereoResult,
   ViewSetInfo,
 } from './api.gen';
+import { send } from './connection';
 
 export type StereoRequestBody = StereoRequest;
 
@@ -60,7 +63,7 @@ async function json<T>(response: Promise<Response>): Promise<T> {
 }
 
 function postJson(url: string, body: unknown, signal?: AbortSignal): Promise<Response> {
-  return fetch(url, {
+  return send(url, {
     method: 'POST',
     headers: { 'Content-Type': 'application/json' },
     body: JSON.stringify(body),
@@ -69,17 +72,17 @@ function postJson(url: string, body: unknown, signal?: AbortSignal): Promise<Res
 }
 
 export function getOptions(): Promise<Options> {
-  return json<Options>(fetch('/api/options'));
+  return json<Options>(send('/api/options'));
 }
 
 export function uploadImage(file: Blob, name: string): Promise<ImageInfo> {
   const form = new FormData();
   form.append('file', file, name);
-  return json<ImageInfo>(fetch('/api/images', { method: 'POST', body: form }));
+  return json<ImageInfo>(send('/api/images', { method: 'POST', body: form }));
 }
 
 export function openExample(name: string): Promise<ImageInfo> {
-  return json<ImageInfo>(fetch(`/api/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+  return json<ImageInfo>(send(`/api/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
 }
 
 export function photoUrl(imageId: string): string {
@@ -98,7 +101,7 @@ export function channelUrl(imageId: string, channel: string, filter: FilterSpec)
 
 /** Whether the server still holds the image (it keeps a bounded number, and forgets on restart). */
 export async function imageKnown(imageId: string): Promise<boolean> {
-  const response = await fetch(photoUrl(imageId), { method: 'GET', cache: 'no-store' });
+  const response = await send(photoUrl(imageId), { method: 'GET', cache: 'no-store' });
   if (response.status === 404) return false;
   if (!response.ok) throw await failure(response);
   return true;
@@ -147,11 +150,11 @@ export function uploadPhotoSet(
   const form = new FormData();
   for (const photo of photos) form.append('photos', photo, photo.name);
   for (const [field, file] of Object.entries(extra)) if (file) form.append(field, file, file.name);
-  return json<PhotoSetInfo>(fetch('/api/photosets', { method: 'POST', body: form }));
+  return json<PhotoSetInfo>(send('/api/photosets', { method: 'POST', body: form }));
 }
 
 export function openPhotoSetExample(name: string): Promise<PhotoSetInfo> {
-  return json<PhotoSetInfo>(fetch(`/api/photosets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+  return json<PhotoSetInfo>(send(`/api/photosets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
 }
 
 export function photoSetPhotoUrl(photosetId: string, index: number): string {
@@ -169,7 +172,7 @@ export function exportStereo(request: StereoRequest, suffix: string): Promise<{ 
 // ------------------------------------------------------------------------------ views
 
 export function openViewSetExample(name: string): Promise<ViewSetInfo> {
-  return json<ViewSetInfo>(fetch(`/api/viewsets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
+  return json<ViewSetInfo>(send(`/api/viewsets/examples/${encodeURIComponent(name)}`, { method: 'POST' }));
 }
 
 export function fuse(request: FuseRequest, signal?: AbortSignal): Promise<FuseResult> {

@@ -148,6 +148,12 @@ export class ImagePane {
     this.resize();
   }
 
+  /** Ask again for the previews that failed to load (the server was away): they load when shown. */
+  retryImages(): void {
+    for (const [url, image] of this.images) if (image.complete && !image.naturalWidth) this.images.delete(url);
+    this.redraw();
+  }
+
   /** New preview addresses (channel or filter changed); images load when first shown. */
   setSources(sources: Sources): void {
     this.sources = sources;

@@ -12,9 +12,13 @@
 // What the model on screen is (up to date, computing, out of date, failed) is each session's
 // ModelState (modelState.ts); the badge by the 3D view, the export menu and the dimming are drawn
 // from the shown session's state and nothing else.
+//
+// A server that stops answering (connection.ts) fails the open mode's model with UNREACHABLE;
+// when it answers again, that mode's solve is sent again (reconnected()).
 import './style.css';
 import * as api from './api';
 import type { ExampleInfo, ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
+import { connectionState, NetworkError, onReconnect, send, UNREACHABLE } from './connection';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
 import { MaskTool } from './maskTool';
@@ -180,6 +184,7 @@ class App {
     });
     this.buildMenus();
     bindToasts();
+    onReconnect(() => this.reconnected());
     this.bindToolbar();
     this.bindFiles();
     this.bindKeys();
@@ -214,7 +219,8 @@ class App {
       let info = session.image;
       if (!(await api.imageKnown(info.image_id))) {
         const reopened = await this.reopen(session.source);
-        if (!reopened) return this.toast(`${session.image.name} is no longer on the server; open it again`, 'info');
+        if (!reopened) return this.toast(`${forgotten(session.image.name)}; this page has no copy to send again: open it again`, 'info');
+        this.toast(`${forgotten(session.image.name)}: ${session.source.kind === 'upload' ? 'sent it again' : 'opened it again'}`, 'info');
         info = reopened;
       } else if (session.source.kind === 'upload') {
         this.imageBytes = await loadImageBytes();
@@ -426,7 +432,10 @@ class App {
     badge.hidden = status === 'none';
     badge.dataset.status = status;
     badge.textContent = statusText(status, message);
-    badge.title = status === 'failed' ? 'The model shown is an older one: change a setting to try again' : '';
+    const waiting = status === 'failed' && message === UNREACHABLE;
+    badge.title = waiting
+      ? 'The model shown is an older one: it is made again once the server answers'
+      : status === 'failed' ? 'The model shown is an older one: change a setting to try again' : '';
     $('view-host').dataset.modelStatus = status;
     $('view-host').classList.toggle('outdated', onScreen && status !== 'current');
     const exportable = onScreen && status === 'current';
@@ -436,6 +445,21 @@ class App {
       ? 'Download the current mesh in one of the library\'s formats'
       : 'Export is off until the model on screen is up to date with the settings';
     if (!exportable) $('export-menu').classList.remove('open');
+  }
+
+  /**
+   * The server answers again: the open mode's solve that failed for want of it goes again (the
+   * server kept the session, or the 404 path reopens what it forgot), and previews that could
+   * not load meanwhile are asked for again.
+   */
+  private reconnected(): void {
+    this.pane.retryImages();
+    const { status, message } = this.shownModel();
+    if (status !== 'failed' || message !== UNREACHABLE) return;
+    const body = document.body.classList;
+    if (body.contains('stereo-mode')) this.stereo.solve();
+    else if (body.contains('views-mode')) this.views.solve();
+    else this.solve();
   }
 
   /** A message over the image about what its tool refused; null takes it away. */
@@ -641,14 +665,34 @@ class App {
       }
     } catch (err) {
       if ((err as Error).name === 'AbortError' || id !== this.latestSent) return;
+      if (err instanceof NetworkError) {
+        // the connection's message says so; this solve goes again once the server answers
+        this.model.failed(version, UNREACHABLE);
+        return;
+      }
       if (err instanceof api.ApiError && err.status === 404 && !retried && this.source) {
-        // the server forgot the image (restart, or its store is full): send it again
-        const info = await this.reopen(this.source).catch(() => null);
+        // the server forgot the image (restarted without its sessions, or its store is full)
+        const source = this.source;
+        const name = this.image?.name ?? source.name;
+        let info: ImageInfo | null = null;
+        let why = 'this page has no copy to send again: open the image again';
+        try {
+          info = await this.reopen(source);
+        } catch (reopenErr) {
+          if (reopenErr instanceof NetworkError) return this.model.failed(version, UNREACHABLE); // away again
+          why = `opening it again failed: ${(reopenErr as Error).message}`;
+        }
+        if (id !== this.latestSent) return;
         if (info) {
           this.image = info;
+          this.pane.setSources(this.sources());
           this.persist();
+          this.toast(`${forgotten(name)}: ${source.kind === 'upload' ? 'sent it again' : 'opened it again'}`, 'info');
           return this.solve(true);
         }
+        this.model.failed(version, `${forgotten(name)}; ${why}`);
+        this.toast(`${forgotten(name)}; ${why}`);
+        return;
       }
       // the old model stays on screen, dimmed and not exportable, until the next change
       this.model.failed(version, (err as Error).message);
@@ -726,7 +770,7 @@ class App {
     await this.busy('Saving project…', async () => {
       let bytes = this.imageBytes;
       if (!bytes) {
-        const photo = await fetch(api.photoUrl(this.image!.image_id));
+        const photo = await send(api.photoUrl(this.image!.image_id));
         if (!photo.ok) throw new Error('the server no longer has this image; open it again, then save');
         bytes = await photo.blob();
       }
@@ -1039,6 +1083,8 @@ class App {
       shownModelState: () => ({ ...this.shownModel().view(), badge: $('model-badge').hidden ? null : $('model-badge').textContent }),
       /** The messages at the bottom of the window, oldest first. */
       toasts: () => toasts(),
+      /** Whether the server answers: "online", or "lost" while it is polled for (connection.ts). */
+      connection: () => connectionState(),
       /** The message over the image about what its tool refused, or null. */
       notice: () => ($('image-notice').hidden ? null : $('image-notice').textContent),
       lastResult: () => {
@@ -1092,6 +1138,11 @@ class App {
 
 type Hook = ReturnType<App['hook']>;
 
+/** Why an image id stopped working, in the user's words. */
+function forgotten(name: string): string {
+  return `The server no longer had ${name} (it was restarted without its sessions, or let it go)`;
+}
+
 /** Input types that take no typing: keys there are shortcuts. */
 const NOT_TYPED = new Set(['checkbox', 'radio', 'range', 'button', 'submit', 'reset', 'color', 'file', 'image']);
 
@@ -1136,7 +1187,13 @@ async function start(): Promise<void> {
     await app.restore();
     resolveReady();
   } catch (err) {
-    toast(`Cannot reach the shadeform server: ${(err as Error).message}. Start it with \`shadeform app\`, then reload.`);
+    if (err instanceof NetworkError) {
+      // nothing was built without the options: start afresh once the server answers
+      onReconnect(() => location.reload());
+      toast('Cannot reach the shadeform server: start it with `shadeform app`; this page reloads once it answers.');
+    } else {
+      toast(`Cannot start the app: ${(err as Error).message}. Reload the page to try again.`);
+    }
     rejectReady(err);
   }
 }

@@ -9,6 +9,7 @@
 // redraws at most once per animation frame.
 import * as api from './api';
 import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
+import { NetworkError, send, UNREACHABLE } from './connection';
 import { ModelState } from './modelState';
 
 export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
@@ -271,11 +272,13 @@ export class StereoSession {
     } catch (err) {
       if ((err as Error).name === 'AbortError') return;
       const message =
-        err instanceof api.ApiError && err.status === 404
-          ? 'The server no longer has these photos (it was restarted or forgot them): open them again with Open photos'
-          : (err as Error).message;
+        err instanceof NetworkError
+          ? 'The server is not reachable (stopped or restarting): the photo set is solved again once it answers' // the App sends it again
+          : err instanceof api.ApiError && err.status === 404
+            ? 'The server no longer has these photos (it was restarted without its sessions, or let them go): open them again with Open photos'
+            : (err as Error).message;
       this.setError(message);
-      this.model.failed(version, message);
+      this.model.failed(version, err instanceof NetworkError ? UNREACHABLE : message);
     } finally {
       if (this.inFlight === controller) {
         this.inFlight = null;
@@ -452,7 +455,7 @@ export class StereoSession {
     $('stereo-photo-out').textContent = `${this.photoIndex + 1} / ${this.info.count}`;
     const id = this.info.photoset_id;
     try {
-      const response = await fetch(api.photoSetPhotoUrl(id, this.photoIndex));
+      const response = await send(api.photoSetPhotoUrl(id, this.photoIndex));
       if (!response.ok) throw new Error((await response.json()).detail ?? response.statusText);
       const image = await createImageBitmap(await response.blob());
       const canvas = document.createElement('canvas');

@@ -12,7 +12,8 @@ function box(): HTMLElement {
   return document.getElementById('toast')!;
 }
 
-export function toast(message: string, kind: ToastKind = 'error'): void {
+/** Show ``message``; returns what takes it away again (a message its cause has outlived). */
+export function toast(message: string, kind: ToastKind = 'error'): () => void {
   const container = box();
   const items = Array.from(container.querySelectorAll<HTMLElement>('.toast-item'));
   const same = items.find((item) => item.dataset.kind === kind && item.querySelector('.toast-text')!.textContent === message);
@@ -37,6 +38,9 @@ export function toast(message: string, kind: ToastKind = 'error'): void {
   for (let i = 0; i < all.length - MOST; i++) all[i].remove();
   if (kind === 'info') window.setTimeout(() => dismiss(item), INFO_MS);
   container.hidden = false;
+  return () => {
+    if (item.isConnected) dismiss(item);
+  };
 }
 
 function dismiss(item: HTMLElement): void {

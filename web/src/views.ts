@@ -11,6 +11,7 @@
 // whose settings changed (it keeps each view's reconstruction).
 import * as api from './api';
 import type { FuseRequest, FuseResult, ImageInfo, Options } from './api.gen';
+import { NetworkError, UNREACHABLE } from './connection';
 import { ModelState } from './modelState';
 import type { ImageSource, Params } from './state';
 
@@ -287,6 +288,12 @@ export class ViewsSession {
       this.render();
     } catch (err) {
       if ((err as Error).name === 'AbortError' || body.request_id !== this.requestCounter) return;
+      if (err instanceof NetworkError) {
+        // the App fuses again once the server answers
+        this.setError('The server is not reachable (stopped or restarting): the views are fused again once it answers');
+        this.model.failed(version, UNREACHABLE);
+        return;
+      }
       if (err instanceof api.ApiError && err.status === 404 && (await this.reopenForgotten(err.message, version))) return;
       this.setError((err as Error).message);
       this.model.failed(version, (err as Error).message);
@@ -305,14 +312,23 @@ export class ViewsSession {
     const index = found ? Number(found[1]) - 1 : -1;
     const view = this.views[index];
     if (!view) return false;
-    const info = this.retried ? null : await this.host.reopen(view.source).catch(() => null);
+    let info: ImageInfo | null = null;
+    try {
+      if (!this.retried) info = await this.host.reopen(view.source);
+    } catch (err) {
+      if (err instanceof NetworkError) {
+        this.model.failed(version, UNREACHABLE); // away again: fused once it answers
+        return true;
+      }
+    }
     if (!info) {
-      const said = `The server no longer has view ${index + 1}'s photo, ${view.image.name} (it was restarted or forgot it): remove the view and add the photo again, or open the view photos again`;
+      const said = `The server no longer has view ${index + 1}'s photo, ${view.image.name} (it was restarted without its sessions, or let it go): remove the view and add the photo again, or open the view photos again`;
       this.setError(said);
       this.model.failed(version, said);
       return true;
     }
     this.retried = true;
+    this.host.toast(`The server no longer had view ${index + 1}'s photo, ${view.image.name} (it was restarted without its sessions, or let it go): opened it again`, 'info');
     // an example comes back with the very pixels: the view's settings still apply
     this.views[index] = { ...view, image: info };
     this.host.changed();
