@@ -3,8 +3,6 @@ any work, and nothing is written."""
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
 from shadeform import synth
