@@ -270,7 +270,9 @@ class TestBivariate:
                 if n @ light < 1e-3:
                     continue  # the basis has a kink where the light grazes
                 numeric = [
-                    (bivariate._basis(n + e, light, h) - bivariate._basis(n - e, light, h)) @ coefficients / 2e-6
+                    (bivariate._basis(n + e, light, h) - bivariate._basis(n - e, light, h))
+                    @ coefficients
+                    / 2e-6
                     for e in 1e-6 * np.eye(3)
                 ]
                 np.testing.assert_allclose(
