@@ -70,6 +70,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_real.py
 	$(PY) benchmarks/bench_detail.py
 	$(PY) benchmarks/bench_photo.py
+	$(PY) benchmarks/bench_relief.py
 
 clean:
 	rm -rf $(VENV) $(JS)/node_modules $(WEB)/node_modules $(STATIC) out

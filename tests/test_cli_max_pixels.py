@@ -22,7 +22,7 @@ from shadeform.cli._shell import MAX_PIXELS as CLI_MAX_PIXELS
 from shadeform.errors import InputError
 from shadeform.io.images import MAX_PIXELS
 
-PHOTO_COMMANDS = ("reconstruct", "stereo", "lights", "batch", "fuse", "app")
+PHOTO_COMMANDS = ("reconstruct", "stereo", "lights", "batch", "fuse", "maps", "relief", "app")
 SIDE = 40  # the small photo: 1,600 pixels
 BIG = (8192, 8193)  # a header one row past MAX_PIXELS
 
@@ -80,6 +80,21 @@ def command_args(command: str, photos: list[Path], out: Path) -> list:
         return ["batch", photos[0], "--out", out / "models", "--workers", "1"]
     if command == "fuse":
         return ["fuse", photos[0], photos[1], "--angles", "0,180", "-o", out / "model.glb"]
+    if command == "maps":
+        return ["maps", photos[0], "--out", out / "maps"]
+    if command == "relief":
+        return [
+            "relief",
+            photos[0],
+            "-o",
+            out / "relief.stl",
+            "--width",
+            "50",
+            "--height",
+            "3",
+            "--base",
+            "2",
+        ]
     raise AssertionError(command)
 
 

@@ -13,6 +13,7 @@ import os
 import re
 import shutil
 import subprocess
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -179,7 +180,30 @@ def check_stl(path, mesh):
     assert (stored[:, 2] > 0).all()
 
 
+def model_unit(path):
+    """The ``unit`` attribute of a 3MF package's model, read with the standard library."""
+    import xml.etree.ElementTree as ET
+
+    with zipfile.ZipFile(path) as package:
+        names = set(package.namelist())
+        assert {"[Content_Types].xml", "_rels/.rels", "3D/3dmodel.model"} <= names
+        root = ET.fromstring(package.read("3D/3dmodel.model"))
+    assert root.tag == "{http://schemas.microsoft.com/3dmanufacturing/core/2015/02}model"
+    return root.get("unit")
+
+
+def check_3mf(path, mesh):
+    # trimesh's 3MF reader (lxml): vertices and triangles in the file's order; 3MF has no normals
+    loaded = trimesh.load(path, file_type="3mf", force="mesh", process=False)
+    assert len(loaded.vertices) == mesh.n_vertices
+    assert len(loaded.faces) == mesh.n_faces
+    np.testing.assert_allclose(loaded.vertices, mesh.vertices, rtol=1e-7, atol=1e-6)
+    np.testing.assert_array_equal(loaded.faces, mesh.faces)
+    assert model_unit(path) == "millimeter"
+
+
 READERS = {
+    ".3mf": check_3mf,
     ".iv": check_inventor,
     ".wrl": check_vrml,
     ".obj": check_with_trimesh,
@@ -255,6 +279,44 @@ class TestExport:
     def test_not_a_mesh_is_type_error(self, tmp_path):
         with pytest.raises(TypeError, match="Mesh"):
             export(np.zeros((3, 3)), tmp_path / "x.wrl")
+
+
+def stated_unit(path):
+    """The unit a file says its coordinates are in, read the way each format keeps it."""
+    data = path.read_bytes()
+    suffix = path.suffix
+    if suffix == ".3mf":
+        return model_unit(path)
+    if suffix == ".glb":
+        length = int.from_bytes(data[12:16], "little")
+        return json.loads(data[20 : 20 + length])["asset"]["extras"]["unit"]
+    if suffix == ".stl":
+        return re.fullmatch(rb"shadeform mesh, units: (\w+) *", data[:80]).group(1).decode()
+    if suffix == ".ply":
+        header = data[: data.index(b"end_header")].decode("ascii")
+        return re.search(r"^comment units: (\w+)$", header, flags=re.MULTILINE).group(1)
+    return re.search(r"^# .*units: (\w+)$", data.decode("ascii"), flags=re.MULTILINE).group(1)
+
+
+class TestUnits:
+    @pytest.mark.parametrize("suffix", sorted(available_formats()))
+    @pytest.mark.parametrize("unit", ["pixel", "millimeter"])
+    def test_every_format_states_its_unit(self, tmp_path, mesh, suffix, unit):
+        scaled = Mesh(mesh.vertices, mesh.faces, mesh.normals, mesh.uv, unit=unit)
+        path = export(scaled, tmp_path / f"mesh{suffix}")
+        if suffix == ".3mf":  # 3MF has no pixel: one pixel is written as one millimetre
+            assert stated_unit(path) == "millimeter"
+            with zipfile.ZipFile(path) as package:
+                text = package.read("3D/3dmodel.model").decode()
+            assert ("coordinates in pixels" in text) is (unit == "pixel")
+        else:
+            assert stated_unit(path) == unit
+        reader_for(suffix)(path, scaled)  # and the file still reads back as before
+
+    def test_meshes_are_in_pixels_unless_told(self, mesh):
+        assert mesh.unit == "pixel"
+        with pytest.raises(InputError, match="mesh unit must be one of"):
+            Mesh(mesh.vertices, mesh.faces, mesh.normals, unit="inch")
 
 
 class TestAvailableFormats:

@@ -45,6 +45,8 @@ _EXPORTS = {
     "calibrate_lights": "shadeform.light.sphere",
     "LightCalibration": "shadeform.light.sphere",
     "fuse": "shadeform.fusion",
+    "relief": "shadeform.solid",
+    "Relief": "shadeform.solid",
     "maps": "shadeform.texture",
 }
 _SUBMODULES = {
@@ -63,6 +65,7 @@ _SUBMODULES = {
     "photometric",
     "fusion",
     "texture",
+    "solid",
 }
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])

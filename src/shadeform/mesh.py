@@ -16,7 +16,10 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
-__all__ = ["Mesh", "outward", "solid_measures", "to_mesh"]
+__all__ = ["UNITS", "Mesh", "cell_triangles", "outward", "solid_measures", "to_mesh"]
+
+#: The units a mesh's coordinates may be in (the names 3MF uses where it has one).
+UNITS = ("pixel", "millimeter")
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,6 +36,10 @@ class Mesh:
         Unit per-vertex normals.
     uv : (V, 2) float64 or None
         Texture coordinates, ``(0, 0)`` at the bottom left of the image.
+    unit : str
+        What one coordinate unit is, one of :data:`UNITS`: ``"pixel"`` for meshes of
+        reconstructions (``docs/conventions.md``), ``"millimeter"`` for print-ready solids
+        (:func:`shadeform.relief`). Exporters write it where the format has a place for it.
 
     Raises
     ------
@@ -44,6 +51,7 @@ class Mesh:
     faces: np.ndarray
     normals: np.ndarray
     uv: np.ndarray | None = None
+    unit: str = "pixel"
 
     def __post_init__(self) -> None:
         vertices = np.asarray(self.vertices, dtype=np.float64)
@@ -79,6 +87,8 @@ class Mesh:
                 )
             if not np.isfinite(uv).all():
                 raise InputError("mesh uv contain NaN or inf; give finite texture coordinates")
+        if self.unit not in UNITS:
+            raise InputError(f"mesh unit must be one of {', '.join(UNITS)}, got {self.unit!r}")
         # frozen: set the converted arrays through object.__setattr__
         object.__setattr__(self, "vertices", vertices)
         object.__setattr__(self, "faces", faces)
@@ -165,6 +175,27 @@ def _half_block(missing: int, size: int) -> np.ndarray:
         2: dr <= dc,  # TL-BR-TR: above the main diagonal
         3: dr + dc <= last,  # TL-BL-TR: above the anti-diagonal
     }[missing]
+
+
+def cell_triangles(tl: np.ndarray, tr: np.ndarray, bl: np.ndarray, br: np.ndarray) -> np.ndarray:
+    """Two triangles per square grid cell, split along its top-left to bottom-right diagonal.
+
+    Parameters
+    ----------
+    tl, tr, bl, br : (n,) int
+        Vertex index of each cell's top-left, top-right, bottom-left and bottom-right corner
+        (rows go down, so "bottom" is -y).
+
+    Returns
+    -------
+    faces : (2 n, 3) int64
+        ``(tl, bl, br)`` and ``(tl, br, tr)`` per cell, in cell order: counter-clockwise seen
+        from +z.
+    """
+    pairs = np.empty((np.size(tl), 6), dtype=np.int64)
+    for column, corner in enumerate((tl, bl, br, tl, br, tr)):
+        pairs[:, column] = corner
+    return pairs.reshape(-1, 3)
 
 
 def to_mesh(reconstruction: Reconstruction, *, step: int = 1) -> Mesh:
@@ -271,11 +302,7 @@ def to_mesh(reconstruction: Reconstruction, *, step: int = 1) -> Mesh:
         vertex_id[dr : dr + full.shape[0], dc : dc + full.shape[1]] for dr, dc in _CORNER_OFFSETS
     )
 
-    tl, tr, bl, br = (ids[full] for ids in corner_id)
-    pairs = np.empty((tl.size, 6), dtype=np.int64)
-    for column, corner in enumerate((tl, bl, br, tl, br, tr)):
-        pairs[:, column] = corner
-    pieces = [pairs.reshape(-1, 3)]
+    pieces = [cell_triangles(*(ids[full] for ids in corner_id))]
     for r, c, corners in singles:
         pieces.append(np.stack([corner_id[k][r, c] for k in corners], axis=1))
     faces = np.concatenate(pieces)

@@ -4,6 +4,7 @@ Commands::
 
     shadeform reconstruct IMAGE -o OUT.wrl   photo -> mesh (+ depth map, normal map)
     shadeform fuse A.png B.png --angles 0,180 -o OUT.glb   views from several sides -> one closed model
+    shadeform relief IMAGE -o OUT.stl --width 100   photo -> print-ready solid in millimetres
     shadeform maps IMAGE --out DIR           photo -> normal, height, occlusion and curvature maps
     shadeform synth SCENE -o image.png       a synthetic image and its ground truth
     shadeform evaluate                       error table of the methods on the synthetic scenes
@@ -24,7 +25,7 @@ leaves no file behind.
 
 from __future__ import annotations
 
-from shadeform.cli import fuse, maps, photos, tools  # noqa: F401  (their commands register on the app)
+from shadeform.cli import fuse, maps, photos, relief, tools  # noqa: F401  (their commands register on the app)
 from shadeform.cli._shell import USAGE_EXIT, app, main
 
 __all__ = ["USAGE_EXIT", "app", "main"]

@@ -4,13 +4,19 @@
 added with :func:`register` is listed and round-trip tested without further changes.
 
 VRML 2.0 and Open Inventor 2.1 are written by the project (:mod:`shadeform.io.vrml`,
-:mod:`shadeform.io.inventor`); OBJ, PLY, STL and glTF binary go through trimesh, imported only
-when one of them is written.
+:mod:`shadeform.io.inventor`), and so is 3MF (:func:`write_3mf`); OBJ, PLY, STL and glTF binary go
+through trimesh, imported only when one of them is written.
+
+Every file states its unit (:attr:`shadeform.mesh.Mesh.unit`: pixels for reconstructions,
+millimetres for print-ready solids; ``docs/conventions.md``): 3MF in its ``unit`` attribute, glTF in
+``asset.extras.unit``, STL in its 80-byte header, OBJ, PLY, VRML and Open Inventor in a comment.
+The coordinates are written as they are, never rescaled.
 """
 
 from __future__ import annotations
 
 import os
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
@@ -18,10 +24,10 @@ from typing import BinaryIO
 from shadeform.errors import InputError
 from shadeform.io.atomic import atomic_write
 from shadeform.io.inventor import write_inventor
-from shadeform.io.vrml import write_vrml
+from shadeform.io.vrml import format_rows, write_vrml
 from shadeform.mesh import Mesh
 
-__all__ = ["Writer", "register", "available_formats", "export"]
+__all__ = ["Writer", "register", "available_formats", "export", "write_3mf"]
 
 Writer = Callable[[Mesh, BinaryIO], None]
 """A writer takes a mesh and a binary file open for writing, writes the whole file, returns None."""
@@ -120,22 +126,119 @@ def _trimesh(mesh: Mesh, *, with_uv: bool):
 def _write_obj(mesh: Mesh, file_obj: BinaryIO) -> None:
     # no uv: trimesh would reference a material file that export() does not write
     text = _trimesh(mesh, with_uv=False).export(file_type="obj", include_normals=True)
-    file_obj.write(text.encode("utf-8"))
+    file_obj.write(f"# units: {mesh.unit}\n".encode("ascii") + text.encode("utf-8"))
 
 
 def _write_ply(mesh: Mesh, file_obj: BinaryIO) -> None:
     data = _trimesh(mesh, with_uv=False).export(file_type="ply", encoding="binary", vertex_normal=True)
-    file_obj.write(data)
+    # a header comment after the format line (the header is ASCII up to end_header)
+    after_format = data.index(b"\n", data.index(b"\nformat ") + 1) + 1
+    file_obj.write(
+        data[:after_format] + f"comment units: {mesh.unit}\n".encode("ascii") + data[after_format:]
+    )
 
 
 def _write_stl(mesh: Mesh, file_obj: BinaryIO) -> None:
-    # STL stores one normal per face (from the winding) and no shared vertices
-    file_obj.write(_trimesh(mesh, with_uv=False).export(file_type="stl"))
+    # STL stores one normal per face (from the winding) and no shared vertices; its 80-byte
+    # header is free text (not starting with "solid", which would read as ASCII STL)
+    data = _trimesh(mesh, with_uv=False).export(file_type="stl")
+    header = f"shadeform mesh, units: {mesh.unit}".encode("ascii").ljust(80, b" ")
+    file_obj.write(header + data[80:])
 
 
 def _write_glb(mesh: Mesh, file_obj: BinaryIO) -> None:
-    data = _trimesh(mesh, with_uv=True).export(file_type="glb", include_normals=True)
+    def state_unit(tree: dict) -> None:
+        tree["asset"].setdefault("extras", {})["unit"] = mesh.unit
+
+    data = _trimesh(mesh, with_uv=True).export(
+        file_type="glb", include_normals=True, tree_postprocessor=state_unit
+    )
     file_obj.write(data)
+
+
+#: 3MF's own length units (the core specification's ``ST_Unit``).
+UNITS_3MF = ("micron", "millimeter", "centimeter", "inch", "foot", "meter")
+
+_3MF_CONTENT_TYPES = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n'
+    '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">\n'
+    ' <Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>\n'
+    ' <Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>\n'
+    "</Types>\n"
+)
+_3MF_RELATIONSHIPS = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n'
+    '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">\n'
+    ' <Relationship Target="/3D/3dmodel.model" Id="rel0" '
+    'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>\n'
+    "</Relationships>\n"
+)
+# zip entries past 2 GiB need the zip64 extension, which must be chosen before writing one
+_ZIP64_FROM = 1 << 31
+
+
+def _zip_entry(name: str) -> zipfile.ZipInfo:
+    """A compressed zip entry with a fixed date, so that one mesh always makes the same bytes."""
+    entry = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+    entry.compress_type = zipfile.ZIP_DEFLATED
+    return entry
+
+
+def write_3mf(mesh: Mesh, file_obj: BinaryIO) -> None:
+    """Write ``mesh`` as a 3MF package (3D Manufacturing Format, core specification 1.x).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        Triangles; normals and ``uv`` are not stored (3MF has no place for them in its core).
+    file_obj : binary file
+        Open for writing; a zip archive is written to it.
+
+    Notes
+    -----
+    The package holds ``[Content_Types].xml``, ``_rels/.rels`` and ``3D/3dmodel.model`` (dated
+    1980-01-01, so the bytes depend on the mesh alone): one
+    object of type ``model`` with the vertices (``%.9g``) and triangles in the mesh's order,
+    and one build item. The model's ``unit`` is the mesh's (``"millimeter"`` for a relief); a mesh
+    in pixels is written with ``unit="millimeter"``, one pixel to one millimetre, and says so in
+    its ``Description`` metadata. Slicers expect a ``model`` object to be closed: a reconstruction's
+    open sheet is flagged by them; :func:`shadeform.relief` makes closed ones.
+
+    References
+    ----------
+    .. [1] 3MF Consortium, "3MF Core Specification", version 1.3, 2022.
+    """
+    unit = mesh.unit if mesh.unit in UNITS_3MF else "millimeter"
+    note = (
+        ""
+        if unit == mesh.unit
+        else f' <metadata name="Description">coordinates in {mesh.unit}s, written as millimetres '
+        f"(one {mesh.unit} to one millimetre)</metadata>\n"
+    )
+    head = (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        f'<model unit="{unit}" xml:lang="en-US" '
+        'xmlns="http://schemas.microsoft.com/3dmanufacturing/core/2015/02">\n'
+        ' <metadata name="Application">shadeform</metadata>\n'
+        f"{note}"
+        " <resources>\n"
+        '  <object id="1" type="model">\n'
+        "   <mesh>\n"
+        "    <vertices>\n"
+    )
+    middle = "    </vertices>\n    <triangles>\n"
+    tail = '    </triangles>\n   </mesh>\n  </object>\n </resources>\n <build>\n  <item objectid="1"/>\n </build>\n</model>\n'
+    # about 60 bytes per vertex line and 45 per triangle line: an upper bound of the text's size
+    large = 60 * mesh.n_vertices + 45 * mesh.n_faces > _ZIP64_FROM
+    with zipfile.ZipFile(file_obj, mode="w", compression=zipfile.ZIP_DEFLATED, compresslevel=5) as package:
+        package.writestr(_zip_entry("[Content_Types].xml"), _3MF_CONTENT_TYPES)
+        package.writestr(_zip_entry("_rels/.rels"), _3MF_RELATIONSHIPS)
+        with package.open(_zip_entry("3D/3dmodel.model"), mode="w", force_zip64=large) as model:
+            model.write(head.encode("ascii"))
+            model.writelines(format_rows(mesh.vertices, '     <vertex x="%.9g" y="%.9g" z="%.9g"/>\n'))
+            model.write(middle.encode("ascii"))
+            model.writelines(format_rows(mesh.faces, '     <triangle v1="%d" v2="%d" v3="%d"/>\n'))
+            model.write(tail.encode("ascii"))
 
 
 register(".wrl", write_vrml, description="VRML 2.0 (VRML97), per-vertex normals, texture coords")
@@ -144,3 +247,4 @@ register(".obj", _write_obj, description="Wavefront OBJ, per-vertex normals")
 register(".ply", _write_ply, description="PLY (binary), per-vertex normals")
 register(".stl", _write_stl, description="STL (binary), face normals only")
 register(".glb", _write_glb, description="glTF 2.0 binary, per-vertex normals, texture coords")
+register(".3mf", write_3mf, description="3MF (3D Manufacturing Format), the unit in the file, no normals")

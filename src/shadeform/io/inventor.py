@@ -40,7 +40,7 @@ def write_inventor(mesh: Mesh, file_obj: BinaryIO) -> None:
     has_uv = mesh.uv is not None
     head = (
         "#Inventor V2.1 ascii\n\n"
-        f"# shadeform mesh: {mesh.n_vertices} vertices, {mesh.n_faces} triangles\n"
+        f"# shadeform mesh: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, units: {mesh.unit}\n"
         "Separator {\n"
         "  ShapeHints {\n"
         "    vertexOrdering COUNTERCLOCKWISE\n"

@@ -75,7 +75,7 @@ def write_vrml(mesh: Mesh, file_obj: BinaryIO) -> None:
     """
     head = (
         "#VRML V2.0 utf8\n"
-        f"# shadeform mesh: {mesh.n_vertices} vertices, {mesh.n_faces} triangles\n"
+        f"# shadeform mesh: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, units: {mesh.unit}\n"
         "Shape {\n"
         "  appearance Appearance {\n"
         "    material Material {\n"

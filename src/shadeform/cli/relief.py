@@ -1,0 +1,251 @@
+"""``shadeform relief``: one photo -> a print-ready solid in millimetres (STL, 3MF, ...)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.markup import escape
+
+from shadeform.cli._shell import (
+    MAX_PIXELS,
+    ChannelOption,
+    ConcaveOption,
+    FilterOption,
+    IntegratorOption,
+    JsonOption,
+    LightOption,
+    LinearOption,
+    MaskFileOption,
+    MaxPixelsOption,
+    MethodOption,
+    ReferenceOption,
+    RefineOption,
+    SlantOption,
+    TiltOption,
+    app,
+    check_outputs,
+    describe_photo,
+    format_seconds,
+    note_channel,
+    note_unsure,
+    output_temps,
+    parse_reference,
+    print_files,
+    print_json,
+    resolve_light,
+    stage,
+    stderr_console,
+    stdout_console,
+)
+from shadeform.cli.photos import reconstruct_photo
+from shadeform.io.atomic import OutputSet
+from shadeform.solid import MIN_WALL_MM
+
+#: The flags of relief()'s options, for the messages of check_options.
+_FLAGS = {
+    "width_mm": "--width",
+    "height_mm": "--height",
+    "base_mm": "--base",
+    "outline": "--outline",
+    "compress": "--compress",
+    "border_mm": "--border",
+    "min_wall_mm": "--min-wall",
+    "max_triangles": "--max-triangles",
+}
+
+
+@app.command("relief")
+def relief_command(
+    image: Annotated[
+        Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Solid's file: .stl (binary), .3mf, .obj, .glb, ... (see `shadeform formats`); "
+            "coordinates in millimetres.",
+        ),
+    ] = Path("relief.stl"),
+    width: Annotated[
+        float, typer.Option("--width", metavar="MM", help="Longest side of the outline (rim included), mm.")
+    ] = 100.0,
+    height: Annotated[
+        float,
+        typer.Option(
+            "--height", metavar="MM", help="Relief depth, lowest to highest point of the surface, mm."
+        ),
+    ] = 4.0,
+    base: Annotated[
+        float, typer.Option("--base", metavar="MM", help="Thickness of the flat base under the relief, mm.")
+    ] = 2.0,
+    compress: Annotated[
+        float,
+        typer.Option(
+            metavar="0..1",
+            help="Bas-relief compression: flatten steep slopes and depth jumps, keep fine detail "
+            "(0: scale the depth linearly).",
+        ),
+    ] = 0.0,
+    invert: Annotated[bool, typer.Option("--invert", help="Engrave instead of emboss.")] = False,
+    border: Annotated[
+        float, typer.Option("--border", metavar="MM", help="A flat rim around the outline, mm wide.")
+    ] = 0.0,
+    outline: Annotated[
+        str,
+        typer.Option(
+            metavar="mask|frame",
+            help="The solid's sides follow the object's outline (mask) or the image frame (frame: a plaque).",
+        ),
+    ] = "mask",
+    min_wall: Annotated[
+        float,
+        typer.Option(
+            "--min-wall", metavar="MM", help="Thinnest wall the printer makes; a thinner base is refused."
+        ),
+    ] = MIN_WALL_MM,
+    max_triangles: Annotated[
+        int | None,
+        typer.Option(
+            "--max-triangles",
+            metavar="N",
+            help="Triangle budget (quadric simplification; needs pip install 'shadeform[print]'). "
+            "Default: two triangles per pixel on top and on the base.",
+            show_default=False,
+        ),
+    ] = None,
+    filter: FilterOption = None,
+    light: LightOption = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
+    depth: Annotated[
+        Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy), pixel units.")
+    ] = None,
+    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    as_json: JsonOption = False,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
+) -> None:
+    """Make a print-ready relief from one photo: a closed solid in millimetres with a flat base."""
+    import shadeform
+    from shadeform.io.maps import save_depth, save_normal_map
+    from shadeform.regions import parse_regions
+    from shadeform.solid import check_options
+
+    # everything the user typed is checked before any work
+    check_outputs(output, depth, normals)
+    options = check_options(
+        width_mm=width,
+        height_mm=height,
+        base_mm=base,
+        outline=outline,
+        compress=compress,
+        invert=invert,
+        border_mm=border,
+        min_wall_mm=min_wall,
+        max_triangles=max_triangles,
+        names=_FLAGS,
+    )
+    light_vector = resolve_light(light, slant, tilt)
+    references = [parse_reference(text) for text in reference or ()]
+    regions = parse_regions(concave) if concave is not None else None
+
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        temps = output_temps(outputs, output, depth, normals)
+        photo, rec = reconstruct_photo(
+            err,
+            timings,
+            image,
+            channel=channel,
+            linear=linear,
+            max_pixels=max_pixels,
+            mask=mask,
+            light=light_vector,
+            method=method,
+            filter=filter,
+            references=references or None,
+            concave=regions,
+            integrator=integrator,
+            refine=refine,
+        )
+        pixels = photo.image
+        with stage(err, "building the solid", timings, "relief"):
+            solid = shadeform.relief(rec, **options)
+        with stage(err, "writing files", timings, "write"):
+            shadeform.export(solid, temps[output])
+            written = [(output, shadeform.available_formats()[output.suffix.lower()] + ", millimetres")]
+            if depth is not None:
+                save_depth(rec.depth, temps[depth])
+                written.append((depth, "depth map, pixel units, NaN off the object"))
+            if normals is not None:
+                save_normal_map(rec.normals, temps[normals])
+                written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+
+    size = [float(v) for v in solid.size_mm]
+    volume = solid.volume_mm3
+    note_channel(err, photo.info)
+    note_unsure(err, rec.info)
+    if as_json:
+        print_json(
+            {
+                "command": "relief",
+                "input": {"path": image, "width": pixels.shape[1], "height": pixels.shape[0]},
+                "files": {"mesh": output, "depth": depth, "normals": normals},
+                "solid": {
+                    "size_mm": size,
+                    "volume_mm3": volume,
+                    "triangles": solid.n_faces,
+                    "vertices": solid.n_vertices,
+                    "deviation_mm": solid.deviation_mm,
+                    "pixel_mm": solid.pixel_mm,
+                    **options,
+                },
+                "light": rec.light,
+                "info": rec.info,
+                "timings": timings,
+            }
+        )
+        return
+
+    out = stdout_console()
+    rows, cols = pixels.shape
+    out.print(f"[bold]relief[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(photo.info)})")
+    out.print(
+        f"  size {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} mm (x y z: base {options['base_mm']:g} + "
+        f"relief {options['height_mm']:g}), volume {volume:,.0f} mm^3, {solid.n_faces:,} triangles"
+    )
+    details = [f"one pixel = {solid.pixel_mm:.4g} mm", f"outline {options['outline']}"]
+    if options["compress"] > 0:
+        details.append(f"compressed {options['compress']:g}")
+    if options["invert"]:
+        details.append("engraved")
+    if options["border_mm"] > 0:
+        details.append(f"rim {options['border_mm']:g} mm")
+    if options["max_triangles"] is not None:
+        details.append(
+            f"simplified: surface within {solid.deviation_mm:.3g} mm of the full-resolution relief"
+        )
+    out.print("  " + ", ".join(details))
+    out.print(
+        f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
+        f"reconstruct {format_seconds(timings['reconstruct'])}, solid {format_seconds(timings['relief'])}, "
+        f"write {format_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, written)
