@@ -9,6 +9,8 @@ export type FilterKind = "none" | "gaussian" | "mean" | "median" | "minimum";
 
 export type LightMode = "z" | "slant_tilt" | "estimate";
 
+export type Outline = "mask" | "frame";
+
 export type StereoLights = "file" | "sphere" | "unknown";
 
 /** Smoothing before the solve (:func:`shadeform.preprocess.parse_filter`). */
@@ -116,6 +118,7 @@ export interface Options {
   stereo_methods: MethodInfo[];
   photo_set_examples: ExampleInfo[];
   stereo_defaults: StereoParams;
+  relief_defaults: ReliefParams;
   /** Shipped view sets: one object photographed from several sides, to fuse. */
   view_set_examples: ExampleInfo[];
   limits: Limits;
@@ -339,6 +342,185 @@ export interface MaskResult {
   dark: boolean;
   /** One line in the user's words saying what was found. */
   note: string;
+}
+
+/** A print's options (:func:`shadeform.relief`); the server checks them (:func:`shadeform.solid.check_options`) and says what is wrong in one line. */
+export interface ReliefParams {
+  /** Longest side of the outline, mm (exact). */
+  width_mm: number;
+  /** Relief depth, lowest to highest point, mm. */
+  height_mm: number;
+  /** Flat base under the relief's lowest point, mm. */
+  base_mm: number;
+  /** Walls along the object's outline, or the frame. */
+  outline: Outline;
+  /** Bas-relief compression in [0, 1]; 0 scales linearly. */
+  compress: number;
+  /** Engrave instead of emboss. */
+  invert: boolean;
+  /** A flat rim around the outline, mm; 0 for none. */
+  border_mm: number;
+  /** The thinnest wall the printer makes, mm. */
+  min_wall_mm: number;
+  /** Triangle budget (at least 12); null: two triangles per pixel. */
+  max_triangles: number | null;
+}
+
+/** A print-ready solid of a stored image's reconstruction with these parameters. */
+export interface ReliefRequest {
+  image_id: string;
+  params: ReconstructParams;
+  relief: ReliefParams;
+  /** Chosen by the client, echoed in the result. */
+  request_id: number;
+}
+
+/** The solid, in millimetres, and its measures. */
+export interface ReliefResult {
+  request_id: number;
+  /** The closed solid, mm: x along the image's columns, y up the image, base on z = 0; no texture coordinates. */
+  mesh: MeshData;
+  /** Extent along x, y, z, mm (z: base plus relief). */
+  size_mm: [number, number, number];
+  volume_mm3: number;
+  triangle_count: number;
+  /** Farthest the printed top is from the full-resolution relief. */
+  deviation_mm: number;
+  /** One image pixel in the print, mm. */
+  pixel_mm: number;
+  /** Seconds: reconstruct (if solved), relief, encode, total. */
+  timings: Record<string, number>;
+  /** ``cached``: the model was reused; ``reused``: the solid too. */
+  info: Record<string, unknown>;
+}
+
+/** One texture map, small, with what its file holds. */
+export interface MapPreview {
+  /** normal_opengl, normal_directx, height, ambient_occlusion or curvature. */
+  name: string;
+  /** A preview: base64 8-bit PNG, at most 256 pixels on a side. */
+  png: string;
+  /** Bits per sample of the map's file in the zip. */
+  bits: number;
+  /** What the map's values mean. */
+  legend: string;
+}
+
+/** Previews of every texture map of a reconstruction (:func:`shadeform.maps`). */
+export interface MapsResult {
+  request_id: number;
+  /** The maps' full width in pixels (the image's). */
+  width: number;
+  height: number;
+  maps: MapPreview[];
+  /** Seconds: reconstruct (if solved), maps, encode, total. */
+  timings: Record<string, number>;
+  /** ``cached``: the model was reused; ``reused``: the maps too. */
+  info: Record<string, unknown>;
+}
+
+/** Where a project's photo came from, to open it again: a shipped example (by name), an upload, the image the server was started with, or photo ``index`` of a shipped view set. */
+export interface ProjectSource {
+  kind: "example" | "upload" | "initial" | "viewset";
+  name: string;
+  /** An upload's MIME type. */
+  type: string | null;
+  /** The photo's place in its view set. */
+  index: number | null;
+}
+
+/** A project's photo: a project file carries its bytes; the server's projects name the image in the server's session store instead (``info.image_id``), which keeps the bytes. */
+export interface ProjectImage {
+  name: string;
+  /** The file's MIME type. */
+  type: string;
+  /** base64 of the image file (project files). */
+  data: string | null;
+  /** A shipped example's name. */
+  example: string | null;
+  source: ProjectSource | null;
+  /** The image as the server stored it (its id in the session store). */
+  info: ImageInfo | null;
+}
+
+/** How the client shows the model and the image (the project file's ``view``). */
+export interface DisplaySettings {
+  wireframe: boolean;
+  normalColours: boolean;
+  texture: boolean;
+  maskOverlay: boolean;
+  lightArrow: boolean;
+}
+
+/** A photo set in a project: the set the server stored and the user's settings. */
+export interface ProjectPhotoSet {
+  info: PhotoSetInfo;
+  params: StereoParams;
+}
+
+/** One view in a project: its stored photo, where the photo came from, angle and settings. */
+export interface ProjectViewEntry {
+  image: ImageInfo;
+  source: ProjectSource;
+  angle: number;
+  params: ReconstructParams;
+}
+
+/** The views in a project (several sides of one object, fused) and the fusion's settings. */
+export interface ProjectViews {
+  views: ProjectViewEntry[];
+  refine: boolean;
+  settle: boolean;
+  resolution: number | null;
+  showParts: boolean;
+  /** The view being edited in single-photo mode, if one is. */
+  editing: number | null;
+}
+
+/** A project as the client's project file holds it: one photo (``image`` and ``params``), a photo set (``photo_set``) or views (``views``), with the display settings. */
+export interface ProjectDocument {
+  format: "shadeform-project";
+  /** 1: the only version so far. */
+  version: number;
+  /** Shown in Open recent; null: what the project is of. */
+  name: string | null;
+  image: ProjectImage | null;
+  params: ReconstructParams | null;
+  view: DisplaySettings;
+  photo_set: ProjectPhotoSet | null;
+  views: ProjectViews | null;
+}
+
+/** A project the server keeps, as Open recent lists it. */
+export interface ProjectInfo {
+  id: string;
+  name: string;
+  /** What the project is of: the photo's name, the photo set's, the views'. */
+  image: string;
+  kind: "photo" | "photo_set" | "views";
+  /** Seconds since the epoch. */
+  created: number;
+  /** Seconds since the epoch, when it was last saved. */
+  updated: number;
+}
+
+/** The projects the server keeps, the most recently updated first. */
+export interface ProjectList {
+  projects: ProjectInfo[];
+}
+
+/** A project the server keeps, with its document. */
+export interface Project {
+  id: string;
+  name: string;
+  /** What the project is of: the photo's name, the photo set's, the views'. */
+  image: string;
+  kind: "photo" | "photo_set" | "views";
+  /** Seconds since the epoch. */
+  created: number;
+  /** Seconds since the epoch, when it was last saved. */
+  updated: number;
+  document: ProjectDocument;
 }
 
 /** Every error response: one line saying what was wrong and what to do. */

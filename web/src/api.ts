@@ -9,6 +9,7 @@ import type {
   FuseRequest,
   FuseResult,
   ImageInfo,
+  MapsResult,
   MaskResult,
   MeshData,
   Options,
@@ -16,6 +17,8 @@ import type {
   ReconstructParams,
   ReconstructRequest,
   ReconstructResult,
+  ReliefRequest,
+  ReliefResult,
   SeedMaskRequest,
   StereoRequest,
   StereoResult,
@@ -181,6 +184,24 @@ export function fuse(request: FuseRequest, signal?: AbortSignal): Promise<FuseRe
 
 export function exportFused(request: FuseRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
   return downloaded(postJson(`/api/fuse/export?format=${encodeURIComponent(suffix)}`, request), suffix);
+}
+
+// ------------------------------------------------------------------- prints and maps
+
+export function relief(request: ReliefRequest, signal?: AbortSignal): Promise<ReliefResult> {
+  return json<ReliefResult>(postJson('/api/relief', request, signal));
+}
+
+export function exportRelief(request: ReliefRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson(`/api/relief/export?format=${encodeURIComponent(suffix)}`, request), suffix);
+}
+
+export function maps(request: ReconstructRequest, signal?: AbortSignal): Promise<MapsResult> {
+  return json<MapsResult>(postJson('/api/maps', request, signal));
+}
+
+export function mapsZip(request: ReconstructRequest): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson('/api/maps/zip', request), '.zip');
 }
 
 async function downloaded(pending: Promise<Response>, suffix: string): Promise<{ blob: Blob; filename: string }> {

@@ -15,18 +15,30 @@
 //
 // A server that stops answering (connection.ts) fails the open mode's model with UNREACHABLE;
 // when it answers again, that mode's solve is sent again (reconnected()).
+//
+// The work open (one photo, a photo set or the views) is autosaved to the server as a project
+// (state.ts, ProjectAutosave); Project ▸ Open recent… lists the server's projects to reopen one,
+// and a page whose storage is empty offers the newest.
 import './style.css';
 import * as api from './api';
-import type { ExampleInfo, ImageInfo, Options, ReconstructRequest, ReconstructResult } from './api.gen';
+import type { ExampleInfo, ImageInfo, Options, ProjectInfo, ReconstructRequest, ReconstructResult } from './api.gen';
 import { connectionState, NetworkError, onReconnect, send, UNREACHABLE } from './connection';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
 import { MaskTool } from './maskTool';
 import { ModelState, statusText, type ModelStateView } from './modelState';
 import {
+  deleteProject,
   download,
+  fetchProject,
+  fromProjectSource,
+  hasSavedSession,
+  listProjects,
   loadImageBytes,
   loadSession,
+  PROJECT_FORMAT,
+  PROJECT_VERSION,
+  ProjectAutosave,
   projectDocument,
   readJsonFile,
   readProject,
@@ -34,15 +46,19 @@ import {
   regionsDocument,
   saveSession,
   storeImageBytes,
+  toProjectSource,
   type Axis,
   type ImageSource,
   type Params,
+  type ProjectSnapshot,
   type Region,
   type ViewSettings,
 } from './state';
 import { StereoSession } from './stereo';
 import { bindToasts, toast, toasts } from './toast';
 import { PART_COLOURS, ViewsSession } from './views';
+import { MapsPanel } from './mapsPanel';
+import { PrintPanel } from './print';
 import { Viewer } from './viewer';
 
 const DRAG_DEBOUNCE_MS = 40;
@@ -92,9 +108,17 @@ class App {
   private readonly maskTool: MaskTool;
   private readonly stereo: StereoSession;
   private readonly views: ViewsSession;
+  /** The Print and Maps panels: the one photo's model as a solid in mm, and as texture maps. */
+  private readonly print: PrintPanel;
+  private readonly maps: MapsPanel;
+  /** The work open, saved to the server as a project. */
+  private readonly projects: ProjectAutosave;
+  /** Nothing was kept in this browser (a first visit, storage cleared): the newest server project is offered. */
+  private readonly freshStorage = !hasSavedSession();
 
   constructor(private readonly options: Options) {
     const session = loadSession();
+    this.projects = new ProjectAutosave(() => this.projectSnapshot());
     this.params = structuredClone(options.defaults);
     this.view = session.view;
     this.pane = new ImagePane($('image-host'), {
@@ -167,6 +191,15 @@ class App {
       },
       modelChanged: () => this.showModelState(),
     });
+    const modelRequest = () => (this.image ? this.request(0) : null);
+    this.print = new PrintPanel(options.relief_defaults, this.viewer, {
+      request: modelRequest,
+      showModel: () => this.result && this.mesh && this.applyResult(this.result, this.mesh),
+      shown: () => this.modelShown(),
+      busy: (text, work) => this.busy(text, work),
+      toast: (message, kind) => this.toast(message, kind),
+    });
+    this.maps = new MapsPanel({ request: modelRequest, busy: (text, work) => this.busy(text, work), toast: (message, kind) => this.toast(message, kind) });
     this.panel = new Panel(options, {
       change: (patch, urgency) => this.change(patch, urgency),
       axis: (axis) => this.setAxis(axis),
@@ -206,8 +239,10 @@ class App {
     if (initial && initial.image_id !== session.initialId) {
       this.initialId = initial.image_id;
       this.views.editing = null;
+      this.projects.begin('photo');
       return this.showImage(initial, { kind: 'initial', name: initial.name }, null);
     }
+    if (this.freshStorage) void this.offerNewest(); // not awaited: the page is ready without it
     if (session.viewsOpen) return this.setViewsMode(true);
     if (session.photoSet) {
       this.stereo.reopen(session.photoSet.info, session.photoSet.params);
@@ -257,6 +292,7 @@ class App {
       this.views.editing = null;
       this.imageBytes = file;
       await storeImageBytes(file);
+      this.projects.begin('photo');
       this.showImage(info, { kind: 'upload', name: file.name, type: file.type }, null);
     });
   }
@@ -267,6 +303,7 @@ class App {
       this.imageBytes = null;
       await storeImageBytes(null);
       this.views.editing = null;
+      this.projects.begin('photo');
       this.showImage(info, { kind: 'example', name }, null);
     });
   }
@@ -299,11 +336,173 @@ class App {
         this.imageBytes = bytes;
         await storeImageBytes(bytes);
       }
+      this.projects.begin('photo');
       this.view = { ...this.view, ...project.view };
       this.applyView();
       this.views.editing = null;
       this.showImage(info, source, { ...this.options.defaults, ...project.params });
     });
+  }
+
+  // ---------------------------------------------------------------- the server's projects
+
+  /** What is open, as the server keeps it: the project file's document, images by their ids. */
+  private projectSnapshot(): ProjectSnapshot | null {
+    const base = {
+      format: PROJECT_FORMAT, version: PROJECT_VERSION, name: null, view: { ...this.view },
+      image: null, params: null, photo_set: null, views: null,
+    } as const;
+    const body = document.body.classList;
+    // a view being edited in single-photo mode is the views' work
+    if (body.contains('views-mode') || this.views.editing !== null) {
+      const saved = this.views.session();
+      if (!saved.views.length) return null;
+      const views = saved.views.map((view) => ({ ...view, source: toProjectSource(view.source) }));
+      return { kind: 'views', document: { ...base, views: { ...saved, views } } };
+    }
+    if (body.contains('stereo-mode')) {
+      const set = this.stereo.session();
+      return set && { kind: 'photo_set', document: { ...base, photo_set: set } };
+    }
+    if (!this.image || !this.source) return null;
+    const source = this.source;
+    const image = {
+      name: source.name,
+      type: source.kind === 'upload' ? source.type : '',
+      data: null, // the server's session store has the bytes
+      example: source.kind === 'example' ? source.name : null,
+      source: toProjectSource(source),
+      info: { ...this.image },
+    };
+    return { kind: 'photo', document: { ...base, image, params: structuredClone(this.params) } };
+  }
+
+  /** Reopen server project ``id``: its photo (by its id in the server's store, as a reload does),
+   * photo set or views, with its settings; from now on the autosave goes to it. */
+  private async openServerProject(id: string): Promise<void> {
+    $<HTMLDialogElement>('recent-dialog').close();
+    $('resume').hidden = true;
+    await this.busy('Opening project…', async () => {
+      const { document: doc } = await fetchProject(id);
+      this.projects.settle(); // the work open now keeps its last change before this replaces it
+      const showAsSaved = () => {
+        this.view = { ...this.view, ...doc.view };
+        this.applyView();
+      };
+      if (doc.photo_set) {
+        showAsSaved();
+        this.projects.use('photo_set', id);
+        this.stereo.reopen(doc.photo_set.info, doc.photo_set.params);
+        this.setStereoMode(true);
+        return;
+      }
+      if (doc.views) {
+        showAsSaved();
+        this.projects.use('views', id);
+        const views = doc.views.views.map((view) => ({ ...view, source: fromProjectSource(view.source) }));
+        this.views.restore({ ...doc.views, views });
+        const editing = this.views.editing;
+        if (editing !== null) this.editView(editing);
+        else this.setViewsMode(true);
+        return;
+      }
+      const image = doc.image!;
+      const source: ImageSource = image.source
+        ? fromProjectSource(image.source)
+        : image.example
+          ? { kind: 'example', name: image.example }
+          : { kind: 'upload', name: image.name, type: image.type };
+      // this browser's copy of an upload is another image's: only the project's own bytes may be sent
+      const bytes = image.data ? new Blob([api.base64ToBytes(image.data) as Uint8Array<ArrayBuffer>], { type: image.type || 'image/png' }) : null;
+      let info: ImageInfo | null = null;
+      if (image.info && (await api.imageKnown(image.info.image_id))) info = image.info;
+      else if (source.kind === 'upload') info = bytes && (await api.uploadImage(bytes, source.name));
+      else info = await this.reopen(source);
+      if (!info) throw new Error(`${forgotten(image.name)}; the project has no copy of it: open the image again`);
+      // only now that it opened: what is open until now keeps its copy if it did not
+      this.imageBytes = bytes;
+      await storeImageBytes(bytes);
+      showAsSaved();
+      this.projects.use('photo', id);
+      this.views.editing = null;
+      this.showImage(info, source, { ...this.options.defaults, ...doc.params });
+    });
+  }
+
+  /** Project ▸ Open recent…: the server's projects, newest first, to reopen or forget. */
+  private async showRecent(): Promise<void> {
+    const dialog = $<HTMLDialogElement>('recent-dialog');
+    const list = $('recent-list');
+    list.replaceChildren();
+    $('recent-note').textContent = 'Asking the server…';
+    if (!dialog.open) dialog.showModal();
+    let projects: ProjectInfo[] | null;
+    try {
+      projects = await listProjects();
+    } catch (err) {
+      $('recent-note').textContent = `Could not list the projects: ${(err as Error).message}`;
+      return;
+    }
+    if (projects === null) {
+      $('recent-note').textContent = 'This server keeps no projects; start it without --no-sessions.';
+      return;
+    }
+    $('recent-note').textContent = projects.length
+      ? 'Kept by the server as you work, newest first. Open one to go on with it.'
+      : 'No projects yet: what you open is kept here as you work.';
+    const open = new Set(Object.values(this.projects.state().ids));
+    for (const project of projects) list.append(this.recentItem(project, open.has(project.id)));
+  }
+
+  private recentItem(project: ProjectInfo, open: boolean): HTMLElement {
+    const item = document.createElement('li');
+    item.dataset.project = project.id;
+    const button = document.createElement('button');
+    button.className = 'recent-open';
+    button.title = `Open ${project.name}`;
+    const name = document.createElement('b');
+    name.textContent = project.name;
+    const what = document.createElement('small');
+    what.textContent = `${describe(project)}${open ? ' · open in this page' : ''}`;
+    const when = document.createElement('time');
+    when.dateTime = new Date(project.updated * 1000).toISOString();
+    when.title = new Date(project.updated * 1000).toLocaleString();
+    when.textContent = ago(project.updated);
+    button.append(name, what, when);
+    button.addEventListener('click', () => this.openServerProject(project.id));
+    const forget = document.createElement('button');
+    forget.className = 'recent-forget';
+    forget.textContent = '×';
+    forget.title = 'Forget this project (the server deletes it)';
+    forget.setAttribute('aria-label', `Forget ${project.name}`);
+    forget.addEventListener('click', async () => {
+      try {
+        await deleteProject(project.id);
+        item.remove();
+      } catch (err) {
+        this.toast(`Could not forget ${project.name}: ${(err as Error).message}`);
+      }
+    });
+    item.append(button, forget);
+    return item;
+  }
+
+  /** A page without storage (first visit, cleared, another browser): offer the newest server
+   * project on the empty image pane, without opening it. */
+  private async offerNewest(): Promise<void> {
+    let projects: ProjectInfo[] | null = null;
+    try {
+      projects = await listProjects();
+    } catch {
+      return; // the server away: the connection says so
+    }
+    const newest = projects?.[0];
+    // something was opened meanwhile: the offer is moot
+    if (!newest || $('image-empty').hidden || this.image || document.body.classList.contains('stereo-mode')) return;
+    $('resume-name').textContent = newest.name;
+    $('resume-detail').textContent = `${describe(newest)} · ${ago(newest.updated)}`;
+    $('resume-open').onclick = () => this.openServerProject(newest.id);
+    $('resume').hidden = false;
   }
 
   /** Make ``info`` the current image, with ``params`` or else its suggested settings. */
@@ -426,6 +625,9 @@ class App {
   private showModelState(): void {
     // called by the sessions' states, the first time before the sessions exist
     if (!this.stereo || !this.views) return;
+    // every edit of the photo's inputs comes through here (its model goes stale): so do the panels'
+    this.print?.sync();
+    this.maps?.sync();
     const { status, message } = this.shownModel();
     const onScreen = $('view-host').classList.contains('has-model');
     const badge = $('model-badge');
@@ -469,12 +671,22 @@ class App {
     box.textContent = text ?? '';
   }
 
+  // the work open keeps its last change (settle) before the other views replace what is shown
   async openViewPhotos(files: File[]): Promise<void> {
-    if (await this.views.openFiles(files)) this.setViewsMode(true);
+    this.projects.settle();
+    if (await this.views.openFiles(files)) this.openedViews();
   }
 
   async openViewSetExample(name: string): Promise<void> {
-    if (await this.views.openExample(name)) this.setViewsMode(true);
+    this.projects.settle();
+    if (await this.views.openExample(name)) this.openedViews();
+  }
+
+  /** Other views replaced the list: new work, a new project. */
+  private openedViews(): void {
+    this.projects.begin('views');
+    this.setViewsMode(true);
+    this.persist(); // saved even when the panel was open already (no mode change to persist it)
   }
 
   /** The photo open now, with its settings, becomes one more view. */
@@ -506,11 +718,18 @@ class App {
   }
 
   async openPhotos(files: File[]): Promise<void> {
-    if (await this.stereo.openFiles(files)) this.setStereoMode(true);
+    this.projects.settle();
+    if (await this.stereo.openFiles(files)) this.openedPhotoSet();
   }
 
   async openPhotoSetExample(name: string): Promise<void> {
-    if (await this.stereo.openExample(name)) this.setStereoMode(true);
+    this.projects.settle();
+    if (await this.stereo.openExample(name)) this.openedPhotoSet();
+  }
+
+  private openedPhotoSet(): void {
+    this.projects.begin('photo_set');
+    this.setStereoMode(true);
   }
 
   private sources() {
@@ -806,6 +1025,7 @@ class App {
   private persist(): void {
     // a view being edited keeps what the user changes (its photo too: a forgotten one reopened)
     if (this.image && this.source && this.views.editing !== null) this.views.edited(this.image, this.source, this.params);
+    this.projects.changed();
     clearTimeout(this.saveTimer);
     this.saveTimer = window.setTimeout(
       () => saveSession({
@@ -944,10 +1164,12 @@ class App {
       button.addEventListener('click', () => nav[button.dataset.nav!]());
     }
     $('help').addEventListener('click', () => $<HTMLDialogElement>('help-dialog').showModal());
+    $('resume-more').addEventListener('click', () => this.showRecent());
     $('project-menu').addEventListener('click', (event) => {
       const action = (event.target as HTMLElement).closest<HTMLElement>('[data-action]')?.dataset.action;
       if (action === 'save-project') this.saveProject();
       if (action === 'open-project') $<HTMLInputElement>('file-project').click();
+      if (action === 'open-recent') this.showRecent();
       if (action === 'save-regions') this.saveRegions();
       if (action === 'load-regions') $<HTMLInputElement>('file-regions').click();
     });
@@ -1010,7 +1232,7 @@ class App {
   private bindKeys(): void {
     document.addEventListener('keydown', (event) => {
       const target = event.target as HTMLElement;
-      if ($<HTMLDialogElement>('help-dialog').open) return;
+      if ($<HTMLDialogElement>('help-dialog').open || $<HTMLDialogElement>('recent-dialog').open) return;
       if (typing(target) || ownKey(target, event.key)) return;
       const openMenus = document.querySelectorAll('.menu.open');
       if (event.key === 'Escape' && openMenus.length) {
@@ -1083,6 +1305,8 @@ class App {
       shownModelState: () => ({ ...this.shownModel().view(), badge: $('model-badge').hidden ? null : $('model-badge').textContent }),
       /** The messages at the bottom of the window, oldest first. */
       toasts: () => toasts(),
+      /** The autosave to the server's projects: this page's project ids, saves taken, whether one is due. */
+      projects: () => this.projects.state(),
       /** Whether the server answers: "online", or "lost" while it is polled for (connection.ts). */
       connection: () => connectionState(),
       /** The message over the image about what its tool refused, or null. */
@@ -1126,6 +1350,9 @@ class App {
       /** The photo set's session (photometric stereo): what it shows and found. */
       stereo: this.stereo.hook(),
       /** The views' session (several sides fused): the views, the fused model and what is drawn. */
+      /** The Print panel's solid (print.ts) and the Maps panel's previews (mapsPanel.ts). */
+      print: this.print.hook(),
+      maps: this.maps.hook(),
       views: {
         ...this.views.hook(),
         open: () => document.body.classList.contains('views-mode'),
@@ -1141,6 +1368,23 @@ type Hook = ReturnType<App['hook']>;
 /** Why an image id stopped working, in the user's words. */
 function forgotten(name: string): string {
   return `The server no longer had ${name} (it was restarted without its sessions, or let it go)`;
+}
+
+/** What a project of each kind is, in Open recent. */
+const KIND_WORDS: Record<ProjectInfo['kind'], string> = { photo: 'photo', photo_set: 'photo set', views: 'views' };
+
+/** What a project is (its kind, and what it is of unless its name says it). */
+function describe(project: ProjectInfo): string {
+  return project.image === project.name ? KIND_WORDS[project.kind] : `${KIND_WORDS[project.kind]} · ${project.image}`;
+}
+
+/** How long ago ``seconds`` (since the epoch) was, in a few words. */
+function ago(seconds: number): string {
+  const minutes = Math.round((Date.now() / 1000 - seconds) / 60);
+  if (minutes < 1) return 'just now';
+  if (minutes < 60) return `${minutes} min ago`;
+  if (minutes < 24 * 60) return `${Math.round(minutes / 60)} h ago`;
+  return new Date(seconds * 1000).toLocaleDateString();
 }
 
 /** Input types that take no typing: keys there are shortcuts. */

@@ -1,12 +1,28 @@
-// What survives a page reload, and the project file.
+// What survives a page reload, the project file, and the projects the server keeps.
 //
 // localStorage holds the small part (image info, parameters with the regions, view toggles, the
 // photo set and the views with their settings);
 // IndexedDB holds the image's original bytes, so that an image the server has forgotten (it
 // keeps a bounded number, and none across a restart) can be uploaded again. A project file is
 // the same session as one JSON document with the image inline as base64.
-import { base64ToBytes, bytesToBase64 } from './api';
-import type { ImageInfo, PhotoSetInfo, ReconstructParams, StereoParams } from './api.gen';
+//
+// The server keeps projects too (/api/projects, in its session store): the work open is
+// autosaved there (ProjectAutosave) as the same document with the images named by their ids in
+// the server's store, so that it outlives a server restart, cleared storage and another browser.
+// localStorage keeps which server project this page works on, one per kind.
+import { ApiError, base64ToBytes, bytesToBase64 } from './api';
+import type {
+  ImageInfo,
+  PhotoSetInfo,
+  Project,
+  ProjectDocument,
+  ProjectInfo,
+  ProjectList,
+  ProjectSource,
+  ReconstructParams,
+  StereoParams,
+} from './api.gen';
+import { NetworkError, onReconnect, send } from './connection';
 import type { ViewsSaved } from './views';
 
 export type Params = ReconstructParams;
@@ -74,6 +90,15 @@ export function loadSession(): Session {
     };
   } catch {
     return empty; // storage disabled or a corrupt entry: start afresh
+  }
+}
+
+/** Whether this browser kept a session for the app (false: a first visit, or storage cleared). */
+export function hasSavedSession(): boolean {
+  try {
+    return localStorage.getItem(SESSION_KEY) !== null;
+  } catch {
+    return false;
   }
 }
 
@@ -169,6 +194,218 @@ export function readProject(document: unknown): { project: ProjectFile; bytes: B
   }
   const bytes = new Blob([base64ToBytes(image.data) as Uint8Array<ArrayBuffer>], { type: image.type || 'image/png' });
   return { project: doc as ProjectFile, bytes };
+}
+
+// ------------------------------------------------------------------ the server's projects
+
+export type ProjectKind = ProjectInfo['kind'];
+
+/** What the page has open, as a server project: null when nothing is (or nothing worth keeping). */
+export interface ProjectSnapshot {
+  kind: ProjectKind;
+  document: ProjectDocument;
+}
+
+/** The server project this page works on, per kind: opening a photo does not end the views' one. */
+export type ProjectIds = Record<ProjectKind, string | null>;
+
+const PROJECT_IDS_KEY = 'shadeform.projects.v1';
+const AUTOSAVE_MS = 1000;
+// a save sent as the page goes away must fit the browser's keepalive budget (64 KiB)
+const KEEPALIVE_BYTES = 60_000;
+
+/** A new project id: random, so that it is this project's on every browser and server. */
+export function newProjectId(): string {
+  // getRandomValues works where randomUUID does not (a page served over plain http to another machine)
+  const bytes = crypto.getRandomValues(new Uint8Array(16));
+  return Array.from(bytes, (b) => b.toString(16).padStart(2, '0')).join('');
+}
+
+export function toProjectSource(source: ImageSource): ProjectSource {
+  return {
+    kind: source.kind,
+    name: source.name,
+    type: source.kind === 'upload' ? source.type : null,
+    index: source.kind === 'viewset' ? source.index : null,
+  };
+}
+
+export function fromProjectSource(source: ProjectSource): ImageSource {
+  if (source.kind === 'upload') return { kind: 'upload', name: source.name, type: source.type ?? '' };
+  if (source.kind === 'viewset') return { kind: 'viewset', name: source.name, index: source.index ?? 0 };
+  return { kind: source.kind, name: source.name };
+}
+
+async function answer<T>(response: Response): Promise<T> {
+  if (!response.ok) {
+    let detail = `${response.status} ${response.statusText}`.trim();
+    try {
+      const body = await response.json();
+      if (body && typeof body.detail === 'string') detail = body.detail;
+    } catch {
+      // not JSON: keep the status line
+    }
+    throw new ApiError(response.status, detail);
+  }
+  return response.status === 204 ? (undefined as T) : ((await response.json()) as T);
+}
+
+function projectUrl(id: string): string {
+  return `/api/projects/${encodeURIComponent(id)}`;
+}
+
+/** The server's projects, newest first; null when the server keeps none (--no-sessions, or older). */
+export async function listProjects(): Promise<ProjectInfo[] | null> {
+  try {
+    return (await answer<ProjectList>(await send('/api/projects', { cache: 'no-store' }))).projects;
+  } catch (err) {
+    if (err instanceof ApiError && (err.status === 404 || err.status === 405)) return null;
+    throw err;
+  }
+}
+
+export async function fetchProject(id: string): Promise<Project> {
+  return answer<Project>(await send(projectUrl(id), { cache: 'no-store' }));
+}
+
+export async function deleteProject(id: string): Promise<void> {
+  await answer<void>(await send(projectUrl(id), { method: 'DELETE' }));
+}
+
+async function putProject(id: string, document: ProjectDocument): Promise<ProjectInfo> {
+  const init = { method: 'PUT', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(document) };
+  return answer<ProjectInfo>(await send(projectUrl(id), init));
+}
+
+/**
+ * Saves what the page has open to the server, 1 s after the last change, one request at a time
+ * (what changes while one is out goes once it is answered, the newest state per project).
+ * Failures are silent: a server that is away is the connection's message (connection.ts) and the
+ * save goes again once it answers; a server that keeps no projects ends the autosaving for this
+ * page.
+ */
+export class ProjectAutosave {
+  private ids: ProjectIds;
+  private timer = 0;
+  /** Documents to send, per project id, oldest first. */
+  private readonly queue = new Map<string, ProjectDocument>();
+  private sending = false;
+  private off = false;
+  private saves = 0;
+  private error: string | null = null;
+
+  constructor(private readonly snapshot: () => ProjectSnapshot | null) {
+    this.ids = loadProjectIds();
+    onReconnect(() => void this.pump());
+    // a change made just before the page goes away: sent with the page's last breath, if small
+    window.addEventListener('pagehide', () => this.flush());
+  }
+
+  /** New work of ``kind`` begins (a photo, a photo set, views opened): a new project. */
+  begin(kind: ProjectKind): void {
+    this.use(kind, newProjectId());
+  }
+
+  /** Work on project ``id`` (opened from the server's list) from now on. */
+  use(kind: ProjectKind, id: string): void {
+    this.settle(); // the work open until now keeps its last change, under its own id
+    this.ids = { ...this.ids, [kind]: id };
+    saveProjectIds(this.ids);
+  }
+
+  /** Something changed: save in a second unless another change comes first. */
+  changed(): void {
+    if (this.off) return;
+    clearTimeout(this.timer);
+    this.timer = window.setTimeout(() => this.settle(), AUTOSAVE_MS);
+  }
+
+  /** A save that is due goes now (before other work replaces what the page shows). */
+  settle(): void {
+    if (!this.timer) return;
+    clearTimeout(this.timer);
+    this.timer = 0;
+    const now = this.current();
+    if (!now) return;
+    this.queue.delete(now.id); // re-queued as the newest
+    this.queue.set(now.id, now.document);
+    void this.pump();
+  }
+
+  /** For the test hook: the ids, how many saves the server took, whether one is due, the last failure. */
+  state() {
+    const pending = this.timer !== 0 || this.queue.size > 0 || this.sending;
+    return { ids: { ...this.ids }, saves: this.saves, pending, error: this.error, off: this.off };
+  }
+
+  private current(): { id: string; document: ProjectDocument } | null {
+    const now = this.snapshot();
+    if (!now) return null;
+    if (!this.ids[now.kind]) {
+      this.ids = { ...this.ids, [now.kind]: newProjectId() };
+      saveProjectIds(this.ids);
+    }
+    return { id: this.ids[now.kind]!, document: now.document };
+  }
+
+  private async pump(): Promise<void> {
+    if (this.sending) return;
+    this.sending = true;
+    try {
+      while (this.queue.size && !this.off) {
+        const [id, document] = this.queue.entries().next().value!;
+        this.queue.delete(id);
+        try {
+          await putProject(id, document);
+          this.saves += 1;
+          this.error = null;
+        } catch (err) {
+          this.error = (err as Error).message;
+          if (err instanceof NetworkError) {
+            // kept (unless a newer one came meanwhile) and sent once the server answers
+            if (!this.queue.has(id)) this.queue.set(id, document);
+            break;
+          }
+          // a server that keeps no projects (409), or an older one without them: stop asking
+          if (err instanceof ApiError && [404, 405, 409].includes(err.status)) this.off = true;
+        }
+      }
+    } finally {
+      this.sending = false;
+    }
+  }
+
+  private flush(): void {
+    if (this.off || !this.timer) return;
+    clearTimeout(this.timer);
+    this.timer = 0;
+    const now = this.current();
+    if (!now) return;
+    const body = JSON.stringify(now.document);
+    if (body.length > KEEPALIVE_BYTES) return;
+    // not through the connection: a page going away has no one to tell
+    fetch(projectUrl(now.id), { method: 'PUT', headers: { 'Content-Type': 'application/json' }, body, keepalive: true }).catch(
+      () => undefined,
+    );
+  }
+}
+
+function loadProjectIds(): ProjectIds {
+  const none: ProjectIds = { photo: null, photo_set: null, views: null };
+  try {
+    const saved = JSON.parse(localStorage.getItem(PROJECT_IDS_KEY) ?? 'null') as Partial<ProjectIds> | null;
+    return { ...none, ...(saved ?? {}) };
+  } catch {
+    return none;
+  }
+}
+
+function saveProjectIds(ids: ProjectIds): void {
+  try {
+    localStorage.setItem(PROJECT_IDS_KEY, JSON.stringify(ids));
+  } catch {
+    // storage disabled: the ids last as long as the page
+  }
 }
 
 // ------------------------------------------------------------------------- regions JSON

@@ -49,6 +49,11 @@ export class Viewer {
   private options: ViewOptions = { wireframe: false, normalColours: false, texture: false, lightArrow: true };
   private frame = 0;
   private renderWaiters: Array<(t: number) => void> = [];
+  // what the mesh's coordinates are ("model": pixels; "solid": a print in mm); a mesh in another
+  // frame than the last one is always fitted anew (a solid of 80 mm after a model of 1000 px)
+  private meshFrame = 'none';
+  private guides: THREE.Object3D | null = null; // drawn with the mesh (a solid's measures)
+  private readonly renderListeners: Array<() => void> = [];
 
   constructor(private readonly host: HTMLElement) {
     this.renderer = new THREE.WebGLRenderer({ antialias: true, alpha: true, preserveDrawingBuffer: true });
@@ -81,8 +86,14 @@ export class Viewer {
     this.resize();
   }
 
-  /** Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new parameter). */
-  setMesh(mesh: DecodedMesh, { refit }: { refit: boolean }): void {
+  /**
+   * Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new
+   * parameter), and so does a ``frame`` other than the last mesh's. Guides go with the old mesh.
+   */
+  setMesh(mesh: DecodedMesh, { refit, frame = 'model' }: { refit: boolean; frame?: string }): void {
+    refit ||= frame !== this.meshFrame;
+    this.meshFrame = frame;
+    this.setGuides(null);
     const geometry = geometryOf(mesh);
     const old = this.surface?.geometry;
     if (this.surface) this.model.remove(this.surface);
@@ -143,7 +154,43 @@ export class Viewer {
     return this.positions ? this.positions.length / 3 : 0;
   }
 
+  /** The frame of the mesh on screen ("model", "solid", ...), or "none". */
+  get shownFrame(): string {
+    return this.surface ? this.meshFrame : 'none';
+  }
+
+  /** Lines drawn in the mesh's coordinates until the next mesh (null removes them). */
+  setGuides(guides: THREE.Object3D | null): void {
+    if (this.guides) {
+      this.model.remove(this.guides);
+      this.guides.traverse((part) => {
+        if (part instanceof THREE.LineSegments) {
+          part.geometry.dispose();
+          (part.material as THREE.Material).dispose();
+        }
+      });
+    }
+    this.guides = guides;
+    if (guides) this.model.add(guides);
+    this.requestRender();
+  }
+
+  /** Call ``listener`` after every frame drawn (labels that follow the camera). */
+  onRender(listener: () => void): void {
+    this.renderListeners.push(listener);
+  }
+
+  /** Where a point in the mesh's coordinates is drawn, in CSS pixels of the view; null behind the camera. */
+  toScreen(x: number, y: number, z: number): [number, number] | null {
+    this.model.updateMatrixWorld();
+    const point = new THREE.Vector3(x, y, z).applyMatrix4(this.model.matrixWorld).project(this.camera);
+    if (point.z > 1) return null;
+    const rect = this.host.getBoundingClientRect();
+    return [((point.x + 1) / 2) * rect.width, ((1 - point.y) / 2) * rect.height];
+  }
+
   clear(): void {
+    this.setGuides(null);
     if (this.surface) {
       this.model.remove(this.surface);
       this.surface.geometry.dispose();
@@ -254,6 +301,7 @@ export class Viewer {
       this.frame = 0;
       this.renderer.render(this.scene, this.camera);
       if (this.surface) this.gizmo.render(this.renderer, this.camera);
+      this.renderListeners.forEach((listener) => listener());
       const waiters = this.renderWaiters;
       this.renderWaiters = [];
       const now = performance.now();

@@ -39,6 +39,7 @@ MEDIA_TYPES = {
     ".wrl": "model/vrml",
     ".obj": "model/obj",
     ".stl": "model/stl",
+    ".3mf": "model/3mf",
     ".glb": "model/gltf-binary",
 }
 

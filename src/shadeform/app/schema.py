@@ -17,7 +17,7 @@ import json
 import sys
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic.json_schema import models_json_schema
 from typing_extensions import TypeAliasType
 
@@ -53,6 +53,22 @@ __all__ = [
     "SeedMaskRequest",
     "MaskFileRequest",
     "MaskResult",
+    "Outline",
+    "ReliefParams",
+    "ReliefRequest",
+    "ReliefResult",
+    "MapPreview",
+    "MapsResult",
+    "ProjectSource",
+    "ProjectImage",
+    "DisplaySettings",
+    "ProjectPhotoSet",
+    "ProjectViewEntry",
+    "ProjectViews",
+    "ProjectDocument",
+    "ProjectInfo",
+    "ProjectList",
+    "Project",
     "ErrorBody",
     "typescript",
 ]
@@ -215,6 +231,7 @@ class Options(_Model):
     stereo_methods: list[MethodInfo] = Field(description="Photometric stereo's methods, the default first.")
     photo_set_examples: list[ExampleInfo]
     stereo_defaults: StereoParams
+    relief_defaults: ReliefParams = Field(default_factory=lambda: ReliefParams())
     view_set_examples: list[ExampleInfo] = Field(
         description="Shipped view sets: one object photographed from several sides, to fuse."
     )
@@ -502,6 +519,196 @@ class MaskResult(_Model):
     note: str = Field(description="One line in the user's words saying what was found.")
 
 
+# --- printing and texture maps (shadeform.app.printing) -----------------------------------------
+
+Outline = TypeAliasType("Outline", Literal["mask", "frame"])
+
+
+class ReliefParams(_Model):
+    """A print's options (:func:`shadeform.relief`); the server checks them
+    (:func:`shadeform.solid.check_options`) and says what is wrong in one line."""
+
+    width_mm: float = Field(default=100.0, description="Longest side of the outline, mm (exact).")
+    height_mm: float = Field(default=5.0, description="Relief depth, lowest to highest point, mm.")
+    base_mm: float = Field(default=2.0, description="Flat base under the relief's lowest point, mm.")
+    outline: Outline = Field(default="mask", description="Walls along the object's outline, or the frame.")
+    compress: float = Field(default=0.0, description="Bas-relief compression in [0, 1]; 0 scales linearly.")
+    invert: bool = Field(default=False, description="Engrave instead of emboss.")
+    border_mm: float = Field(default=0.0, description="A flat rim around the outline, mm; 0 for none.")
+    min_wall_mm: float = Field(default=0.8, description="The thinnest wall the printer makes, mm.")
+    max_triangles: int | None = Field(
+        default=200_000, description="Triangle budget (at least 12); null: two triangles per pixel."
+    )
+
+
+class ReliefRequest(_Model):
+    """A print-ready solid of a stored image's reconstruction with these parameters."""
+
+    image_id: str
+    params: ReconstructParams = Field(default_factory=ReconstructParams)
+    relief: ReliefParams = Field(default_factory=ReliefParams)
+    request_id: int = Field(default=0, description="Chosen by the client, echoed in the result.")
+
+
+class ReliefResult(_Model):
+    """The solid, in millimetres, and its measures."""
+
+    request_id: int
+    mesh: MeshData = Field(
+        description="The closed solid, mm: x along the image's columns, y up the image, base on z = 0; "
+        "no texture coordinates.",
+    )
+    size_mm: tuple[float, float, float] = Field(description="Extent along x, y, z, mm (z: base plus relief).")
+    volume_mm3: float
+    triangle_count: int
+    deviation_mm: float = Field(description="Farthest the printed top is from the full-resolution relief.")
+    pixel_mm: float = Field(description="One image pixel in the print, mm.")
+    timings: dict[str, float] = Field(description="Seconds: reconstruct (if solved), relief, encode, total.")
+    info: dict[str, Any] = Field(description="``cached``: the model was reused; ``reused``: the solid too.")
+
+
+class MapPreview(_Model):
+    """One texture map, small, with what its file holds."""
+
+    name: str = Field(description="normal_opengl, normal_directx, height, ambient_occlusion or curvature.")
+    png: str = Field(description="A preview: base64 8-bit PNG, at most 256 pixels on a side.")
+    bits: int = Field(description="Bits per sample of the map's file in the zip.")
+    legend: str = Field(description="What the map's values mean.")
+
+
+class MapsResult(_Model):
+    """Previews of every texture map of a reconstruction (:func:`shadeform.maps`)."""
+
+    request_id: int
+    width: int = Field(description="The maps' full width in pixels (the image's).")
+    height: int
+    maps: list[MapPreview]
+    timings: dict[str, float] = Field(description="Seconds: reconstruct (if solved), maps, encode, total.")
+    info: dict[str, Any] = Field(description="``cached``: the model was reused; ``reused``: the maps too.")
+
+
+# --- projects: the user's work on one photo, a photo set or views, kept by the server ------------
+
+#: A project's id: chosen by the client, so that it can save before the server answers.
+PROJECT_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+
+_Name = Annotated[str, Field(max_length=1000)]
+
+
+class ProjectSource(_Model):
+    """Where a project's photo came from, to open it again: a shipped example (by name), an upload,
+    the image the server was started with, or photo ``index`` of a shipped view set."""
+
+    kind: Literal["example", "upload", "initial", "viewset"]
+    name: _Name
+    type: str | None = Field(default=None, max_length=200, description="An upload's MIME type.")
+    index: int | None = Field(default=None, ge=0, lt=1000, description="The photo's place in its view set.")
+
+
+class ProjectImage(_Model):
+    """A project's photo: a project file carries its bytes; the server's projects name the image in
+    the server's session store instead (``info.image_id``), which keeps the bytes."""
+
+    name: _Name
+    type: str = Field(default="", max_length=200, description="The file's MIME type.")
+    data: str | None = Field(default=None, description="base64 of the image file (project files).")
+    example: str | None = Field(default=None, max_length=200, description="A shipped example's name.")
+    source: ProjectSource | None = None
+    info: ImageInfo | None = Field(
+        default=None, description="The image as the server stored it (its id in the session store)."
+    )
+
+
+class DisplaySettings(_Model):
+    """How the client shows the model and the image (the project file's ``view``)."""
+
+    wireframe: bool = False
+    normalColours: bool = False
+    texture: bool = False
+    maskOverlay: bool = True
+    lightArrow: bool = True
+
+
+class ProjectPhotoSet(_Model):
+    """A photo set in a project: the set the server stored and the user's settings."""
+
+    info: PhotoSetInfo
+    params: StereoParams
+
+
+class ProjectViewEntry(_Model):
+    """One view in a project: its stored photo, where the photo came from, angle and settings."""
+
+    image: ImageInfo
+    source: ProjectSource
+    angle: float = Field(allow_inf_nan=False)
+    params: ReconstructParams
+
+
+class ProjectViews(_Model):
+    """The views in a project (several sides of one object, fused) and the fusion's settings."""
+
+    views: list[ProjectViewEntry] = Field(min_length=1, max_length=24)
+    refine: bool = True
+    settle: bool = True
+    resolution: float | None = Field(default=None, ge=0.25, le=64, allow_inf_nan=False)
+    showParts: bool = True
+    editing: int | None = Field(
+        default=None, ge=0, lt=24, description="The view being edited in single-photo mode, if one is."
+    )
+
+
+class ProjectDocument(_Model):
+    """A project as the client's project file holds it: one photo (``image`` and ``params``), a
+    photo set (``photo_set``) or views (``views``), with the display settings."""
+
+    format: Literal["shadeform-project"]
+    version: int = Field(ge=1, le=1, description="1: the only version so far.")
+    name: str | None = Field(
+        default=None, max_length=200, description="Shown in Open recent; null: what the project is of."
+    )
+    image: ProjectImage | None = None
+    params: ReconstructParams | None = None
+    view: DisplaySettings = Field(default_factory=DisplaySettings)
+    photo_set: ProjectPhotoSet | None = None
+    views: ProjectViews | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> ProjectDocument:
+        held = [key for key in ("image", "photo_set", "views") if getattr(self, key) is not None]
+        if len(held) != 1:
+            raise ValueError(
+                "a project holds exactly one of image (with params), photo_set or views; "
+                f"this one holds {' and '.join(held) or 'none of them'}"
+            )
+        if self.image is not None and self.params is None:
+            raise ValueError("a project with an image needs its params")
+        return self
+
+
+class ProjectInfo(_Model):
+    """A project the server keeps, as Open recent lists it."""
+
+    id: str
+    name: str
+    image: str = Field(description="What the project is of: the photo's name, the photo set's, the views'.")
+    kind: Literal["photo", "photo_set", "views"]
+    created: float = Field(description="Seconds since the epoch.")
+    updated: float = Field(description="Seconds since the epoch, when it was last saved.")
+
+
+class ProjectList(_Model):
+    """The projects the server keeps, the most recently updated first."""
+
+    projects: list[ProjectInfo]
+
+
+class Project(ProjectInfo):
+    """A project the server keeps, with its document."""
+
+    document: ProjectDocument
+
+
 class ErrorBody(_Model):
     """Every error response: one line saying what was wrong and what to do."""
 
@@ -537,6 +744,21 @@ _EXPORTED = (
     SeedMaskRequest,
     MaskFileRequest,
     MaskResult,
+    ReliefParams,
+    ReliefRequest,
+    ReliefResult,
+    MapPreview,
+    MapsResult,
+    ProjectSource,
+    ProjectImage,
+    DisplaySettings,
+    ProjectPhotoSet,
+    ProjectViewEntry,
+    ProjectViews,
+    ProjectDocument,
+    ProjectInfo,
+    ProjectList,
+    Project,
     ErrorBody,
 )
 

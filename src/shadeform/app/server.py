@@ -14,6 +14,8 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``POST /api/images/{id}/mask/...``          masks: :mod:`shadeform.app.masks`
 ``/api/photosets``, ``/api/stereo``         photo sets: :mod:`shadeform.app.stereo`
 ``/api/fuse``, ``/api/viewsets``            several views fused: :mod:`shadeform.app.fusion`
+``/api/projects``                           the users' projects: :mod:`shadeform.app.projects`
+``/api/relief``, ``/api/maps``              prints and texture maps: :mod:`shadeform.app.printing`
 ==========================================  ===================================================
 
 Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a library
@@ -67,6 +69,8 @@ from shadeform.app.encoding import (
 from shadeform.app.fusion import add_fusion_routes
 from shadeform.app.guard import ERROR_RESPONSES, AppLimits, Guard, add_error_handlers, file_too_large
 from shadeform.app.masks import add_mask_routes, user_mask
+from shadeform.app.printing import add_print_routes
+from shadeform.app.projects import add_project_routes
 from shadeform.app.schema import (
     ExampleInfo,
     FilterParams,
@@ -241,6 +245,8 @@ def create_app(
     add_mask_routes(app, state)
     add_stereo_routes(app, state)
     add_fusion_routes(app, state)
+    add_project_routes(app, state)
+    add_print_routes(app, state)
 
     @app.api_route("/", methods=["GET", "HEAD"], include_in_schema=False)
     def index() -> Response:

@@ -1,4 +1,5 @@
-"""What the app's sessions opened, kept in SQLite so that they outlive a server restart.
+"""What the app's sessions opened, and the users' projects, kept in SQLite so that they outlive
+a server restart.
 
 The server holds images and photo sets in memory (:class:`shadeform.app.store.LRU`); this store
 keeps, for each id a client was given, how to make it again: the uploaded files' bytes (decoded
@@ -9,7 +10,9 @@ entry again from here.
 
 One SQLite file in the user's data folder (:func:`data_folder`), in WAL mode (a reader never
 waits for a writer; a crash never leaves it half-written), bounded by bytes: the least recently
-used entries go first.
+used entries go first. The same file keeps the users' projects (table ``projects``: the client's
+project documents, autosaved), so that a project outlives a restart of the server, a browser
+whose storage was cleared and a change of browser; the most recently updated are kept.
 """
 
 from __future__ import annotations
@@ -39,7 +42,20 @@ CREATE TABLE IF NOT EXISTS blobs (
     data BLOB NOT NULL,
     PRIMARY KEY (key, position)
 );
+CREATE TABLE IF NOT EXISTS projects (
+    id TEXT PRIMARY KEY,
+    name TEXT NOT NULL,
+    image TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    document TEXT NOT NULL,
+    created REAL NOT NULL,
+    updated REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS projects_by_update ON projects (updated);
 """
+
+#: The columns of a project's row, as the keys of the dicts the store returns.
+_PROJECT_FIELDS = ("id", "name", "image", "kind", "created", "updated")
 
 
 def data_folder() -> Path:
@@ -65,11 +81,23 @@ class SessionStore:
     max_bytes : int
         Most bytes of blobs kept; the least recently used entries go first (the one just put is
         always kept).
+    max_projects, max_project_bytes : int
+        Most projects, and most bytes of their documents, kept; the least recently updated go
+        first (the one just saved is always kept).
     """
 
-    def __init__(self, path: str | os.PathLike, *, max_bytes: int) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        max_bytes: int,
+        max_projects: int = 200,
+        max_project_bytes: int = 256 * 2**20,
+    ) -> None:
         self.path = Path(path)
         self.max_bytes = int(max_bytes)
+        self.max_projects = int(max_projects)
+        self.max_project_bytes = int(max_project_bytes)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # one connection, shared by the server's worker threads under a lock
         self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
@@ -123,6 +151,75 @@ class SessionStore:
                 ).fetchall()
             ]
         return row[0], json.loads(row[1]), blobs
+
+    # --- projects ------------------------------------------------------------------------------
+
+    def save_project(
+        self, project_id: str, name: str, document: str | dict, *, image: str = "", kind: str = ""
+    ) -> dict:
+        """Keep (or replace) project ``project_id``: its ``name``, its ``document`` (JSON text, or
+        a JSON-able dict) and, for listing without reading every document, what it is about
+        (``image``) and its ``kind``; then let the least recently updated others go to fit
+        :attr:`max_projects` and :attr:`max_project_bytes`. Returns the project's listing (as
+        :meth:`list_projects`)."""
+        text = document if isinstance(document, str) else json.dumps(document)
+        now = time.time()
+        with self._lock, self._db:
+            self._db.execute("BEGIN")
+            # created survives a save; updated never goes back (a clock set back keeps the order)
+            self._db.execute(
+                "INSERT INTO projects VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT (id) DO UPDATE SET "
+                "name = excluded.name, image = excluded.image, kind = excluded.kind, "
+                "document = excluded.document, updated = MAX(excluded.updated, projects.updated)",
+                (project_id, name, image, kind, text, now, now),
+            )
+            newest = self._db.execute("SELECT MAX(updated) FROM projects WHERE id != ?", (project_id,))
+            latest = newest.fetchone()[0]
+            if latest is not None and latest >= now:  # same clock tick, or a clock set back
+                self._db.execute("UPDATE projects SET updated = ? WHERE id = ?", (latest + 1e-6, project_id))
+            self._bound_projects(project_id)
+            row = self._db.execute(
+                f"SELECT {', '.join(_PROJECT_FIELDS)} FROM projects WHERE id = ?", (project_id,)
+            ).fetchone()
+        return dict(zip(_PROJECT_FIELDS, row))
+
+    def _bound_projects(self, keep: str) -> None:
+        count, total = self._db.execute(
+            "SELECT COUNT(*), COALESCE(SUM(LENGTH(document)), 0) FROM projects"
+        ).fetchone()
+        if count <= self.max_projects and total <= self.max_project_bytes:
+            return
+        for old, size in self._db.execute(
+            "SELECT id, LENGTH(document) FROM projects WHERE id != ? ORDER BY updated", (keep,)
+        ).fetchall():
+            if count <= self.max_projects and total <= self.max_project_bytes:
+                break
+            self._db.execute("DELETE FROM projects WHERE id = ?", (old,))
+            count, total = count - 1, total - size
+
+    def get_project(self, project_id: str) -> dict | None:
+        """Project ``project_id``: its listing (as :meth:`list_projects`) and ``document``, the
+        JSON text as saved; None if the store does not have it."""
+        with self._lock:
+            row = self._db.execute(
+                f"SELECT {', '.join(_PROJECT_FIELDS)}, document FROM projects WHERE id = ?",
+                (project_id,),
+            ).fetchone()
+        return None if row is None else dict(zip((*_PROJECT_FIELDS, "document"), row))
+
+    def list_projects(self) -> list[dict]:
+        """Every project kept, the most recently updated first: dicts of ``id``, ``name``,
+        ``image``, ``kind``, ``created`` and ``updated`` (seconds since the epoch)."""
+        with self._lock:
+            rows = self._db.execute(
+                f"SELECT {', '.join(_PROJECT_FIELDS)} FROM projects ORDER BY updated DESC"
+            ).fetchall()
+        return [dict(zip(_PROJECT_FIELDS, row)) for row in rows]
+
+    def delete_project(self, project_id: str) -> bool:
+        """Forget project ``project_id``; whether the store had it."""
+        with self._lock:
+            return self._db.execute("DELETE FROM projects WHERE id = ?", (project_id,)).rowcount > 0
 
     def __len__(self) -> int:
         with self._lock:
