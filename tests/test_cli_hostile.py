@@ -54,6 +54,44 @@ CASES = [
     ("deep views file", ["fuse", "--views", "{inputs}/deep_views.json", "-o", "{out}/f.glb"], "views"),
     ("maps reach 0.5", ["maps", "{photo}", "--out", "{out}/maps", "--reach", "0.5"], "--reach"),
     ("maps tile alone", ["maps", "{photo}", "--out", "{out}/maps", "--tile"], "--material"),
+    (
+        "unknown map name",
+        ["maps", "{photo}", "--out", "{out}/maps", "--maps", "height,glossiness"],
+        "glossiness",
+    ),
+    (
+        "relief width 0",
+        ["relief", "{photo}", "-o", "{out}/r.stl", "--width", "0", "--height", "3", "--base", "2"],
+        "width",
+    ),
+    (
+        "relief negative height",
+        ["relief", "{photo}", "-o", "{out}/r.stl", "--width", "50", "--height", "-3", "--base", "2"],
+        "height",
+    ),
+    (
+        "relief base thinner than a wall",
+        ["relief", "{photo}", "-o", "{out}/r.stl", "--width", "50", "--height", "3", "--base", "0.1"],
+        "base",
+    ),
+    (
+        "relief budget 0",
+        [
+            "relief",
+            "{photo}",
+            "-o",
+            "{out}/r.stl",
+            "--width",
+            "50",
+            "--height",
+            "3",
+            "--base",
+            "2",
+            "--max-triangles",
+            "0",
+        ],
+        "triangles",
+    ),
 ]
 
 

@@ -78,3 +78,10 @@ def test_material_mode_writes_an_albedo_too_and_says_where_the_light_was_read(tm
 def test_tile_needs_material(photo, tmp_path, cli):
     result = cli("maps", photo, "--out", tmp_path / "maps", "--tile")
     assert result.exit_code == 2 and "--material" in result.output
+
+
+def test_only_the_maps_asked_for(photo, tmp_path, cli):
+    out = tmp_path / "maps"
+    result = cli("maps", photo, "--out", out, "--maps", "height, normal_directx")
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["sphere_height.png", "sphere_normal_directx.png"]

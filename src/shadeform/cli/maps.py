@@ -58,6 +58,16 @@ def maps(
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
     ],
     out: Annotated[Path, typer.Option("--out", help="Folder for the maps (created if missing).")],
+    only: Annotated[
+        str | None,
+        typer.Option(
+            "--maps",
+            metavar="NAMES",
+            help="Write only these maps, comma-separated: normal_opengl, normal_directx, height, "
+            "ambient_occlusion, curvature (and albedo with --material). Default: all.",
+            show_default=False,
+        ),
+    ] = None,
     reach: Annotated[
         float | None,
         typer.Option(
@@ -103,8 +113,9 @@ def maps(
         raise InputError(
             "--tile makes material maps tile; add --material (a photo of a surface filling the frame)"
         )
+    wanted = _wanted(only, [*LEGEND, "albedo"] if material else list(LEGEND))
     if material:
-        return _material(image, out, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
+        return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
                          channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
     light_vector = resolve_light(light, slant, tilt)
     references = [parse_reference(text) for text in reference or ()]
@@ -115,7 +126,7 @@ def maps(
     total = time.perf_counter()
     with OutputSet() as outputs:
         outputs.make_folder(out)
-        files = {name: out / f"{image.stem}_{name}.png" for name in LEGEND}
+        files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
         photo, rec = reconstruct_photo(
             err,
@@ -138,8 +149,8 @@ def maps(
             made = shadeform.maps(rec, reach=reach)
         timings["maps"] = time.perf_counter() - start
         start = time.perf_counter()
-        for name, values in made.items():
-            save_gray(values, temps[name], bitdepth=LEGEND[name][0])
+        for name in wanted:
+            save_gray(made[name], temps[name], bitdepth=LEGEND[name][0])
         outputs.commit()
         timings["write"] = time.perf_counter() - start
     timings["total"] = time.perf_counter() - total
@@ -147,16 +158,13 @@ def maps(
     relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
     note_channel(err, photo.info)
     note_unsure(err, rec.info)
-    rows = [
-        (files[name], text.format(range=f" ({relief:.3g} px of relief)"))
-        for name, (_, text) in LEGEND.items()
-    ]
+    rows = [(files[name], LEGEND[name][1].format(range=f" ({relief:.3g} px of relief)")) for name in wanted]
     if as_json:
         print_json(
             {
                 "command": "maps",
                 "input": {"path": image, "width": photo.image.shape[1], "height": photo.image.shape[0]},
-                "maps": {name: {"path": files[name], "bits": LEGEND[name][0]} for name in LEGEND},
+                "maps": {name: {"path": files[name], "bits": LEGEND[name][0]} for name in wanted},
                 "height_range_px": relief,
                 "info": rec.info,
                 "timings": timings,
@@ -171,7 +179,21 @@ def maps(
     print_files(console, rows)
 
 
-def _material(image, out, *, reach, tile, light, slant, tilt, channel, linear, as_json, max_pixels):
+def _wanted(only: str | None, names: list[str]) -> list[str]:
+    """The maps ``--maps`` asks for, in the legend's order; every map without it."""
+    if only is None:
+        return names
+    from shadeform.errors import InputError
+
+    asked = [name.strip() for name in only.split(",") if name.strip()]
+    unknown = [name for name in asked if name not in names]
+    if unknown or not asked:
+        what = f"unknown map {unknown[0]!r} in --maps" if unknown else "--maps names no map"
+        raise InputError(f"{what}; choose from {', '.join(names)}")
+    return [name for name in names if name in asked]
+
+
+def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, linear, as_json, max_pixels):
     """``maps --material``: the maps of a photo of a surface filling the frame."""
     from shadeform.io.images import read_photo
     from shadeform.io.maps import save_gray
@@ -185,15 +207,15 @@ def _material(image, out, *, reach, tile, light, slant, tilt, channel, linear, a
     legend = {**LEGEND, "albedo": ALBEDO}
     with OutputSet() as outputs:
         outputs.make_folder(out)
-        files = {name: out / f"{image.stem}_{name}.png" for name in legend}
+        files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
         with err.status(f"loading {escape(str(image))}", spinner="dots"):
             photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
         colour = photo.pixels if photo.pixels.shape[2] == 3 else photo.image
         with err.status("making the maps", spinner="dots"):
             result = material(colour, light=given, tile=tile, reach=reach)
-        for name, values in result.maps.items():
-            save_gray(values, temps[name], bitdepth=legend[name][0])
+        for name in wanted:
+            save_gray(result.maps[name], temps[name], bitdepth=legend[name][0])
         outputs.commit()
     seconds = time.perf_counter() - total
     height = result.maps["height"]
@@ -210,7 +232,7 @@ def _material(image, out, *, reach, tile, light, slant, tilt, channel, linear, a
                 "command": "maps",
                 "material": True,
                 "input": {"path": image, "width": height.shape[1], "height": height.shape[0]},
-                "maps": {name: {"path": files[name], "bits": legend[name][0]} for name in legend},
+                "maps": {name: {"path": files[name], "bits": legend[name][0]} for name in wanted},
                 "light": result.light,
                 "light_estimated": result.light_estimated,
                 "seconds": seconds,
@@ -223,5 +245,5 @@ def _material(image, out, *, reach, tile, light, slant, tilt, channel, linear, a
         f"{tilt_read:.0f} degrees{' (read from the photo)' if result.light_estimated else ''}, in "
         f"{format_seconds(seconds)}"
     )
-    rows = [(files[name], text.format(range="")) for name, (_, text) in legend.items()]
+    rows = [(files[name], legend[name][1].format(range="")) for name in wanted]
     print_files(console, rows)
