@@ -14,6 +14,13 @@ Submodules are imported lazily so that ``import shadeform`` stays fast.
 from __future__ import annotations
 
 import importlib
+import os
+
+# The compiled kernels' OpenMP threads sleep when idle instead of spinning: a spinning thread
+# competes with any other program for its core, and on a loaded machine the spinning made parallel
+# kernels 2-3x slower with rare much worse runs (benchmarks/results/stalls.md). Read once, when
+# OpenMP starts (at the first parallel kernel); a user's own setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
 

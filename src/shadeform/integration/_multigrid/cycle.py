@@ -23,6 +23,9 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numba
 import numpy as np
 from numba import prange
@@ -290,3 +293,22 @@ def vcycle(r, levels, sweeps, threads):
         else:
             _prolong_ser(z, zc, h, dims[lev + 1, 0])
         _smooth(z, b, wx, wy, inv, h, sweeps, True, blocks)
+
+
+@contextmanager
+def threads_for(cells: int) -> Iterator[int]:
+    """Run the kernels called inside on one thread when the grid has fewer than
+    :data:`PARALLEL_MIN` cells, on all of numba's threads otherwise; yields the count.
+
+    A small grid gains nothing from a parallel launch, and on a loaded machine every launch
+    waits for its slowest thread: the 2002 method's small Poisson solves had runs 2-6x their
+    median with another program on a core (``benchmarks/results/stalls.md``)."""
+    threads = numba.get_num_threads()
+    if cells >= PARALLEL_MIN or threads == 1:
+        yield threads
+        return
+    numba.set_num_threads(1)
+    try:
+        yield 1
+    finally:
+        numba.set_num_threads(threads)

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from shadeform.integration._multigrid.cycle import SWEEPS
+from shadeform.integration._multigrid.cycle import SWEEPS, threads_for
 from shadeform.integration._multigrid.layout import CHUNKS, FAST, around, chunk, padded, pair_rows, to_rb
 from shadeform.integration._multigrid.levels import Levels, label_parts, pseudo_inverse
 from shadeform.integration._multigrid.pcg import pcg
@@ -184,11 +184,12 @@ class Hierarchy:
     def __init__(self, mask: np.ndarray, weights: np.ndarray, top: float):
         self.mask = mask
         self.shape = padded(*mask.shape)
-        wx, wy = self._rb_array(), self._rb_array()
-        _pixel_pairs(mask, weights, 1.0 / top if top > 0 else 0.0, wx, wy)
-        self.labels = np.empty(mask.shape, np.int32)
-        self.n_parts = label_parts(mask, weights, self.labels)
-        self._set_up(wx, wy, 1.0, pseudo_inverse)
+        with threads_for(mask.size):
+            wx, wy = self._rb_array(), self._rb_array()
+            _pixel_pairs(mask, weights, 1.0 / top if top > 0 else 0.0, wx, wy)
+            self.labels = np.empty(mask.shape, np.int32)
+            self.n_parts = label_parts(mask, weights, self.labels)
+            self._set_up(wx, wy, 1.0, pseudo_inverse)
 
     def _set_up(self, wx: np.ndarray, wy: np.ndarray, scale: float, coarse_inverse) -> None:
         """The operator of red-black pair weights ``wx, wy`` and its levels, which hold ``scale``
@@ -218,22 +219,22 @@ class Hierarchy:
         """:func:`.pcg.pcg` on the workspace (``r`` holding ``b``, with ``warm`` ``x`` holding
         ``x0``) for the operator of red-black pair weights ``wx, wy``."""
         x, r, p, q = self._workspace()
-        threads = numba.get_num_threads()
-        it, res = pcg(
-            r,
-            x,
-            p,
-            q,
-            wx,
-            wy,
-            self.levels.arrays,
-            SWEEPS,
-            float(tol),
-            int(maxiter),
-            threads,
-            bool(warm),
-            bool(from_start),
-        )
+        with threads_for(self.mask.size) as threads:
+            it, res = pcg(
+                r,
+                x,
+                p,
+                q,
+                wx,
+                wy,
+                self.levels.arrays,
+                SWEEPS,
+                float(tol),
+                int(maxiter),
+                threads,
+                bool(warm),
+                bool(from_start),
+            )
         return int(it), float(res)
 
     def solve(
@@ -255,8 +256,9 @@ class Hierarchy:
         mask's pixels only. Returns the number of CG iterations and the final relative residual.
         """
         x, r, p, q = self._workspace()
-        _slopes_rb(normals, self.mask, r0, c0, min_nz, p, q)  # p, q: slopes, until CG needs them
-        _divergence_rb(p, q, self.wx, self.wy, self.mask.shape[0], r)
-        it, res = self._pcg(self.wx, self.wy, tol=tol, maxiter=maxiter, warm=False)
-        _finish(x, self.mask, self.labels, self.n_parts, r0, c0, out)
+        with threads_for(self.mask.size):
+            _slopes_rb(normals, self.mask, r0, c0, min_nz, p, q)  # p, q: slopes, until CG needs them
+            _divergence_rb(p, q, self.wx, self.wy, self.mask.shape[0], r)
+            it, res = self._pcg(self.wx, self.wy, tol=tol, maxiter=maxiter, warm=False)
+            _finish(x, self.mask, self.labels, self.n_parts, r0, c0, out)
         return it, res
