@@ -31,14 +31,13 @@ from shadeform.cli._shell import (
     format_seconds,
     note_channel,
     note_unsure,
-    parse_reference,
     print_files,
     print_json,
     resolve_light,
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import reconstruct_photo
+from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
 
 #: Each map's file ending, bits per sample and legend (what its values mean).
@@ -107,7 +106,6 @@ def maps(
     import shadeform
     from shadeform.errors import InputError
     from shadeform.io.maps import save_gray
-    from shadeform.regions import parse_regions
 
     if tile and not material:
         raise InputError(
@@ -117,9 +115,10 @@ def maps(
     if material:
         return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
                          channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
-    light_vector = resolve_light(light, slant, tilt)
-    references = [parse_reference(text) for text in reference or ()]
-    regions = parse_regions(concave) if concave is not None else None
+    options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+    )  # fmt: skip
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -129,20 +128,7 @@ def maps(
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
         photo, rec = reconstruct_photo(
-            err,
-            timings,
-            image,
-            channel=channel,
-            linear=linear,
-            max_pixels=max_pixels,
-            mask=mask,
-            light=light_vector,
-            method=method,
-            filter=filter,
-            references=references or None,
-            concave=regions,
-            integrator=integrator,
-            refine=refine,
+            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
         )
         start = time.perf_counter()
         with err.status("making the maps", spinner="dots"):

@@ -86,13 +86,13 @@ def reconstruct(
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
-    from shadeform.regions import parse_regions
 
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
-    light_vector = resolve_light(light, slant, tilt)
-    references = [parse_reference(text) for text in reference or ()]
-    regions = parse_regions(concave) if concave is not None else None
+    options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+    )  # fmt: skip
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -100,20 +100,7 @@ def reconstruct(
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
         photo, rec = reconstruct_photo(
-            err,
-            timings,
-            image,
-            channel=channel,
-            linear=linear,
-            max_pixels=max_pixels,
-            mask=mask,
-            light=light_vector,
-            method=method,
-            filter=filter,
-            references=references or None,
-            concave=regions,
-            integrator=integrator,
-            refine=refine,
+            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
         )
         pixels = photo.image
         mesh, written, report = write_model(
@@ -157,6 +144,21 @@ def reconstruct(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
+    """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the light
+    as ``--light`` or ``--slant``/``--tilt``, references, a regions file), checked before any
+    work; ``rest`` (method, filter, integrator, refine) passes through."""
+    from shadeform.regions import parse_regions
+
+    references = [parse_reference(text) for text in reference or ()]
+    return {
+        "light": resolve_light(light, slant, tilt),
+        "references": references or None,
+        "concave": parse_regions(concave) if concave is not None else None,
+        **rest,
+    }
 
 
 def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, **options):

@@ -32,15 +32,13 @@ from shadeform.cli._shell import (
     note_channel,
     note_unsure,
     output_temps,
-    parse_reference,
     print_files,
     print_json,
-    resolve_light,
     stage,
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import reconstruct_photo
+from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
 from shadeform.solid import MIN_WALL_MM
 
@@ -140,7 +138,6 @@ def relief_command(
     """Make a print-ready relief from one photo: a closed solid in millimetres with a flat base."""
     import shadeform
     from shadeform.io.maps import save_depth, save_normal_map
-    from shadeform.regions import parse_regions
     from shadeform.solid import check_options
 
     # everything the user typed is checked before any work
@@ -157,9 +154,10 @@ def relief_command(
         max_triangles=max_triangles,
         names=_FLAGS,
     )
-    light_vector = resolve_light(light, slant, tilt)
-    references = [parse_reference(text) for text in reference or ()]
-    regions = parse_regions(concave) if concave is not None else None
+    solve_options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+    )  # fmt: skip
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -174,13 +172,7 @@ def relief_command(
             linear=linear,
             max_pixels=max_pixels,
             mask=mask,
-            light=light_vector,
-            method=method,
-            filter=filter,
-            references=references or None,
-            concave=regions,
-            integrator=integrator,
-            refine=refine,
+            **solve_options,
         )
         pixels = photo.image
         with stage(err, "building the solid", timings, "relief"):
