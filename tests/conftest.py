@@ -69,3 +69,18 @@ def registries(monkeypatch):
 def sphere64():
     """The synthetic sphere, 64 x 64, light +z: image, mask, normals, depth."""
     return synth.scene("sphere", size=64)
+
+
+@pytest.fixture
+def app_server(tmp_path):
+    """The app's real server with a session store, on a port it can be stopped and started on
+    again (``test_app_browser_reconnect.RestartableServer``)."""
+    from shadeform.app.server import STATIC_DIR, create_app
+    from test_app_browser_reconnect import RestartableServer
+
+    if not (STATIC_DIR / "index.html").is_file():
+        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
+    controlled = RestartableServer()
+    controlled.start(lambda: create_app(sessions=tmp_path / "s.sqlite3", warm=True))
+    yield controlled
+    controlled.stop()

@@ -17,7 +17,7 @@ import pytest
 
 import test_app_browser
 from test_app_browser import ARTIFACTS, FIRST_RESULT_MS, RESULT_MS, click_image, open_example, wait_for_result
-from test_app_browser_reconnect import RestartableServer, record_requests, toast_texts
+from test_app_browser_reconnect import record_requests, toast_texts
 
 # Chromium and a fresh page per test: test_app_browser's own fixtures (the page opens ``server``,
 # which is this module's)
@@ -28,20 +28,8 @@ SAVED_MS = 10_000
 
 
 @pytest.fixture
-def app_server(tmp_path):
-    from shadeform.app.server import STATIC_DIR, create_app
-
-    if not (STATIC_DIR / "index.html").is_file():
-        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
-    controlled = RestartableServer()
-    controlled.start(lambda: create_app(sessions=tmp_path / "s.sqlite3", warm=True))
-    yield controlled
-    controlled.stop()
-
-
-@pytest.fixture
 def server(app_server):
-    """The address test_app_browser's ``page`` opens."""
+    """The address test_app_browser's ``page`` opens (``app_server``: tests/conftest.py)."""
     return app_server.url
 
 

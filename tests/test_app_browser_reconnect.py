@@ -73,20 +73,8 @@ class RestartableServer:
 
 
 @pytest.fixture
-def app_server(tmp_path):
-    from shadeform.app.server import STATIC_DIR, create_app
-
-    if not (STATIC_DIR / "index.html").is_file():
-        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
-    controlled = RestartableServer()
-    controlled.start(lambda: create_app(sessions=tmp_path / "s.sqlite3", warm=True))
-    yield controlled
-    controlled.stop()
-
-
-@pytest.fixture
 def server(app_server):
-    """The address test_app_browser's ``page`` opens."""
+    """The address test_app_browser's ``page`` opens (``app_server``: tests/conftest.py)."""
     return app_server.url
 
 
