@@ -15,6 +15,7 @@ from starlette.exceptions import HTTPException
 
 from shadeform.app.schema import ErrorBody
 from shadeform.errors import InputError
+from shadeform.io.images import MAX_PIXELS
 
 #: Every operation's error responses in the OpenAPI schema: any 4xx is one JSON line
 #: (:class:`~shadeform.app.schema.ErrorBody`); FastAPI's list-shaped 422 is never sent.
@@ -35,7 +36,8 @@ class AppLimits:
     max_upload_bytes : int
         Largest image file accepted (413 beyond).
     max_pixels : int
-        Most pixels an image may have (413 beyond), checked before decoding.
+        Most pixels an image may have (413 beyond), checked before decoding: the loader's one
+        limit (:data:`shadeform.io.images.MAX_PIXELS`) unless the server is started with another.
     max_images, max_image_bytes : int
         Images kept in memory; the least recently used go first.
     max_results, max_result_bytes : int
@@ -48,7 +50,7 @@ class AppLimits:
     """
 
     max_upload_bytes: int = 64 * 2**20
-    max_pixels: int = 4096 * 4096
+    max_pixels: int = MAX_PIXELS
     max_images: int = 16
     max_image_bytes: int = 1024 * 2**20
     max_results: int = 32
