@@ -6,10 +6,10 @@ worker processes (the solvers are numba kernels that hold the interpreter, so th
 queue). A photo that is a user mistake (unreadable, all black, ...) fails alone: its result
 carries the one-line message and the other photos go on.
 
-The workers end with the batch, however it ends: an error or a signal terminates them (each
-removes its temporary files as it goes), and a worker whose batch process was killed outright
-(``kill -9``) notices within :data:`WATCH_SECONDS` (once a compiled kernel it is running
-returns) and ends itself the same way.
+The workers end with the batch, however it ends: an error or a signal terminates them (and the
+batch then removes the temporary files they leave), and a worker whose batch process was killed
+outright (``kill -9``) notices within :data:`WATCH_SECONDS` (once a compiled kernel it is
+running returns), removes its temporary files and ends itself.
 
 Dask is optional (``pip install 'shadeform[dask]'``); without it :func:`reconstruct_files`
 raises an :class:`~shadeform.errors.InputError` naming the extra.
@@ -18,7 +18,6 @@ raises an :class:`~shadeform.errors.InputError` naming the extra.
 from __future__ import annotations
 
 import os
-import signal
 import threading
 import time
 from collections import Counter
@@ -133,6 +132,7 @@ def reconstruct_files(
     """
     from shadeform._checks import check_choice
     from shadeform.integration import available_integrators
+    from shadeform.io.atomic import sweep
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS, MAX_PIXELS
     from shadeform.preprocess import parse_filter
@@ -213,24 +213,27 @@ def reconstruct_files(
         finally:
             pool.terminate()  # idle after a full run; after an error or a signal, ends the tasks
             pool.join()
+            sweep(out_dir, again=True)  # what the ended tasks were writing
     return list(results)
 
 
 def _start_worker(batch: int) -> None:
-    """A worker's set-up: a SIGTERM (the pool terminated) removes the task's temporaries and
-    ends the worker (Dask's task runner would catch an exception and take the next task), and a
-    thread does the same soon after the batch process ``batch`` is gone."""
-    from shadeform.io.atomic import exit_on_signals
-
-    exit_on_signals(unwind=False)
+    """A worker's set-up: a thread that ends the worker soon after the batch process ``batch``
+    is gone. A SIGTERM (the pool terminated) keeps its default, ending the worker at once: a
+    Python handler would run only in the main thread, which may be blocked in the pool's queue
+    while the signal lands on another thread (a pool's join then waited forever)."""
     threading.Thread(target=_watch, args=(batch,), daemon=True, name="shadeform-watch").start()
 
 
 def _watch(batch: int) -> None:
-    """Wait until this worker's parent is no longer ``batch``, then end the worker."""
+    """Wait until this worker's parent is no longer ``batch``, then remove this worker's
+    temporaries and end it (from this thread: no signal needs the main thread)."""
+    from shadeform.io.atomic import remove_temporaries
+
     while os.getppid() == batch:
         time.sleep(WATCH_SECONDS)
-    os.kill(os.getpid(), signal.SIGTERM)
+    remove_temporaries()
+    os._exit(1)
 
 
 def _reconstruct_one(

@@ -125,7 +125,7 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
     _fsync_folder(parent)
 
 
-def sweep(folder: str | os.PathLike[str]) -> list[Path]:
+def sweep(folder: str | os.PathLike[str], *, again: bool = False) -> list[Path]:
     """Delete the temporaries that processes no longer running left in ``folder``.
 
     Called by every writer before its first temporary in a folder (once per folder and process),
@@ -136,6 +136,9 @@ def sweep(folder: str | os.PathLike[str]) -> list[Path]:
     ----------
     folder : str or path-like
         The folder to sweep; a folder that cannot be listed is left alone.
+    again : bool, keyword-only
+        Sweep even if this process swept the folder before (after ending worker processes
+        that wrote there).
 
     Returns
     -------
@@ -144,7 +147,7 @@ def sweep(folder: str | os.PathLike[str]) -> list[Path]:
     """
     folder = Path(folder)
     key = folder.resolve()
-    if key in _SWEPT:
+    if key in _SWEPT and not again:
         return []
     _SWEPT.add(key)
     removed = []
@@ -171,31 +174,17 @@ def remove_temporaries() -> None:
         _LIVE.discard(path)
 
 
-def exit_on_signals(*, unwind: bool = True) -> None:
-    """Make SIGTERM and SIGHUP (``kill``, a closed terminal, a pool ending its workers) remove
-    this process's temporaries before it ends; Python's default for them ends the process
-    without any clean-up. Call from the main thread.
-
-    Parameters
-    ----------
-    unwind : bool, keyword-only
-        True: end as an exception would (``SystemExit``), so ``with`` blocks clean up as they
-        leave. False, for a worker process whose task runner catches every exception (Dask's
-        does, and would go on to the next task): remove the temporaries and end at once.
-    """
-    handler = _raise_exit if unwind else _end_now
+def exit_on_signals() -> None:
+    """Make SIGTERM and SIGHUP (``kill``, a closed terminal) end the process as an exception
+    would, so that ``with`` blocks remove their temporaries; Python's default for them ends the
+    process without any clean-up. Call from the main thread."""
     for name in ("SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
-            signal.signal(getattr(signal, name), handler)
+            signal.signal(getattr(signal, name), _raise_exit)
 
 
 def _raise_exit(signum, frame) -> None:
     raise SystemExit(128 + signum)
-
-
-def _end_now(signum, frame) -> None:
-    remove_temporaries()
-    os._exit(128 + signum)
 
 
 def _running(pid: int) -> bool:
