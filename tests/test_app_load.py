@@ -44,7 +44,9 @@ def test_concurrent_requests_all_succeed(bench, server):
 
 def test_memory_is_flat_once_the_image_store_is_full(bench, server):
     kept = AppLimits().max_images
-    memory = bench.uploads(server.url, server.process.pid, 3 * kept, 512)
-    # the store holds `kept` images of 512x512x1 float32 (1 MiB each); past two stores' worth
-    # of uploads, the process must not grow by more than a few of them
-    assert memory[-1] - memory[2 * kept - 1] < 8.0, [round(m) for m in memory]
+    memory = bench.uploads(server.url, server.process.pid, 6 * kept, 512)
+    # the store holds `kept` images of 512x512x1 float32 (1 MiB each). The allocator keeps freed
+    # blocks per worker thread for a while (resident memory creeps up while the server's threads
+    # each meet their first uploads), so the plateau is judged over the last two stores' worth:
+    # a leak of the images would add 32 MiB there
+    assert memory[-1] - memory[4 * kept - 1] < 8.0, [round(m) for m in memory]
