@@ -34,10 +34,12 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The server, without the warm-up: with a cold compile cache, compiling the kernels in the
+#: background grows its memory for a minute or two, while it is being measured.
 SERVE = (
     "import sys, uvicorn\n"
     "from shadeform.app.server import create_app\n"
-    "uvicorn.run(create_app(warm=True), host='127.0.0.1', port=int(sys.argv[1]), log_level='error')\n"
+    "uvicorn.run(create_app(), host='127.0.0.1', port=int(sys.argv[1]), log_level='error')\n"
 )
 
 
