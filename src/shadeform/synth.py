@@ -1156,8 +1156,12 @@ def material_surface(size: int = 256, *, seed: int = 0, slope: float = 0.25) -> 
     normals : (size, size, 3) float64
         Its unit normals (spectral derivatives, so periodic too).
     """
+    from shadeform.texture import spectral_normals, spectral_slopes
+
     size = _check_size(size)
     slope = _finite_float(slope, "slope")
+    if not slope > 0:
+        raise InputError(f"slope must be positive, got {slope!r}")
     rng = np.random.default_rng(seed)
     f = np.fft.fftfreq(size)
     radius = np.hypot(f[:, None], f[None, :])
@@ -1166,11 +1170,6 @@ def material_surface(size: int = 256, *, seed: int = 0, slope: float = 0.25) -> 
     height = np.fft.ifft2(
         amplitude * (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size)))
     ).real
-    w = 2 * np.pi * f
-    spectrum = np.fft.fft2(height)
-    dx = np.fft.ifft2(1j * w[None, :] * spectrum).real  # x = column
-    dy = -np.fft.ifft2(1j * w[:, None] * spectrum).real  # y = -row
-    scale = slope / np.sqrt(np.mean(dx * dx + dy * dy))
-    if not slope > 0:
-        raise InputError(f"slope must be positive, got {slope!r}")
-    return height * scale, np.stack(_normalise(-scale * dx, -scale * dy, np.ones_like(height)), axis=-1)
+    dx, dy = spectral_slopes(height)
+    height = height * slope / np.sqrt(np.mean(dx * dx + dy * dy))
+    return height, spectral_normals(height)

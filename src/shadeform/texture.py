@@ -304,7 +304,7 @@ def material(image: np.ndarray, *, light=None, tile: bool = False, reach: float 
     height = linear_shading_height(shading, light)
     mask = np.ones(gray.shape, dtype=bool)
     reach = max(1.0, min(gray.shape) / 16) if reach is None else reach
-    normals = _spectral_normals(height)
+    normals = spectral_normals(height)
     shape_maps = maps(_Surface(normals, height, mask), reach=reach)
     predicted = np.clip(normals @ light, 1e-3, None) / light[2]  # shading relative to a flat patch
     source = pixels / (lighting if pixels.ndim == 2 else lighting[..., None])
@@ -380,12 +380,17 @@ def linear_shading_height(shading: np.ndarray, light: np.ndarray) -> np.ndarray:
     return np.fft.ifft2(spectrum).real
 
 
-def _spectral_normals(height: np.ndarray) -> np.ndarray:
-    """Unit normals (H, W, 3) of a periodic height field, its slopes by spectral derivatives."""
+def spectral_slopes(height: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The slopes ``(dz/dx, dz/dy)`` (each (H, W)) of a periodic height field by spectral
+    derivatives (``x`` = column, ``y`` = -row)."""
     w_row, w_col = _frequencies(height.shape)
     spectrum = np.fft.fft2(height)
-    slope_x = np.fft.ifft2(1j * w_col * spectrum).real
-    slope_y = -np.fft.ifft2(1j * w_row * spectrum).real
+    return np.fft.ifft2(1j * w_col * spectrum).real, -np.fft.ifft2(1j * w_row * spectrum).real
+
+
+def spectral_normals(height: np.ndarray) -> np.ndarray:
+    """Unit normals (H, W, 3) of a periodic height field (:func:`spectral_slopes`)."""
+    slope_x, slope_y = spectral_slopes(height)
     normals = np.stack([-slope_x, -slope_y, np.ones_like(height)], axis=-1)
     return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
 

@@ -229,12 +229,9 @@ def _solve_seconds(reconstruction) -> float:
 
 def _legend(relief_px: float) -> dict[str, tuple[int, str]]:
     """The CLI's legend of each map: bits per sample and what its values mean."""
-    from shadeform.cli.maps import LEGEND
+    from shadeform.cli.maps import legend
 
-    return {
-        name: (bits, text.format(range=f" ({relief_px:.3g} px of relief)"))
-        for name, (bits, text) in LEGEND.items()
-    }
+    return legend(relief_px)
 
 
 def _maps_result(state, entry, body: ReconstructRequest) -> MapsResult:

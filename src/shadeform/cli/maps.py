@@ -51,6 +51,14 @@ LEGEND = {
 ALBEDO = (8, "albedo: the photo with its shading and uneven lighting divided out")
 
 
+def legend(relief_px: float | None = None, *, material: bool = False) -> dict[str, tuple[int, str]]:
+    """Each map's bits per sample and legend line (:data:`LEGEND`, and :data:`ALBEDO` for the
+    material mode); the height's with its range in pixels when known. The app's zip uses it too."""
+    shown = "" if relief_px is None else f" ({relief_px:.3g} px of relief)"
+    every = {**LEGEND, "albedo": ALBEDO} if material else LEGEND
+    return {name: (bits, text.format(range=shown)) for name, (bits, text) in every.items()}
+
+
 @app.command()
 def maps(
     image: Annotated[
@@ -144,7 +152,8 @@ def maps(
     relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
     note_channel(err, photo.info)
     note_unsure(err, rec.info)
-    rows = [(files[name], LEGEND[name][1].format(range=f" ({relief:.3g} px of relief)")) for name in wanted]
+    lines = legend(relief)
+    rows = [(files[name], lines[name][1]) for name in wanted]
     if as_json:
         print_json(
             {
@@ -190,7 +199,7 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
         given = resolve_light(light, slant, tilt)
     err = stderr_console()
     total = time.perf_counter()
-    legend = {**LEGEND, "albedo": ALBEDO}
+    lines = legend(material=True)
     with OutputSet() as outputs:
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
@@ -201,7 +210,7 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
         with err.status("making the maps", spinner="dots"):
             result = material(colour, light=given, tile=tile, reach=reach)
         for name in wanted:
-            save_gray(result.maps[name], temps[name], bitdepth=legend[name][0])
+            save_gray(result.maps[name], temps[name], bitdepth=lines[name][0])
         outputs.commit()
     seconds = time.perf_counter() - total
     height = result.maps["height"]
@@ -218,7 +227,7 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
                 "command": "maps",
                 "material": True,
                 "input": {"path": image, "width": height.shape[1], "height": height.shape[0]},
-                "maps": {name: {"path": files[name], "bits": legend[name][0]} for name in wanted},
+                "maps": {name: {"path": files[name], "bits": lines[name][0]} for name in wanted},
                 "light": result.light,
                 "light_estimated": result.light_estimated,
                 "seconds": seconds,
@@ -231,5 +240,5 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
         f"{tilt_read:.0f} degrees{' (read from the photo)' if result.light_estimated else ''}, in "
         f"{format_seconds(seconds)}"
     )
-    rows = [(files[name], legend[name][1].format(range="")) for name in wanted]
+    rows = [(files[name], lines[name][1]) for name in wanted]
     print_files(console, rows)
