@@ -34,7 +34,8 @@ from the shading gradients' dominant direction, its side is the one nearer to ab
 left (:data:`PRIOR_TILT`: the prior people themselves use, Sun and Perona 1998; photos are mostly
 lit from above), and its slant (which scales the relief) is 45 degrees unless given. Texture tools instead take the brightness
 itself for height, which under an oblique light is the slope along the light, not the height
-(``benchmarks/results/material.md`` compares the two against rendered surfaces).
+(``benchmarks/results/material.md`` compares the two against rendered surfaces, and
+``material-real.md`` on patches of real photos with measured normals, where it is far weaker).
 
 References
 ----------
