@@ -94,12 +94,12 @@ def parse_regions(source) -> tuple[Region, ...]:
             raise InputError(f"{where} is not UTF-8 text; save it as UTF-8 JSON") from None
         except OSError as err:
             raise InputError(f"cannot read {where}: {err.strerror}") from None
-        document = _loads(text, where)
+        document = loads_json(text, where)
     elif isinstance(source, str):
         where = "regions text"
         if not source.lstrip().startswith(("{", "[")):
             where += " (a str is JSON text; pass a pathlib.Path to read a file)"
-        document = _loads(source, where)
+        document = loads_json(source, where)
     elif isinstance(source, dict):
         document = source
     else:
@@ -198,17 +198,17 @@ def concave_masks(regions, shape) -> tuple[np.ndarray, np.ndarray]:
     return concave_x, concave_y
 
 
-def _loads(text: str, where: str):
+def loads_json(text: str, where: str):
+    """``json.loads(text)``, with a one-line :class:`InputError` naming ``where`` for text that is
+    not JSON or nests too deeply (the decoder recurses once per level)."""
     try:
         return json.loads(text)
     except json.JSONDecodeError as err:
         raise InputError(
             f"{where} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
         ) from None
-    except RecursionError:  # the decoder recurses once per level of nesting
-        raise InputError(
-            f"{where} nests lists or objects too deeply; a regions file is a flat list of polygons"
-        ) from None
+    except RecursionError:
+        raise InputError(f"{where} nests lists or objects too deeply; give a flat JSON document") from None
 
 
 def _region(entry, index: int) -> Region:

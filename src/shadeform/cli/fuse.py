@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Annotated, NamedTuple
@@ -274,16 +273,15 @@ def _views(photos, angles, views_file, masks) -> list[ViewEntry]:
 
 
 def _views_file(path: Path) -> list[ViewEntry]:
+    from shadeform.regions import loads_json
+
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"views file '{path}' does not exist; check the path") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+    except UnicodeDecodeError as err:
         raise InputError(f"views file '{path}' is not valid JSON ({err})") from None
-    except RecursionError:  # the decoder recurses once per level of nesting
-        raise InputError(
-            f"views file '{path}' nests lists or objects too deeply; see docs/conventions.md"
-        ) from None
+    document = loads_json(text, f"views file '{path}'")
     items = document.get("views") if isinstance(document, dict) else None
     if not isinstance(items, list) or not all(isinstance(item, dict) for item in items):
         raise InputError(
