@@ -318,6 +318,26 @@ class TestPreview:
             < bound
         )
 
+    def test_on_grid_is_the_preview_s_grid_in_grid_units(self):
+        """reconstruct_on_grid: the grid's own arrays (what a relief with a budget is built from);
+        references and unsure areas stay in the input's pixels."""
+        scene = synth.scene("vase", size=256)
+        regions = synth.concave_regions("vase", size=256)
+        grid = pipeline.reconstruct_on_grid(
+            scene.image, mask=scene.mask, concave=regions, step=3, references=[(128, 128)]
+        )
+        quick = reconstruct_preview(
+            scene.image, mask=scene.mask, concave=regions, step=3, references=[(128, 128)]
+        )
+        assert grid.depth.shape == grid.mask.shape == (86, 86) and grid.info["grid_step"] == 3
+        np.testing.assert_array_equal(grid.mask, scene.mask[::3, ::3])
+        np.testing.assert_allclose(grid.depth[grid.mask] * 3, quick.depth[::3, ::3][grid.mask])
+        assert grid.info["references"] == quick.info["references"] == [(129, 129)]
+        plain = pipeline.reconstruct_on_grid(scene.image, mask=scene.mask, concave=regions, step=3)
+        assert metrics.depth_error(plain.depth, scene.depth[::3, ::3] / 3, plain.mask) < 0.5
+        one = pipeline.reconstruct_on_grid(scene.image, mask=scene.mask, step=1)
+        assert one.depth.shape == scene.mask.shape and one.info["grid_step"] == 1
+
     def test_keep_caps_moves_a_cap_to_the_nearest_grid_point(self):
         image = np.full((9, 9), 0.5)
         mask = np.ones((9, 9), bool)

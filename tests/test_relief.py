@@ -508,6 +508,56 @@ class TestCli:
         assert loaded.is_watertight and len(loaded.faces) == report["triangles"]
         assert sorted(p.name for p in out.iterdir()) == ["depth.npy", "vase.3mf"]
 
+    def test_a_budget_solves_only_its_grid(self, cli, out):
+        """With --max-triangles only the grid the budget samples is solved (grid_step); the solid
+        matches the one from every pixel (--full-resolution) to a small share of its depth."""
+        from PIL import Image
+
+        from shadeform.solid import grid_step
+
+        scene = synth.scene("vase", size=256)
+        photo, concave = out.parent / "vase256.png", out.parent / "neck.json"
+        Image.fromarray(np.round(scene.image * 65535).astype(np.uint16)).save(photo)
+        concave.write_text(json.dumps(synth.concave_regions("vase", size=256)))
+        reports, solids = {}, {}
+        for how in ("grid", "full"):
+            target = out / f"{how}.stl"
+            flags = ["--full-resolution"] if how == "full" else []
+            result = cli(
+                "relief", photo, "-o", target, "--max-triangles", 1000, "--concave", concave, "--json", *flags
+            )  # fmt: skip
+            assert result.exit_code == 0, result.output
+            reports[how] = json.loads(result.stdout)["solid"]
+            solids[how] = trimesh.load(target, process=True)
+        assert reports["grid"]["solved_step"] == grid_step(int(scene.mask.sum()), 1000) >= 2
+        assert reports["full"]["solved_step"] == 1
+        for how in ("grid", "full"):
+            assert reports[how]["triangles"] <= 1000
+            assert solids[how].is_watertight and solids[how].volume > 0
+            assert solids[how].extents[:2].max() == pytest.approx(100.0, abs=0.05)
+            assert solids[how].extents[2] == pytest.approx(6.0, abs=0.05)
+        # one input pixel is the same size in both; the surfaces agree (heights sampled on a raster)
+        assert reports["grid"]["pixel_mm"] == pytest.approx(reports["full"]["pixel_mm"], rel=0.02)
+        # the top surface, interpolated on its own triangles (matplotlib's), at points inside
+        from matplotlib.tri import LinearTriInterpolator, Triangulation
+
+        x, y = np.meshgrid(np.linspace(20, 35, 6), np.linspace(20, 80, 13))
+        tops = []
+        for how in ("grid", "full"):
+            mesh = solids[how]
+            up = mesh.faces[
+                (mesh.face_normals[:, 2] > 0.01) & (mesh.vertices[mesh.faces, 2].min(axis=1) > 1.0)
+            ]
+            flat = Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], up)
+            tops.append(np.ma.filled(LinearTriInterpolator(flat, mesh.vertices[:, 2])(x, y), np.nan).ravel())
+        both = np.isfinite(tops[0]) & np.isfinite(tops[1])
+        assert both.sum() > 40
+        # solving only the grid moves the surface less than the budget's simplification does
+        gap = np.abs(tops[0] - tops[1])[both]
+        assert gap.max() < min(reports["grid"]["deviation_mm"], reports["full"]["deviation_mm"])
+        assert gap.mean() < 0.05  # mm, of a 4 mm relief
+        assert solids["grid"].volume == pytest.approx(solids["full"].volume, rel=0.02)
+
     @pytest.mark.parametrize(
         "args, message",
         [

@@ -8,6 +8,7 @@ looks the solver up in the registry (:mod:`shadeform.solvers`); it knows no solv
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -302,7 +303,7 @@ def _brightness_scale(image, mask, main: Reference, light, *, estimated=None) ->
     return float(image[mask].max())
 
 
-def reconstruct_preview(
+def reconstruct_on_grid(
     image: np.ndarray,
     *,
     step: int,
@@ -312,15 +313,97 @@ def reconstruct_preview(
     concave: Any = None,
     **options: Any,
 ) -> Reconstruction:
+    """The reconstruction of the image's grid: every ``step``-th row and column, solved alone.
+
+    ``step**2`` times fewer pixels than :func:`reconstruct`, for what will only be seen on that
+    grid anyway: the quick look of a mesh of that step (:func:`reconstruct_preview`), a relief
+    whose triangle budget samples the surface that coarsely (:func:`shadeform.solid.grid_step`).
+    The image is sampled, not averaged: an average flattens the narrow bright ridges where the
+    eikonal solver finds its singular points (the vase's rim); a bright cap that falls between
+    grid points (a singular point on a thin rim or on the object's top row) is kept at the nearest
+    grid point, so the solvers still start from it. Filter sizes, references and concave regions
+    are carried to the grid. Features narrower than the grid are lost.
+
+    Parameters
+    ----------
+    image : (H, W) float array
+        As for :func:`reconstruct`.
+    step : int, keyword-only
+        Grid spacing in pixels, ``>= 1`` (1 is :func:`reconstruct`).
+    mask, filter, references, concave
+        As for :func:`reconstruct`, in pixels of the input image. A reference whose grid point
+        falls off the coarse object moves to the nearest grid point on it.
+    **options
+        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+
+    Returns
+    -------
+    Reconstruction
+        Arrays of the grid's shape ``(ceil(H / step), ceil(W / step))``: pixel ``(i, j)`` is the
+        input's ``(i * step, j * step)``; depth in grid pixels (input pixels / ``step``). ``info``
+        is :func:`reconstruct`'s with ``grid_step``; its references and unsure areas are in
+        pixels of the input image, as the user gave them.
+
+    Examples
+    --------
+    >>> from shadeform import synth
+    >>> scene = synth.scene("sphere", size=64)
+    >>> reconstruct_on_grid(scene.image, mask=scene.mask, step=2).depth.shape
+    (32, 32)
+    """
+    image = _check_image(image)
+    step = whole(step, "step", minimum=1)
+    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
+    _check_shading(image, mask)
+    if step == 1:
+        rec = reconstruct(image, mask=mask, filter=filter, references=references, concave=concave, **options)
+        return replace(rec, info={**rec.info, "grid_step": 1})
+    coarse_mask = mask[::step, ::step]
+    if not coarse_mask.any():
+        raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
+    coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0), coarse_mask, step)
+
+    # the filter, scaled to the grid, does the smoothing
+    spec = parse_filter(filter) if filter else None
+    if spec is not None and spec.kind != "none":
+        size = spec.size / step if spec.kind == "gaussian" else float(round(spec.size / step))
+        spec = Filter(spec.kind, size) if size > 0 else None
+    coarse_refs = None
+    if references:
+        coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
+    regions = tuple(Region(region.polygon / step, region.axis) for region in as_regions(concave))
+    rec = reconstruct(
+        coarse, mask=coarse_mask, filter=spec, references=coarse_refs, concave=regions or None, **options
+    )
+    info = {
+        **rec.info,
+        "grid_step": step,
+        "references": [(r * step, c * step) for r, c in rec.info["references"]],
+        "unsure": [  # in input pixels, like the references
+            {
+                **area,
+                "polygon": [[x * step, y * step] for x, y in area["polygon"]],
+                "centre": [area["centre"][0] * step, area["centre"][1] * step],
+            }
+            for area in rec.info["unsure"]
+        ],
+    }
+    return replace(rec, info=info)
+
+
+def reconstruct_preview(
+    image: np.ndarray,
+    *,
+    step: int,
+    mask: np.ndarray | None = None,
+    **options: Any,
+) -> Reconstruction:
     """A quick look at what ``to_mesh(reconstruct(...), step=step)`` will show.
 
-    The image is sampled at the mesh's grid (every ``step``-th row and column) and reconstructed
-    there, ``step**2`` times fewer pixels: interactive tools show this while the full-resolution
-    solve runs. Filter sizes, references and concave regions are carried to
-    the coarse grid; depth is scaled back to pixels of the input image. A bright cap that falls
-    between grid points (a singular point on a thin rim or on the object's top row) is kept at the
-    nearest grid point, so the solvers still start from it. Other features narrower than the grid
-    are lost until the full result replaces the preview.
+    The image's grid at the mesh's spacing solved alone (:func:`reconstruct_on_grid`), ``step**2``
+    times fewer pixels, and placed back on the input's pixels: interactive tools show this while
+    the full-resolution solve runs. Features narrower than the grid are lost until the full result
+    replaces the preview.
 
     Parameters
     ----------
@@ -328,11 +411,11 @@ def reconstruct_preview(
         As for :func:`reconstruct`.
     step : int, keyword-only
         The mesh's grid spacing in pixels, ``>= 1`` (1 is the full solve).
-    mask, filter, references, concave
-        As for :func:`reconstruct`, in pixels of the input image. A reference whose grid point
-        falls off the coarse object moves to the nearest grid point on it.
+    mask : (H, W) bool, keyword-only
+        As for :func:`reconstruct`.
     **options
-        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+        ``filter``, ``references``, ``concave``, ``light``, ``method``, ``integrator``,
+        ``refine``: as for :func:`reconstruct_on_grid`, in pixels of the input image.
 
     Returns
     -------
@@ -354,27 +437,10 @@ def reconstruct_preview(
     image = _check_image(image)
     step = whole(step, "step", minimum=1)
     mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
-    _check_shading(image, mask)
     if step == 1:
-        return reconstruct(image, mask=mask, filter=filter, references=references, concave=concave, **options)
-    # sampled, not averaged: an average flattens the narrow bright ridges where the eikonal
-    # solver finds its singular points (the vase's rim); the filter, scaled, does the smoothing
-    coarse_mask = mask[::step, ::step]
-    if not coarse_mask.any():
-        raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
-    coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0), coarse_mask, step)
-
-    spec = parse_filter(filter) if filter else None
-    if spec is not None and spec.kind != "none":
-        size = spec.size / step if spec.kind == "gaussian" else float(round(spec.size / step))
-        spec = Filter(spec.kind, size) if size > 0 else None
-    coarse_refs = None
-    if references:
-        coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
-    regions = tuple(Region(region.polygon / step, region.axis) for region in as_regions(concave))
-    rec = reconstruct(
-        coarse, mask=coarse_mask, filter=spec, references=coarse_refs, concave=regions or None, **options
-    )
+        return reconstruct(image, mask=mask, **options)
+    rec = reconstruct_on_grid(image, step=step, mask=mask, **options)
+    coarse_mask = rec.mask
 
     normals = np.full(image.shape + (3,), np.nan)
     depth = np.full(image.shape, np.nan)
@@ -384,19 +450,8 @@ def reconstruct_preview(
     grid_depth[coarse_mask] = rec.depth[coarse_mask] * step  # heights in input pixels
     confidence = np.full(image.shape, np.nan)
     confidence[::step, ::step][coarse_mask] = rec.confidence[coarse_mask]
-    info = {
-        **rec.info,
-        "preview_step": step,
-        "references": [(r * step, c * step) for r, c in rec.info["references"]],
-        "unsure": [  # in input pixels, like the references
-            {
-                **area,
-                "polygon": [[x * step, y * step] for x, y in area["polygon"]],
-                "centre": [area["centre"][0] * step, area["centre"][1] * step],
-            }
-            for area in rec.info["unsure"]
-        ],
-    }
+    info = {key: value for key, value in rec.info.items() if key != "grid_step"}
+    info["preview_step"] = step
     return Reconstruction(
         normals=normals,
         depth=depth,

@@ -161,14 +161,18 @@ def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> di
     }
 
 
-def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, **options):
+def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, grid=None, **options):
     """Load a photo (and its mask file, if given) and reconstruct it, each under a spinner: the
     part of ``reconstruct`` that the commands making other things from one photo share.
 
-    Returns the :class:`~shadeform.io.images.Photo` and the reconstruction, whose ``info`` holds
-    the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
+    ``grid``, if given, maps the object's mask to a grid spacing: the photo is then solved on
+    that grid only (:func:`shadeform.pipeline.reconstruct_on_grid`; the reconstruction has the
+    grid's shape). Returns the :class:`~shadeform.io.images.Photo` and the reconstruction, whose
+    ``info`` holds the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
     import shadeform
     from shadeform.io.images import read_photo
+    from shadeform.pipeline import reconstruct_on_grid
+    from shadeform.preprocess import object_mask as find_mask
 
     with stage(err, f"loading {escape(str(image))}", timings, "load"):
         photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
@@ -178,7 +182,13 @@ def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels,
             else None
         )
     with stage(err, f"reconstructing ({options.get('method', 'auto')})", timings, "reconstruct"):
-        rec = shadeform.reconstruct(photo.image, mask=object_mask, **options)
+        if grid is None:
+            rec = shadeform.reconstruct(photo.image, mask=object_mask, **options)
+        else:
+            if object_mask is None:
+                object_mask = find_mask(photo.image)
+            step = grid(object_mask)
+            rec = reconstruct_on_grid(photo.image, step=step, mask=object_mask, **options)
     return photo, replace(rec, info={**rec.info, "photo": photo.info})
 
 

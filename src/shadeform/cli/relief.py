@@ -40,7 +40,7 @@ from shadeform.cli._shell import (
 )
 from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
-from shadeform.solid import MIN_WALL_MM
+from shadeform.solid import MIN_WALL_MM, grid_step
 
 #: The flags of relief()'s options, for the messages of check_options.
 _FLAGS = {
@@ -116,6 +116,14 @@ def relief_command(
             show_default=False,
         ),
     ] = None,
+    full_resolution: Annotated[
+        bool,
+        typer.Option(
+            "--full-resolution",
+            help="With --max-triangles, solve every pixel anyway (slower); by default only the grid "
+            "the budget samples is solved, since the simplified surface keeps nothing finer.",
+        ),
+    ] = False,
     filter: FilterOption = None,
     light: LightOption = None,
     slant: SlantOption = None,
@@ -159,6 +167,15 @@ def relief_command(
         method=method, filter=filter, integrator=integrator, refine=refine,
     )  # fmt: skip
 
+    # a budget samples the surface every few pixels: solve only that grid, unless a per-pixel
+    # map is asked for too
+    grid = None
+    if options["max_triangles"] is not None and not full_resolution and depth is None and normals is None:
+
+        def grid(mask):
+            pixels = int(mask.sum()) if options["outline"] == "mask" else mask.size
+            return grid_step(pixels, options["max_triangles"])
+
     err = stderr_console()
     timings: dict[str, float] = {}
     total = time.perf_counter()
@@ -172,6 +189,7 @@ def relief_command(
             linear=linear,
             max_pixels=max_pixels,
             mask=mask,
+            grid=grid,
             **solve_options,
         )
         pixels = photo.image
@@ -205,7 +223,8 @@ def relief_command(
                     "triangles": solid.n_faces,
                     "vertices": solid.n_vertices,
                     "deviation_mm": solid.deviation_mm,
-                    "pixel_mm": solid.pixel_mm,
+                    "pixel_mm": solid.pixel_mm / rec.info.get("grid_step", 1),
+                    "solved_step": rec.info.get("grid_step", 1),
                     **options,
                 },
                 "light": rec.light,
@@ -222,7 +241,13 @@ def relief_command(
         f"  size {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} mm (x y z: base {options['base_mm']:g} + "
         f"relief {options['height_mm']:g}), volume {volume:,.0f} mm^3, {solid.n_faces:,} triangles"
     )
-    details = [f"one pixel = {solid.pixel_mm:.4g} mm", f"outline {options['outline']}"]
+    solved_step = rec.info.get("grid_step", 1)
+    details = [
+        f"one pixel = {solid.pixel_mm / solved_step:.4g} mm",
+        f"outline {options['outline']}",
+    ]
+    if solved_step > 1:
+        details.append(f"solved every {solved_step} pixels (the grid the triangle budget samples)")
     if options["compress"] > 0:
         details.append(f"compressed {options['compress']:g}")
     if options["invert"]:
@@ -231,7 +256,8 @@ def relief_command(
         details.append(f"rim {options['border_mm']:g} mm")
     if options["max_triangles"] is not None:
         details.append(
-            f"simplified: surface within {solid.deviation_mm:.3g} mm of the full-resolution relief"
+            f"simplified: surface within {solid.deviation_mm:.3g} mm of the "
+            + ("solved surface" if solved_step > 1 else "full-resolution relief")
         )
     out.print("  " + ", ".join(details))
     out.print(
