@@ -21,6 +21,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e ".[test]"
+	# compile the numba kernels now, into the cache beside the installed sources, so that the
+	# first reconstruction does not wait for the compiler (`shadeform warm`)
+	$(VENV)/bin/shadeform warm
 	@touch $@
 
 $(JSSTAMP): $(JS)/package.json $(JS)/package-lock.json

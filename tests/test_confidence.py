@@ -267,3 +267,42 @@ class TestInTheResult:
         result = shadeform.reconstruct(scene.image, mask=scene.mask)
         assert result.info["unsure"] == []
         assert np.nanmedian(result.confidence) > 0.9
+
+
+class TestFastParts:
+    """The compiled flooding and the polygon simplification against scikit-image's, their
+    references (the pipeline uses the fast ones for memory and start-up time)."""
+
+    def test_flood_matches_skimage_watershed(self):
+        from scipy import ndimage as ndi
+
+        from shadeform.confidence import _basins, _basins_reference
+
+        rng = np.random.default_rng(1)
+        for _ in range(12):
+            height, width = rng.integers(20, 90, 2)
+            smooth = ndi.gaussian_filter(rng.random((height, width)), 3)
+            mask = ndi.gaussian_filter(rng.random((height, width)), 4) > 0.45
+            pixels = np.argwhere(mask)
+            markers = np.zeros((height, width), np.int32)
+            for label, (r, c) in enumerate(pixels[rng.choice(len(pixels), 4, replace=False)], start=1):
+                markers[max(r - 1, 0) : r + 2, max(c - 1, 0) : c + 2] = label
+            markers[~mask] = 0
+            fast = _basins(smooth, mask, markers, 4)
+            assert (fast[mask] > 0).any()
+            np.testing.assert_array_equal(fast, _basins_reference(smooth, mask, markers, 4))
+
+    def test_simplified_matches_skimage_approximate_polygon(self):
+        from scipy import ndimage as ndi
+        from skimage.measure import approximate_polygon, find_contours
+
+        from shadeform.confidence import _simplified
+
+        rng = np.random.default_rng(3)
+        for _ in range(20):
+            image = ndi.gaussian_filter(rng.random((50, 60)), rng.uniform(2, 6))
+            for contour in find_contours(image, float(np.median(image))):
+                for tolerance in (0.5, 1.0, 2.0):
+                    np.testing.assert_array_equal(
+                        _simplified(contour, tolerance), approximate_polygon(contour, tolerance)
+                    )

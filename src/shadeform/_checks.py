@@ -35,7 +35,7 @@ def shading_image(image) -> np.ndarray:
         image = image / np.iinfo(image.dtype).max
     elif image.dtype == bool or not np.issubdtype(image.dtype, np.floating):
         raise InputError(f"image must hold numbers, got dtype {image.dtype}")
-    image = image.astype(np.float64)
+    image = image.astype(np.float64, copy=False)  # no copy of a float64 image: callers only read it
     if not np.isfinite(image).all():
         raise InputError("image contains NaN or infinite values; replace them (e.g. by 0) or mask them out")
     if image.size and image.min() < 0:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from shadeform.errors import InputError
@@ -96,7 +97,7 @@ class Confidence:
 
     Attributes
     ----------
-    map : (H, W) float64
+    map : (H, W) float32
         In [0, 1] on the object, NaN off it: how well the normals explain the photo times how
         settled the pixel's convexity is (1, 0.5 with one axis open, 0 with both).
     unsure : tuple of Unsure
@@ -165,7 +166,7 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     ((), 1.0)
     """
     image, mask, light, normals, albedo = _checked(image, mask, light, normals, albedo)
-    confidence = np.full(mask.shape, np.nan)
+    confidence = np.full(mask.shape, np.nan, dtype=np.float32)
     # the work is done on the object's box: one pixel of margin keeps what find_boundary and the
     # smoothing see unchanged, and where the box meets the image frame so does the object
     rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
@@ -174,33 +175,59 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     image, mask, normals = image[box], mask[box], normals[box]
     if albedo.ndim:
         albedo = albedo[box]
-
-    weight = mask.astype(np.float64)
-    total = _blur(weight)
+    # Memory: a few box-sized arrays at a time (this runs while the reconstruction's arrays are
+    # held), each freed as soon as its step is done; smoothing is done in place.
+    total = _blur(mask.astype(np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
-        shading = np.where(mask, image / albedo, 0.0)
-    smooth = _smooth(shading, weight, total)
+        shading = np.divide(image, albedo, dtype=np.float64)
+    shading[~mask] = 0.0
+    smooth = _smooth(shading.copy(), mask, total)
 
     markers, centres = _singular_points(smooth, mask)
     basins = _basins(smooth, mask, markers, len(centres))
-    unsure, openness = _unsure_areas(basins, centres, mask, (top, left))
+    del smooth, markers
 
-    # how well the normals explain the photo, where they say anything (a NaN component: nothing)
-    facing = np.einsum("ijk,k->ij", normals, light)
-    known = mask & np.isfinite(facing)
-    with np.errstate(invalid="ignore"):
-        residual = np.where(known, np.abs(shading - np.maximum(facing, 0.0)), 0.0)
+    # how well the normals explain the photo, where they say anything (a NaN component: nothing);
+    # the residual is made in the shading's array
+    known = _residual(shading, normals, light, mask)
+    residual = shading
+    del shading
     if np.array_equal(known, mask):
-        residual = _smooth(residual, weight, total)
+        residual = _smooth(residual, mask, total)
     else:
-        known_weight = known.astype(np.float64)
-        residual = _smooth(residual, known_weight, _blur(known_weight))
-    explained = np.exp(-((residual / RESIDUAL_SCALE) ** 2))
-    settled = np.ones(mask.shape)
+        residual = _smooth(residual, known, _blur(known.astype(np.float64)))
+    del total
+    explained = residual  # exp(-(residual / scale)^2), in place
+    explained /= RESIDUAL_SCALE
+    np.square(explained, out=explained)
+    np.negative(explained, out=explained)
+    np.exp(explained, out=explained)
+    del residual
+
+    unsure, openness = _unsure_areas(basins, centres, mask, (top, left))
     for label, open_axes in openness.items():
-        settled[basins == label] = 1.0 - 0.5 * open_axes
-    confidence[box][mask] = np.where(known, explained * settled, 0.0)[mask]
+        explained[basins == label] *= 1.0 - 0.5 * open_axes  # how settled the basin is
+    explained[~known] = 0.0
+    np.copyto(confidence[box], explained, where=mask)
     return Confidence(map=confidence, unsure=unsure)
+
+
+def _residual(out, normals, light, mask):
+    """``|out - max(N . L, 0)|`` written into ``out`` (H, W) float64 where the normals (H, W, 3)
+    are finite on ``mask``, 0 elsewhere; a band of rows at a time (no (H, W, 3) temporary).
+    Returns where they are known, (H, W) bool."""
+    known = np.zeros(mask.shape, dtype=bool)
+    rows = max(1, (1 << 16) // max(mask.shape[1], 1))
+    for start in range(0, mask.shape[0], rows):
+        band = slice(start, start + rows)
+        facing = np.einsum("ijk,k->ij", normals[band], light)
+        known[band] = mask[band] & np.isfinite(facing)
+        with np.errstate(invalid="ignore"):
+            np.maximum(facing, 0.0, out=facing)
+        np.subtract(out[band], facing, out=facing)
+        np.abs(facing, out=facing)
+        out[band] = np.where(known[band], facing, 0.0)
+    return known
 
 
 def _checked(image, mask, light, normals, albedo):
@@ -214,7 +241,7 @@ def _checked(image, mask, light, normals, albedo):
     mask = mask.astype(bool)
     if not mask.any():
         raise InputError("mask is empty; give the object's pixels")
-    normals = _numbers(normals, "normals")
+    normals = _numbers(normals, "normals", single=True)
     if normals.shape != (*image.shape, 3):
         raise InputError(f"normals must have shape {(*image.shape, 3)} (H, W, 3), got {normals.shape}")
     if not np.isfinite(image[mask]).all():
@@ -234,29 +261,36 @@ def _checked(image, mask, light, normals, albedo):
     return image, mask, light, normals, albedo
 
 
-def _numbers(values, name):
-    """``values`` as a float64 array, or an :class:`InputError` naming ``name``."""
+def _numbers(values, name, *, single=False):
+    """``values`` as a float64 array (float32 ones kept as they are with ``single``: no copy of
+    the normals), or an :class:`InputError` naming ``name``."""
     try:
+        if single and np.asarray(values).dtype == np.float32:
+            return np.asarray(values)
         return np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{name} must be an array of numbers, got {type(values).__name__}") from None
 
 
 def _blur(values):
-    """``values`` (H, W) float64 smoothed by the Gaussian of :data:`_SIGMA`, zero outside."""
+    """``values`` (H, W) float64 smoothed by the Gaussian of :data:`_SIGMA`, zero outside, in
+    place (scipy's one-dimensional filters read each line into a buffer first); returns it."""
     from scipy import ndimage as ndi
 
-    # the pass along rows is the fast one: the pass along columns runs on the transpose
-    across = ndi.gaussian_filter1d(values, _SIGMA, axis=1, mode="constant")
-    down = ndi.gaussian_filter1d(np.ascontiguousarray(across.T), _SIGMA, axis=1, mode="constant")
-    return down.T
+    ndi.gaussian_filter1d(values, _SIGMA, axis=1, mode="constant", output=values)
+    ndi.gaussian_filter1d(values, _SIGMA, axis=0, mode="constant", output=values)
+    return values
 
 
 def _smooth(values, weight, total):
-    """``values`` (H, W) smoothed by :func:`_blur`, averaging only where ``weight`` (H, W) is 1
-    (``total`` its blur), so the background does not darken the edge; 0 where ``weight`` is 0."""
+    """``values`` (H, W) float64, zero where ``weight`` (H, W) bool is False, smoothed by
+    :func:`_blur` averaging only where ``weight`` is set (``total`` the blur of ``weight``), so
+    the background does not darken the edge; 0 where it is not. In place; returns ``values``."""
+    _blur(values)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(weight > 0, _blur(values * weight) / total, 0.0)
+        np.divide(values, total, out=values, where=weight)
+    values[~weight] = 0.0
+    return values
 
 
 def _singular_points(smooth, mask):
@@ -392,7 +426,6 @@ def _basins(smooth, mask, markers, count):
     """Basin (H, W) int32 of every object pixel: the number of its singular point, 0 where none
     (off the object, or in a part of it that holds no singular point)."""
     from scipy import ndimage as ndi
-    from skimage.segmentation import watershed
 
     if count == 0:
         return np.zeros(mask.shape, dtype=np.int32)
@@ -403,9 +436,116 @@ def _basins(smooth, mask, markers, count):
     # a singular point's area is its basin's already: only its rim starts the flooding, which
     # spares the watershed a large bright plateau (a flat base facing the light)
     inner = ndi.binary_erosion(markers > 0, structure=np.ones((3, 3), dtype=bool))
+    basins = np.where(inner | ~mask, 0, markers).astype(np.int32)
+    _flood(smooth, mask & ~inner, basins)
+    basins[inner] = markers[inner]
+    return basins
+
+
+def _basins_reference(smooth, mask, markers, count):
+    """:func:`_basins` by :func:`skimage.segmentation.watershed` of ``-smooth``: the slow,
+    memory-hungry reference of the compiled flooding, for the tests."""
+    from scipy import ndimage as ndi
+    from skimage.segmentation import watershed
+
+    if count < 2:
+        return _basins(smooth, mask, markers, count)
+    inner = ndi.binary_erosion(markers > 0, structure=np.ones((3, 3), dtype=bool))
     basins = watershed(-smooth, np.where(inner, 0, markers), mask=mask & ~inner).astype(np.int32)
     basins[inner] = markers[inner]
     return basins
+
+
+@numba.njit(cache=True)
+def _before(key_a, age_a, key_b, age_b):
+    return key_a < key_b or (key_a == key_b and age_a < age_b)
+
+
+@numba.njit(cache=True)
+def _push(keys, ages, items, size, key, age, item):
+    """Add ``(key, age, item)`` to the heap of the three arrays (doubled when full); returns the
+    arrays and the new size."""
+    if size == keys.size:
+        grown = (np.empty(2 * size), np.empty(2 * size, np.int64), np.empty(2 * size, np.int64))
+        grown[0][:size] = keys[:size]
+        grown[1][:size] = ages[:size]
+        grown[2][:size] = items[:size]
+        keys, ages, items = grown
+    i = size
+    while i > 0:
+        parent = (i - 1) // 2
+        if not _before(key, age, keys[parent], ages[parent]):
+            break
+        keys[i] = keys[parent]
+        ages[i] = ages[parent]
+        items[i] = items[parent]
+        i = parent
+    keys[i] = key
+    ages[i] = age
+    items[i] = item
+    return keys, ages, items, size + 1
+
+
+@numba.njit(cache=True)
+def _pop(keys, ages, items, size):
+    """Remove the smallest ``(key, age)``; returns its item and the new size."""
+    item = items[0]
+    size -= 1
+    last_key, last_age, last_item = keys[size], ages[size], items[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and _before(keys[child + 1], ages[child + 1], keys[child], ages[child]):
+            child += 1
+        if not _before(keys[child], ages[child], last_key, last_age):
+            break
+        keys[i] = keys[child]
+        ages[i] = ages[child]
+        items[i] = items[child]
+        i = child
+    keys[i] = last_key
+    ages[i] = last_age
+    items[i] = last_item
+    return item, size
+
+
+@numba.njit(cache=True)
+def _flood(smooth, allowed, labels):
+    """Watershed of ``-smooth`` (H, W) float64 from the labelled pixels of ``labels`` (H, W)
+    int32 (0: not yet), through the 4-connected pixels of ``allowed`` (H, W) bool, in place.
+
+    Priority flooding as :func:`skimage.segmentation.watershed` does it (compactness 0, no
+    watershed line): a pixel takes the label of the neighbour that reaches it first, and pixels
+    are taken brightest first, equal ones in the order they were reached (the seeds first). The
+    queue is a binary heap of ``(-smooth, age, pixel)`` that grows with the front, so the memory
+    is the labels' alone (skimage's copies and pads the image and the markers).
+    """
+    height, width = labels.shape
+    keys = np.empty(1024)
+    ages = np.empty(1024, np.int64)
+    items = np.empty(1024, np.int64)
+    size = 0
+    for r in range(height):
+        for c in range(width):
+            if labels[r, c] != 0 and allowed[r, c]:
+                keys, ages, items, size = _push(keys, ages, items, size, -smooth[r, c], 0, r * width + c)
+    age = 0
+    while size > 0:
+        item, size = _pop(keys, ages, items, size)
+        r = item // width
+        c = item % width
+        for k in range(4):
+            rr = r + (-1, 0, 0, 1)[k]
+            cc = c + (0, -1, 1, 0)[k]
+            if rr < 0 or rr >= height or cc < 0 or cc >= width:
+                continue
+            if not allowed[rr, cc] or labels[rr, cc] != 0:
+                continue
+            labels[rr, cc] = labels[r, c]
+            age += 1
+            keys, ages, items, size = _push(keys, ages, items, size, -smooth[rr, cc], age, rr * width + cc)
 
 
 def _unsure_areas(basins, centres, mask, origin):
@@ -467,14 +607,48 @@ def _ends_on_outline(inside, outline, start):
 def _outline_polygon(inside):
     """The simplified outer outline of ``inside`` (H, W) bool, ``(N, 2)`` in ``(x, y)``."""
     from scipy import ndimage as ndi
-    from skimage.measure import approximate_polygon, find_contours
+    from skimage.measure import find_contours
 
     rows, cols = ndi.find_objects(inside.astype(np.int8))[0]
     # a pixel of margin closes the contour where the area meets the image frame
     padded = np.pad(inside[rows, cols], 1).astype(np.float64)
     contour = max(find_contours(padded, 0.5), key=len)
-    simple = approximate_polygon(contour, _POLYGON_TOLERANCE)[:-1]  # closed: last repeats first
+    simple = _simplified(contour, _POLYGON_TOLERANCE)[:-1]  # closed: last repeats first
     if len(simple) < 3:
         simple = contour[:-1]
     offset = np.array([rows.start - 1, cols.start - 1], dtype=np.float64)
     return (simple + offset)[:, ::-1].copy()
+
+
+def _simplified(points, tolerance):
+    """The vertices of the polyline ``points`` (N, 2) that Douglas-Peucker keeps at ``tolerance``.
+
+    Each chord keeps its farthest point (the first of equals) when that lies more than
+    ``tolerance`` from it, and both halves are simplified again. A point that projects strictly
+    inside the chord is measured to the chord's line, any other (a closed chord's, whose ends are
+    one point) to the nearer end. The result is :func:`skimage.measure.approximate_polygon`'s
+    (the tests compare them), without that module's import of scipy.signal: a third of a second
+    at start-up.
+    """
+    keep = np.zeros(len(points), dtype=bool)
+    keep[[0, -1]] = True
+    chords = [(0, len(points) - 1)]
+    while chords:
+        start, end = chords.pop()
+        if end - start < 2:
+            continue
+        (r0, c0), (r1, c1) = points[start], points[end]
+        dr, dc = r1 - r0, c1 - c0
+        angle = -np.arctan2(dr, dc)
+        rows, cols = points[start + 1 : end, 0], points[start + 1 : end, 1]
+        to_start = np.sqrt((cols - c0) ** 2 + (rows - r0) ** 2)
+        to_end = np.sqrt((cols - c1) ** 2 + (rows - r1) ** 2)
+        distance = np.minimum(to_start, to_end)
+        within = ((rows - r0) * dr + (cols - c0) * dc > 0) & (-(rows - r1) * dr - (cols - c1) * dc > 0)
+        line = c0 * np.sin(angle) + r0 * np.cos(angle)
+        distance[within] = np.abs(rows[within] * np.cos(angle) + cols[within] * np.sin(angle) - line)
+        if (distance > tolerance).any():
+            split = start + 1 + int(np.argmax(distance))
+            keep[split] = True
+            chords += [(split, end), (start, split)]
+    return points[keep]

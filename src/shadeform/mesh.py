@@ -119,7 +119,9 @@ def _check_step(step: object, shape: tuple[int, int]) -> int:
 def _check_reconstruction(reconstruction: Reconstruction) -> tuple[np.ndarray, ...]:
     mask = np.asarray(reconstruction.mask, dtype=bool)
     depth = np.asarray(reconstruction.depth, dtype=np.float64)
-    normals = np.asarray(reconstruction.normals, dtype=np.float64)
+    normals = np.asarray(reconstruction.normals)  # float32 or float64: only the grid's are converted
+    if not np.issubdtype(normals.dtype, np.floating):
+        normals = normals.astype(np.float64)
     if mask.ndim != 2:
         raise InputError(f"reconstruction mask must have shape (H, W), got {mask.shape}")
     if depth.shape != mask.shape:
@@ -143,10 +145,13 @@ def _outside_count(background: np.ndarray, top: np.ndarray, left: np.ndarray, si
 
     Returns
     -------
-    counts : same shape as ``top``, int64
+    counts : same shape as ``top``, int32 (int64 past 2**31 pixels)
     """
-    integral = np.zeros((background.shape[0] + 1, background.shape[1] + 1), dtype=np.int64)
-    np.cumsum(np.cumsum(background, axis=0), axis=1, out=integral[1:, 1:])
+    # int32 while every count fits: half the memory of int64 for this image-sized table
+    dtype = np.int32 if background.size < 2**31 else np.int64
+    integral = np.zeros((background.shape[0] + 1, background.shape[1] + 1), dtype=dtype)
+    np.cumsum(background, axis=0, dtype=dtype, out=integral[1:, 1:])
+    np.cumsum(integral[1:, 1:], axis=1, out=integral[1:, 1:])
     bottom, right = top + size, left + size
     return (integral[bottom, right] - integral[top, right]) - (integral[bottom, left] - integral[top, left])
 
@@ -248,7 +253,7 @@ def to_mesh(reconstruction: Reconstruction, *, step: int = 1) -> Mesh:
     grid_mask = mask[::step, ::step]
     grid_depth = depth[::step, ::step]
     grid_normals = normals[::step, ::step]
-    lengths = np.sqrt(np.einsum("ijk,ijk->ij", grid_normals, grid_normals))
+    lengths = np.sqrt(np.einsum("ijk,ijk->ij", grid_normals, grid_normals, dtype=np.float64))
     with np.errstate(invalid="ignore"):
         valid = grid_mask & np.isfinite(grid_depth) & np.isfinite(lengths) & (lengths > 0)
 

@@ -14,8 +14,10 @@ class Reconstruction:
 
     Attributes
     ----------
-    normals : (H, W, 3) float64
-        Unit normals in the camera frame (``docs/conventions.md``), NaN outside ``mask``.
+    normals : (H, W, 3) float32 or float64
+        Unit normals in the camera frame (``docs/conventions.md``), NaN outside ``mask``;
+        float32 from :func:`shadeform.reconstruct` (half the memory; a unit vector's float32
+        rounding is below 1e-5 degrees).
     depth : (H, W) float64
         Height z in pixel units (larger = nearer the viewer), NaN outside ``mask``;
         z = 0 at the main reference pixel.
@@ -30,7 +32,7 @@ class Reconstruction:
         What ran: method, integrator, references, iterations, timings in seconds per stage;
         ``info["unsure"]``: the areas whose convexity the photo cannot settle
         (:func:`shadeform.confidence.assess`), each ``{"polygon", "axis", "share", "centre"}``.
-    confidence : (H, W) float64 or None
+    confidence : (H, W) float32 (from :func:`shadeform.reconstruct`) or float64, or None
         How far each pixel's shape can be trusted, in [0, 1] (NaN off the mask): how well the
         normals explain the photo times how settled its convexity is
         (:func:`shadeform.confidence.assess`); None where it was not assessed.

@@ -101,6 +101,20 @@ def main() -> None:
     app(prog_name="shadeform")
 
 
+@app.command()
+def warm() -> None:
+    """Compile the numba kernels of the common paths now (set-up does it), so that the first
+    reconstruction does not wait for the compiler."""
+    from shadeform.pipeline import warm as warm_kernels
+
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    with stage(err, "compiling the kernels (once per install: about a minute)", timings, "warm"):
+        seconds = warm_kernels()
+    paths = ", ".join(f"{name} {format_seconds(value)}" for name, value in seconds.items())
+    typer.echo(f"kernels ready in {format_seconds(timings['warm'])} ({paths})")
+
+
 # --- small helpers -----------------------------------------------------------------------------
 
 

@@ -4,8 +4,9 @@
 added with :func:`register` is listed and round-trip tested without further changes.
 
 VRML 2.0 and Open Inventor 2.1 are written by the project (:mod:`shadeform.io.vrml`,
-:mod:`shadeform.io.inventor`), and so is 3MF (:func:`write_3mf`); OBJ, PLY, STL and glTF binary go
-through trimesh, imported only when one of them is written.
+:mod:`shadeform.io.inventor`), and so are 3MF (:func:`write_3mf`) and glTF binary (streamed, without
+trimesh's import or its in-memory copies); OBJ, PLY and STL go through trimesh, imported only when
+one of them is written.
 
 Every file states its unit (:attr:`shadeform.mesh.Mesh.unit`: pixels for reconstructions,
 millimetres for print-ready solids; ``docs/conventions.md``): 3MF in its ``unit`` attribute, glTF in
@@ -147,13 +148,83 @@ def _write_stl(mesh: Mesh, file_obj: BinaryIO) -> None:
 
 
 def _write_glb(mesh: Mesh, file_obj: BinaryIO) -> None:
-    def state_unit(tree: dict) -> None:
-        tree["asset"].setdefault("extras", {})["unit"] = mesh.unit
+    """glTF 2.0 binary (GLB), written by the project: one triangle primitive with ``POSITION``,
+    ``NORMAL`` and ``TEXCOORD_0`` (float32; glTF's texture ``v`` runs down the image, so ``1 - v``
+    is stored) and ``uint32`` indices, one grey matte material, the unit in ``asset.extras``.
 
-    data = _trimesh(mesh, with_uv=True).export(
-        file_type="glb", include_normals=True, tree_postprocessor=state_unit
-    )
-    file_obj.write(data)
+    The arrays are streamed into the file one at a time, so the memory is one float32 copy of one
+    array at most (trimesh built the whole file in memory, twice).
+
+    References
+    ----------
+    .. [1] The Khronos Group, "glTF 2.0 Specification", 2021 (GLB container, accessors).
+    """
+    import json
+
+    import numpy as np
+
+    if mesh.n_vertices >= 2**32:
+        raise InputError(f"a glTF mesh holds fewer than 2**32 vertices; this one has {mesh.n_vertices:,}")
+    parts = [
+        (lambda: mesh.faces.astype(np.uint32).ravel(), 5125, "SCALAR", 3 * mesh.n_faces, 34963),
+        (lambda: mesh.vertices.astype(np.float32), 5126, "VEC3", mesh.n_vertices, 34962),
+        (lambda: mesh.normals.astype(np.float32), 5126, "VEC3", mesh.n_vertices, 34962),
+    ]
+    if mesh.uv is not None:
+        parts.append((lambda: _gltf_uv(mesh.uv), 5126, "VEC2", mesh.n_vertices, 34962))
+    views, accessors, offset = [], [], 0
+    for index, (_, component, kind, count, target) in enumerate(parts):
+        length = 4 * count * {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[kind]
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": length, "target": target})
+        accessors.append({"bufferView": index, "componentType": component, "count": count, "type": kind})
+        offset += length  # every element is 4 bytes: each view stays 4-byte aligned
+    # glTF requires the positions' bounds, of the float32 values as stored
+    positions = mesh.vertices.astype(np.float32)
+    if mesh.n_vertices:
+        accessors[1]["min"] = positions.min(axis=0).tolist()
+        accessors[1]["max"] = positions.max(axis=0).tolist()
+    del positions
+    attributes = {"POSITION": 1, "NORMAL": 2}
+    if mesh.uv is not None:
+        attributes["TEXCOORD_0"] = 3
+    tree = {
+        "asset": {"version": "2.0", "generator": "shadeform", "extras": {"unit": mesh.unit}},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": attributes, "indices": 0, "mode": 4, "material": 0}]}],
+        "materials": [
+            {
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.4, 0.4, 0.4, 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.9,
+                }
+            }
+        ],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{"byteLength": offset}],
+    }
+    text = json.dumps(tree, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 4)  # chunks are 4-byte aligned; JSON pads with spaces
+    total = 12 + 8 + len(text) + 8 + offset
+    if total >= 2**32:
+        raise InputError("the mesh is too large for one glTF binary file (4 GiB); use a larger --step")
+    file_obj.write(b"glTF" + (2).to_bytes(4, "little") + total.to_bytes(4, "little"))
+    file_obj.write(len(text).to_bytes(4, "little") + b"JSON" + text)
+    file_obj.write(offset.to_bytes(4, "little") + b"BIN\x00")
+    for make, *_ in parts:
+        file_obj.write(memoryview(np.ascontiguousarray(make())).cast("B"))
+
+
+def _gltf_uv(uv):
+    """Texture coordinates in glTF's frame: ``v`` down from the top of the image, float32."""
+    import numpy as np
+
+    out = uv.astype(np.float32)
+    np.subtract(1.0, out[:, 1], out=out[:, 1])
+    return out
 
 
 #: 3MF's own length units (the core specification's ``ST_Unit``).

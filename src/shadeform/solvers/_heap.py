@@ -76,6 +76,32 @@ def heap_pop(keys, items, where, size):
     return key, item, size
 
 
-def new_heap(n_items: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Empty ``keys``, ``items`` and ``where`` arrays for up to ``n_items`` items ``0..n_items-1``."""
-    return np.empty(n_items), np.empty(n_items, np.int64), np.full(n_items, -1, np.int64)
+@numba.njit(cache=True)
+def heap_reserve(keys, items, size):
+    """``keys`` and ``items`` with room for one more entry: the same arrays, or copies twice as
+    long when ``size`` fills them (a heap started small grows with its front, not the image)."""
+    if size < keys.size:
+        return keys, items
+    grown_keys = np.empty(2 * keys.size, keys.dtype)
+    grown_items = np.empty(2 * items.size, items.dtype)
+    grown_keys[:size] = keys[:size]
+    grown_items[:size] = items[:size]
+    return grown_keys, grown_items
+
+
+def index_dtype(n_items: int) -> type:
+    """The integer type of item numbers ``0..n_items-1`` and heap positions: int32 while they
+    fit (half the memory of a pixel-sized array), int64 beyond."""
+    return np.int32 if n_items < 2**31 else np.int64
+
+
+def new_heap(n_items: int, capacity: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Empty ``keys``, ``items`` and ``where`` arrays for items ``0..n_items-1``.
+
+    ``keys`` and ``items`` hold ``capacity`` entries (default ``n_items``, never full); a caller
+    that starts smaller calls :func:`heap_reserve` before each :func:`heap_update`. ``where``
+    always has one entry per item.
+    """
+    capacity = n_items if capacity is None else max(int(capacity), 1)
+    dtype = index_dtype(n_items)
+    return np.empty(capacity), np.empty(capacity, dtype), np.full(n_items, -1, dtype)

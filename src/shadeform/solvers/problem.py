@@ -114,8 +114,9 @@ class Solution:
     Attributes
     ----------
     normals : (H, W, 3) float64
-        Unit normals on the mask (values off it are ignored). ``reconstruct`` copies both arrays,
-        so a solver may hand over arrays it keeps.
+        Unit normals on the mask (values off it are ignored). ``reconstruct`` takes both arrays
+        over and writes NaN into them off the mask (no image-sized copy): a solver that keeps an
+        array, or returns one of the problem's, hands over a copy.
     depth : (H, W) float64
         Height in pixel units, ``z = 0`` at the main reference (values off the mask are ignored).
     info : dict

@@ -49,7 +49,7 @@ class EikonalResult:
     depth : (H, W) float64
         Height z in pixel units (larger = nearer the viewer), NaN outside the mask; ``z = 0`` at
         the main singular point of each connected part of the mask.
-    normals : (H, W, 3) float64
+    normals : (H, W, 3) float64 (or float32, as asked)
         Unit normals on the shading cone (``n_z = I / albedo``) tilted along the depth's steepest
         descent, NaN outside the mask.
     singular_points : tuple of SingularPoint
@@ -81,6 +81,7 @@ def eikonal_depth(
     tol: float = TOL,
     smooth: float = 0.0,
     steep: float = STEEP,
+    dtype=np.float64,
 ) -> EikonalResult:
     """Depth and normals from one image lit from the viewer's direction, by fast marching.
 
@@ -122,6 +123,8 @@ def eikonal_depth(
     steep : float, optional
         Slope above which the arc update replaces finite differences
         (:mod:`shadeform.solvers.eikonal.marching`).
+    dtype : {numpy.float64, numpy.float32}, optional
+        Of the normals (computed in float64 either way); the registry's solver keeps float32.
 
     Returns
     -------
@@ -169,9 +172,11 @@ def eikonal_depth(
 
     seen = apply_filter(image, mask, Filter("gaussian", smooth)) if smooth > 0 else image
     albedo = float(seen[mask].max()) if albedo is None else positive(albedo, "albedo")
-    cos_theta = np.where(mask, np.clip(image / albedo, 0.0, 1.0), 0.0)
-    cos_seen = np.where(mask, np.clip(seen / albedo, 0.0, 1.0), 0.0)
+    cos_theta = _cosines(image, mask, albedo)
+    cos_seen = cos_theta if seen is image else _cosines(seen, mask, albedo)
+    del seen
     f, theta = slope_fields(cos_theta)
+    del cos_theta  # made again for the normals: the marching does not need it (memory)
     parts, n_parts = ndi.label(mask, structure=EIGHT)
     lap("prepare")
 
@@ -186,19 +191,23 @@ def eikonal_depth(
         detect=bool(detect),
         references=references,
     )
+    del cos_seen, concave_x, concave_y, parts  # (H, W) each, not needed by the marching
     lap("singular points")
 
     place_heights(nodes, main_of_part, f, theta, mask, steep)
     lap("heights")
 
     depth = _surface(nodes, f, theta, mask, steep)
+    del f, theta  # the marching is over: free them before the normals are made
     offset = np.zeros(n_parts + 1)
     for part, main in main_of_part.items():
         offset[part] = depth[nodes[main].representative]
-    depth = np.where(mask, depth - offset[parts], np.nan)
+    # in place: z = 0 at each part's main singular point, NaN off the mask
+    depth -= offset[1] if n_parts == 1 else offset[ndi.label(mask, structure=EIGHT)[0]]
+    depth[~mask] = np.nan
     lap("depth")
 
-    normals = cone_normals(depth, mask, cos_theta)
+    normals = cone_normals(depth, mask, _cosines(image, mask, albedo), dtype=dtype)
     lap("normals")
 
     # the main one first: the first reference, else the first part's
@@ -224,15 +233,23 @@ def _surface(nodes, f, theta, mask, steep) -> np.ndarray:
     ids = np.repeat(np.arange(len(nodes)), counts)
     is_min = np.array([n.kind == "min" for n in nodes])
     if not is_min.any():
-        low, _ = run_march(f, theta, mask, steep, index, -heights, ids)
-        return -low
-    up, _ = run_march(f, theta, mask, steep, index, heights, ids)
+        low, _ = run_march(f, theta, mask, steep, index, -heights)
+        return np.negative(low, out=low)
+    up, _ = run_march(f, theta, mask, steep, index, heights)
     if is_min.all():
         return up
-    low, _ = run_march(f, theta, mask, steep, index, -heights, ids)
+    low, _ = run_march(f, theta, mask, steep, index, -heights)
     _, nearest = run_march(f, theta, mask, steep, index, np.zeros(len(index)), ids)
     from_below = mask & is_min[np.maximum(nearest, 0)]
     return np.where(from_below, up, -low)
+
+
+def _cosines(image, mask, albedo: float) -> np.ndarray:
+    """``c = I / albedo`` clipped to [0, 1], 0 off the mask: (H, W) float64, made in place."""
+    c = np.divide(image, albedo, dtype=np.float64)
+    np.clip(c, 0.0, 1.0, out=c)
+    c[~mask] = 0.0
+    return c
 
 
 def _concave_mask(value, shape, name: str) -> np.ndarray:
@@ -245,7 +262,7 @@ def _concave_mask(value, shape, name: str) -> np.ndarray:
             f"{name} has shape {value.shape} but the image has {shape}; give a mask of "
             "the image's size (shadeform.regions.concave_masks)"
         )
-    return value.astype(bool)
+    return value.astype(bool, copy=False)
 
 
 def solve(problem: Problem) -> Solution:
@@ -261,6 +278,7 @@ def solve(problem: Problem) -> Solution:
         references=given or None,
         concave_x=problem.concave_x,
         concave_y=problem.concave_y,
+        dtype=np.float32,  # what reconstruct keeps: no float64 copy of the normals is made
     )
     problem.lap("normals")
     depth = result.depth

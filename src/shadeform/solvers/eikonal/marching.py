@@ -42,7 +42,7 @@ import numpy as np
 
 from shadeform._checks import positive
 from shadeform.errors import InputError
-from shadeform.solvers._heap import heap_pop, heap_update, new_heap
+from shadeform.solvers._heap import heap_pop, heap_reserve, heap_update, index_dtype, new_heap
 
 __all__ = ["COS_FLOOR", "STEEP", "arrival_times", "arrival_times_reference"]
 
@@ -222,14 +222,16 @@ def _arc_update_from(T, done, theta, r, c, pr, pc):
 
 
 @numba.njit(cache=True)
-def _march(f, theta, mask, steep, sources, goal, need, out, heap):
+def _march(f, theta, mask, steep, sources, goal, need, out, heap, track):
     """Fast marching over ``mask`` from the sources; fills the arrays of ``out``.
 
     ``sources`` is ``(index, value, label)`` of the source pixels; ``out`` is ``(T, label, done,
     reached)`` and ``heap`` the arrays of :func:`shadeform.solvers._heap.new_heap`, all from the
-    caller. ``goal`` holds a target id per pixel (-1 for none); the first accepted value of each
-    target goes to ``reached`` and marching stops once ``need`` targets were reached
-    (``need <= 0``: march everything). Returns the targets still missing.
+    caller (the heap may start small: it grows with the front). ``goal`` holds a target id per
+    pixel (-1 for none; read only when ``need > 0``, so it may be a 1 x 1 placeholder otherwise);
+    the first accepted value of each target goes to ``reached`` and marching stops once ``need``
+    targets were reached (``need <= 0``: march everything). ``label`` is written only when
+    ``track`` (else it may be a 1 x 1 placeholder). Returns the targets still missing.
     """
     src_index, src_value, src_label = sources
     T, label, done, reached = out
@@ -242,19 +244,22 @@ def _march(f, theta, mask, steep, sources, goal, need, out, heap):
         c = i % width
         if src_value[s] < T[r, c]:
             T[r, c] = src_value[s]
-            label[r, c] = src_label[s]
+            if track:
+                label[r, c] = src_label[s]
+            keys, items = heap_reserve(keys, items, size)
             size = heap_update(keys, items, where, size, src_value[s], i)
     while size > 0:
         _, i, size = heap_pop(keys, items, where, size)
         r = i // width
         c = i % width
         done[r, c] = True
-        g = goal[r, c]
-        if need > 0 and g >= 0 and reached[g] == np.inf:
-            reached[g] = T[r, c]
-            need -= 1
-            if need == 0:
-                break
+        if need > 0:
+            g = goal[r, c]
+            if g >= 0 and reached[g] == np.inf:
+                reached[g] = T[r, c]
+                need -= 1
+                if need == 0:
+                    break
         for dr in range(-1, 2):
             for dc in range(-1, 2):
                 rr = r + dr
@@ -269,12 +274,14 @@ def _march(f, theta, mask, steep, sources, goal, need, out, heap):
                     t = _difference_update(T, done, rr, cc, f[rr, cc])
                 if t < T[rr, cc]:
                     T[rr, cc] = t
-                    label[rr, cc] = label[r, c]
+                    if track:
+                        label[rr, cc] = label[r, c]
+                    keys, items = heap_reserve(keys, items, size)
                     size = heap_update(keys, items, where, size, t, rr * width + cc)
     return need
 
 
-def run_march(f, theta, mask, steep, index, values, labels, goal=None, need=0):
+def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, need=0):
     """Allocate the work arrays and run the compiled marching (private to the package).
 
     Parameters
@@ -285,9 +292,11 @@ def run_march(f, theta, mask, steep, index, values, labels, goal=None, need=0):
         Pixels to march over.
     steep : float
         Slope above which the arc update replaces finite differences.
-    index, values, labels : (S,) int, float, int
-        Flat index ``row * W + col``, starting ``T`` and label of each source pixel.
-    goal : (H, W) int64, optional
+    index, values : (S,) int, float
+        Flat index ``row * W + col`` and starting ``T`` of each source pixel.
+    labels : (S,) int, optional
+        A label per source pixel, to learn which source each pixel's value came from.
+    goal : (H, W) int32, optional
         A target id per pixel (-1 for none).
     need : int
         With ``goal``: stop once this many targets were reached.
@@ -296,29 +305,74 @@ def run_march(f, theta, mask, steep, index, values, labels, goal=None, need=0):
     -------
     T : (H, W) float64
         Arrival times; inf where not reached.
-    label : (H, W) int64
-        The label of the source each pixel's value came from (-1 where not reached).
+    label : (H, W) int32 or None
+        With ``labels``: the label of the source each pixel's value came from (-1 where not
+        reached).
     reached : (G,) float64
         Only with ``goal``: the first accepted value of each target (inf if not reached).
+
+    Notes
+    -----
+    Memory: 13 bytes per pixel of the image (``T``, the accepted flags and the heap's positions;
+    4 more with ``labels``, 4 with ``goal``) plus a heap that grows with the front. One compiled specialisation: ``f`` and
+    ``theta`` float64, the labels and targets int32 (the pixel numbers int64 past 2**31 pixels).
     """
     shape = mask.shape
     T = np.full(shape, np.inf)
-    label = np.full(shape, -1, dtype=np.int64)
+    track = labels is not None
+    label = np.full(shape if track else (1, 1), -1, dtype=np.int32)
     done = np.zeros(shape, dtype=bool)
-    heap = new_heap(mask.size)
-    targets = np.full(shape, -1, dtype=np.int64) if goal is None else goal
+    # the front of a march is far smaller than the image: start the heap at the sources plus
+    # a perimeter's worth and let it grow
+    heap = new_heap(mask.size, capacity=index.size + 2 * sum(shape))
+    if goal is None:
+        targets = np.full((1, 1), -1, dtype=np.int32)  # never read: need is 0
+        need = 0
+    else:
+        targets = goal.astype(np.int32, copy=False)
     reached = np.full(max(int(targets.max()) + 1, 1), np.inf)
-    sources = (index.astype(np.int64), values.astype(np.float64), labels.astype(np.int64))
-    _march(f, theta, mask, float(steep), sources, targets, int(need), (T, label, done, reached), heap)
+    if labels is None:
+        labels = np.zeros(index.size, dtype=np.int32)
+    sources = (index.astype(index_dtype(mask.size)), values.astype(np.float64), labels.astype(np.int32))
+    # C-ordered arrays of fixed types: one compiled specialisation for every caller (a strided
+    # view, such as a coarse grid's mask, would compile another)
+    _march(
+        np.ascontiguousarray(f, dtype=np.float64),
+        np.ascontiguousarray(theta, dtype=np.float64),
+        np.ascontiguousarray(mask, dtype=bool),
+        float(steep),
+        sources,
+        targets,
+        int(need),
+        (T, label, done, reached),
+        heap,
+        track,
+    )
+    label = label if track else None
     if goal is not None:
         return T, label, reached
     return T, label
 
 
 def slope_fields(cos_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``f = tan(theta)`` and ``theta = arccos(c)`` with ``c`` floored at :data:`COS_FLOOR`."""
-    c = np.clip(cos_theta, COS_FLOOR, 1.0)
-    return np.sqrt(1.0 / (c * c) - 1.0), np.arccos(c)
+    """``f = tan(theta)`` and ``theta = arccos(c)`` with ``c`` floored at :data:`COS_FLOOR`.
+
+    Both float64 (float32 would cost the plane wave's and the circle's exactness 1e-7), made a
+    band of rows at a time so that no image-sized temporary is made.
+    """
+    cos_theta = np.asarray(cos_theta)
+    f = np.empty(cos_theta.shape)
+    theta = np.empty(cos_theta.shape)
+    rows = max(1, (1 << 18) // max(cos_theta.shape[-1], 1))
+    for start in range(0, cos_theta.shape[0], rows):
+        band = slice(start, start + rows)
+        c = np.clip(cos_theta[band], COS_FLOOR, 1.0, dtype=np.float64)
+        theta[band] = np.arccos(c)
+        c *= c
+        np.divide(1.0, c, out=c)
+        c -= 1.0
+        f[band] = np.sqrt(c, out=c)
+    return f, theta
 
 
 # --------------------------------------------------------------------------------------------
@@ -403,7 +457,7 @@ def arrival_times(cos_theta, mask, sources, *, values=None, steep: float = STEEP
     cos_theta, mask, pixels, values, steep = _check_times_input(cos_theta, mask, sources, values, steep)
     f, theta = slope_fields(cos_theta)
     index = pixels[:, 0] * mask.shape[1] + pixels[:, 1]
-    T, _ = run_march(f, theta, mask, steep, index, values, np.zeros(len(index), np.int64))
+    T, _ = run_march(f, theta, mask, steep, index, values)
     return T
 
 

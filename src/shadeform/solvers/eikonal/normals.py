@@ -19,7 +19,9 @@ import numpy as np
 __all__ = ["cone_normals", "cone_normals_reference"]
 
 
-def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> np.ndarray:
+def cone_normals(
+    depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray, *, dtype=np.float64
+) -> np.ndarray:
     """Normals with ``n_z = cos_theta`` tilted along the steepest descent of ``depth`` (compiled).
 
     Parameters
@@ -29,18 +31,22 @@ def cone_normals(depth: np.ndarray, mask: np.ndarray, cos_theta: np.ndarray) -> 
     mask : (H, W) bool
     cos_theta : (H, W) float
         Required ``n_z``, clipped to [0, 1] (``I / k`` for a light at +z).
+    dtype : {numpy.float64, numpy.float32}, keyword-only
+        Of the result; computed in float64 either way (float32 is what
+        :func:`shadeform.reconstruct` keeps: half the memory).
 
     Returns
     -------
-    normals : (H, W, 3) float64
+    normals : (H, W, 3) ``dtype``
         Unit normals, NaN outside the mask. The gradient uses central differences where both
         neighbours are on the mask, one-sided ones where only one is; where it vanishes the
         normal is ``(0, 0, 1)``.
     """
-    depth = np.asarray(depth, dtype=np.float64)
-    mask = np.asarray(mask, dtype=bool)
-    cos = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
-    normals = np.full(mask.shape + (3,), np.nan)
+    # C-ordered, fixed types: one compiled specialisation per output type
+    depth = np.ascontiguousarray(depth, dtype=np.float64)
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    cos = np.ascontiguousarray(cos_theta, dtype=np.float64)  # clipped in the kernel: no copy
+    normals = np.full(mask.shape + (3,), np.nan, dtype=dtype)
     _cone_normals_kernel(depth, mask, cos, normals)
     return normals
 
@@ -116,10 +122,10 @@ def _cone_normals_kernel(z, mask, cos, out):
                 out[r, c, 1] = 0.0
                 out[r, c, 2] = 1.0
                 continue
-            sin = np.sqrt(1.0 - cos[r, c] * cos[r, c])
+            nz = min(max(cos[r, c], 0.0), 1.0)
+            sin = np.sqrt(1.0 - nz * nz)
             nx = -gx / slope * sin
             ny = -gy / slope * sin
-            nz = cos[r, c]
             length = np.sqrt(nx * nx + ny * ny + nz * nz)
             out[r, c, 0] = nx / length
             out[r, c, 1] = ny / length

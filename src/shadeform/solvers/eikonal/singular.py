@@ -139,7 +139,7 @@ def find_singular_points(
     if detect:
         nodes, regions, found = _detect(cos_seen, mask, parts, concave_x, concave_y, tol)
     else:
-        nodes, regions, found = [], np.zeros(mask.shape, dtype=np.int64), 0
+        nodes, regions, found = [], np.zeros(mask.shape, dtype=np.int32), 0
     nodes = _add_references(nodes, regions, references, cos_seen, mask, parts, concave_x, concave_y)
     nodes = _cover_parts(nodes, cos_seen, parts, n_parts, concave_x, concave_y)
     return nodes, _main_nodes(nodes, n_parts), found
@@ -179,7 +179,7 @@ def _detect(cos_seen, mask, parts, concave_x, concave_y, tol):
     # cropping to where it rises above the floor changes none of them, and saves most of the work.
     floor = 1.0 - 2.0 * tol
     bright = mask & (cos_seen > floor)
-    regions = np.zeros(mask.shape, dtype=np.int64)
+    regions = np.zeros(mask.shape, dtype=np.int32)
     if not bright.any():
         return [], regions, 0
     rows, cols = np.nonzero(bright)
@@ -220,7 +220,9 @@ def _detect(cos_seen, mask, parts, concave_x, concave_y, tol):
         nodes.sort(key=lambda node: node.region)
         kept[:] = False
         kept[[node.region for node in nodes]] = True
-    return nodes, np.where(kept[regions], regions, 0), found
+    labelled = regions[box]  # a view: the regions dropped are cleared in place
+    labelled[~kept[labelled]] = 0
+    return nodes, regions, found
 
 
 def _add_references(nodes, regions, references, cos_seen, mask, parts, concave_x, concave_y) -> list[Node]:
@@ -325,12 +327,14 @@ def _pairwise_distances(members, f, theta, mask, steep) -> np.ndarray:
     The marching from node a measures the nodes after it and stops once it has reached them all.
     """
     n = len(members)
-    goal = np.full(mask.shape, -1, dtype=np.int64)
+    goal = np.full(mask.shape, -1, dtype=np.int32)
     for j, node in enumerate(members):
         goal[node.pixels[:, 0], node.pixels[:, 1]] = j
     width = mask.shape[1]
     distance = np.zeros((n, n))
+    T = None
     for a, node in enumerate(members[:-1]):
+        del T  # the last march's times: free them before the next is allocated
         goal[node.pixels[:, 0], node.pixels[:, 1]] = -1  # measured from now on
         index = node.pixels[:, 0] * width + node.pixels[:, 1]
         need = len(np.unique(goal[goal > a]))
@@ -341,7 +345,6 @@ def _pairwise_distances(members, f, theta, mask, steep) -> np.ndarray:
             steep,
             index,
             np.zeros(len(index)),
-            np.zeros(len(index), np.int64),
             goal=goal,
             need=need,
         )
