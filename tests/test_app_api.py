@@ -23,6 +23,7 @@ from PIL import Image
 import shadeform
 from shadeform import metrics, synth
 from shadeform.app import schema, server
+from shadeform.app.large import FIT_FACTOR, LARGE_PIXELS
 from shadeform.app.server import AppLimits, create_app
 from shadeform.app.store import LRU
 from shadeform.examples import EXAMPLES, load_example
@@ -140,6 +141,8 @@ class TestOptions:
         assert options["limits"] == {
             "max_upload_bytes": AppLimits().max_upload_bytes,
             "max_pixels": AppLimits().max_pixels,
+            "large_pixels": LARGE_PIXELS,
+            "fit_factor": FIT_FACTOR,
         }
         assert options["initial_image"] is None
 

@@ -91,6 +91,10 @@ export interface ExampleInfo {
 export interface Limits {
   max_upload_bytes: number;
   max_pixels: number;
+  /** Images with more pixels get their quick look on a downsampled copy and their full solve in the background (``/api/solves``: progress, cancel). */
+  large_pixels: number;
+  /** A photo over ``max_pixels`` but at most this many times it may be opened downsampled to fit (``POST /api/images?fit=true``). */
+  fit_factor: number;
 }
 
 /** A stored image; ``image_id`` names it in every later request. */
@@ -147,7 +151,7 @@ export interface ReconstructResult {
   /** True for a quick look solved at the mesh's grid or a coarser one: the full result is still to come. */
   preview: boolean;
   mesh: MeshData;
-  /** The object mask as a base64 8-bit grey PNG (255 = object), the image's size. */
+  /** The object mask as a base64 8-bit grey PNG (255 = object), the image's size; empty in a quick look of a large photo (``info.level``): the full result brings it. */
   mask_png: string;
   /** Unit vector toward the light that was used (given or estimated). */
   light: [number, number, number];
@@ -159,6 +163,24 @@ export interface ReconstructResult {
   timings: Record<string, number>;
   /** What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused). */
   info: Record<string, unknown>;
+}
+
+/** A full-resolution solve running in the background (``/api/solves``). */
+export interface SolveJob {
+  job_id: string;
+  /** The request's ``request_id``, echoed. */
+  request_id: number;
+  state: "running" | "done" | "cancelled" | "failed";
+  /** The stage done last (``timings``' names), ``queued``, ``mesh`` or ``done``. */
+  stage: string;
+  /** What the solve is doing, in the user's words. */
+  stage_text: string;
+  /** Rough share of the work done, 0 to 1. */
+  fraction: number;
+  /** Seconds since it started (to its end, once ended). */
+  elapsed: number;
+  /** Why it ended without a result: the error, or what cancelled it; else null. */
+  detail: string | null;
 }
 
 /** Everything the user sets for photometric stereo on a photo set. */

@@ -20,18 +20,25 @@ import type {
   ReliefRequest,
   ReliefResult,
   SeedMaskRequest,
+  SolveJob,
   StereoRequest,
   StereoResult,
   ViewSetInfo,
 } from './api.gen';
 import { send } from './connection';
+import type { DecodeReply, MeshBounds } from './meshWorker';
 
 export type StereoRequestBody = StereoRequest;
 
 export type FilterSpec = ReconstructParams['filter'];
 
 export class ApiError extends Error {
-  constructor(readonly status: number, message: string) {
+  constructor(
+    readonly status: number,
+    message: string,
+    /** The response's headers (a refused upload's offer to downsample: X-Shadeform-Fit). */
+    readonly headers: Headers | null = null,
+  ) {
     super(message);
     this.name = 'ApiError';
   }
@@ -56,7 +63,7 @@ async function failure(response: Response): Promise<ApiError> {
   } catch {
     // not JSON (e.g. a proxy's page): keep the status line
   }
-  return new ApiError(response.status, detail);
+  return new ApiError(response.status, detail, response.headers);
 }
 
 async function json<T>(response: Promise<Response>): Promise<T> {
@@ -78,10 +85,11 @@ export function getOptions(): Promise<Options> {
   return json<Options>(send('/api/options'));
 }
 
-export function uploadImage(file: Blob, name: string): Promise<ImageInfo> {
+/** Upload a photo; with ``fit``, one over the pixel limit is downsampled to fit (the server's offer). */
+export function uploadImage(file: Blob, name: string, { fit = false } = {}): Promise<ImageInfo> {
   const form = new FormData();
   form.append('file', file, name);
-  return json<ImageInfo>(send('/api/images', { method: 'POST', body: form }));
+  return json<ImageInfo>(send(`/api/images${fit ? '?fit=true' : ''}`, { method: 'POST', body: form }));
 }
 
 export function openExample(name: string): Promise<ImageInfo> {
@@ -112,6 +120,70 @@ export async function imageKnown(imageId: string): Promise<boolean> {
 
 export function reconstruct(request: ReconstructRequest, signal?: AbortSignal): Promise<ReconstructResult> {
   return json<ReconstructResult>(postJson('/api/reconstruct', request, signal));
+}
+
+/** A reconstruct result and its mesh, decoded in the mesh worker (its ``mesh`` strings emptied). */
+export interface Decoded {
+  result: ReconstructResult;
+  mesh: DecodedMesh;
+  bounds: MeshBounds;
+  /** Milliseconds the worker took to parse and decode it. */
+  decodeMs: number;
+}
+
+let worker: Worker | null = null;
+let decodeCounter = 0;
+const decoding = new Map<number, { resolve: (d: Decoded) => void; reject: (e: Error) => void }>();
+
+function meshWorker(): Worker {
+  if (worker) return worker;
+  worker = new Worker(new URL('./meshWorker.ts', import.meta.url), { type: 'module' });
+  worker.onmessage = (event: MessageEvent<DecodeReply>) => {
+    const reply = event.data;
+    const waiting = decoding.get(reply.id);
+    decoding.delete(reply.id);
+    if (!waiting) return;
+    if (reply.ok) waiting.resolve({ result: reply.result, mesh: reply.mesh, bounds: reply.bounds, decodeMs: reply.decodeMs });
+    else waiting.reject(new ApiError(500, `the model could not be read: ${reply.message}`));
+  };
+  return worker;
+}
+
+/** A response's JSON result, parsed and its mesh decoded in the worker: the page never blocks on it. */
+async function decodedResult(response: Promise<Response>, signal?: AbortSignal): Promise<Decoded> {
+  const done = await response;
+  if (!done.ok) throw await failure(done);
+  const bytes = await done.arrayBuffer(); // read off the page's thread; parsed in the worker
+  signal?.throwIfAborted();
+  const id = ++decodeCounter;
+  return new Promise<Decoded>((resolve, reject) => {
+    decoding.set(id, { resolve, reject });
+    meshWorker().postMessage({ id, bytes }, [bytes]);
+  });
+}
+
+/** ``reconstruct``, decoded in the mesh worker. */
+export function reconstructDecoded(request: ReconstructRequest, signal?: AbortSignal): Promise<Decoded> {
+  return decodedResult(postJson('/api/reconstruct', request, signal), signal);
+}
+
+// ------------------------------------------------------------- background full solves
+
+/** Start the full-resolution solve in the background (a large photo's): its job, to poll. */
+export function startSolve(request: ReconstructRequest, signal?: AbortSignal): Promise<SolveJob> {
+  return json<SolveJob>(postJson('/api/solves', request, signal));
+}
+
+export function solveProgress(jobId: string, signal?: AbortSignal): Promise<SolveJob> {
+  return json<SolveJob>(send(`/api/solves/${encodeURIComponent(jobId)}`, { cache: 'no-store', signal }));
+}
+
+export function solveResult(jobId: string, signal?: AbortSignal): Promise<Decoded> {
+  return decodedResult(send(`/api/solves/${encodeURIComponent(jobId)}/result`, { cache: 'no-store', signal }), signal);
+}
+
+export function cancelSolve(jobId: string): Promise<SolveJob> {
+  return json<SolveJob>(send(`/api/solves/${encodeURIComponent(jobId)}`, { method: 'DELETE' }));
 }
 
 function maskUrl(imageId: string, what: 'auto' | 'seeds' | 'file'): string {

@@ -91,8 +91,10 @@ export class ImagePane {
   private offY = 0;
   private fitted = false;
   private sources: Sources | null = null;
-  private readonly images = new Map<string, HTMLImageElement>();
+  private readonly images = new Map<string, Picture>();
   private maskLayer: HTMLCanvasElement | null = null;
+  /** A small copy of the mask's layer (the mask worker's), drawn while the image is shown smaller. */
+  private maskSmall: ImageBitmap | null = null;
   private regionList: Region[] = [];
   private unsureList: Unsure[] = [];
   private selected: number | null = null;
@@ -143,6 +145,7 @@ export class ImagePane {
     this.events.notice(null);
     if (!sameSize) {
       this.maskLayer = null;
+      this.maskSmall = null;
       this.fitted = false;
     }
     this.resize();
@@ -150,7 +153,7 @@ export class ImagePane {
 
   /** Ask again for the previews that failed to load (the server was away): they load when shown. */
   retryImages(): void {
-    for (const [url, image] of this.images) if (image.complete && !image.naturalWidth) this.images.delete(url);
+    for (const [url, picture] of this.images) if (picture.failed) this.images.delete(url);
     this.redraw();
   }
 
@@ -188,6 +191,11 @@ export class ImagePane {
 
   /** The object mask as a tinted overlay with its outline; ``dirty``: only that part changed. */
   setMask(mask: MaskBits | null, dirty?: Rect): void {
+    // a new mask brings its small copy (or none); an edit makes the one shown out of date
+    const small = dirty ? null : (mask?.small ?? null);
+    if (mask) mask.small = null;
+    if (small !== this.maskSmall) this.maskSmall?.close();
+    this.maskSmall = small;
     if (!mask) {
       this.maskLayer = null;
     } else {
@@ -471,16 +479,24 @@ export class ImagePane {
     this.redraw();
   }
 
-  private image(url: string): HTMLImageElement | null {
-    let image = this.images.get(url);
-    if (!image) {
-      image = new Image();
-      image.onload = () => this.redraw();
-      image.src = url;
-      this.images.set(url, image);
+  /**
+   * The picture at ``url`` to draw at the scale shown: decoded off the page's thread (an
+   * ImageBitmap; an <img> drawn on a canvas was decoded on it, 180 ms for a 12 Mpx photo), with
+   * a copy at most SMALL_SIDE on a side for a photo shown smaller than that (a software canvas
+   * scaling 12 Mpx at every frame blocked the page too). Null until it is ready.
+   */
+  private image(url: string): ImageBitmap | null {
+    let picture = this.images.get(url);
+    if (!picture) {
+      picture = { full: null, small: null, failed: false };
+      this.images.set(url, picture);
       if (this.images.size > 12) this.images.delete(this.images.keys().next().value!); // oldest
+      void loadPicture(url, picture).then(() => this.redraw());
     }
-    return image.complete && image.naturalWidth ? image : null;
+    const full = picture.full;
+    if (!full) return null;
+    const shown = this.width * this.scale * (window.devicePixelRatio || 1);
+    return picture.small && shown <= picture.small.width * 1.25 ? picture.small : full;
   }
 
   redraw(): void {
@@ -514,7 +530,9 @@ export class ImagePane {
     }
     if ((this.showMask || this.tool === 'mask') && this.maskLayer) {
       ctx.imageSmoothingEnabled = false;
-      ctx.drawImage(this.maskLayer, this.offX, this.offY, w, h);
+      const shown = w * (window.devicePixelRatio || 1);
+      const small = this.maskSmall && shown <= this.maskSmall.width * 1.25 ? this.maskSmall : null;
+      ctx.drawImage(small ?? this.maskLayer, this.offX, this.offY, w, h);
     }
     ctx.strokeStyle = 'rgba(255,255,255,0.18)';
     ctx.lineWidth = 1;
@@ -684,4 +702,36 @@ function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number
   ctx.strokeText(text, x, y);
   ctx.fillStyle = colour;
   ctx.fillText(text, x, y);
+}
+
+/** Long side of the copy of a large picture drawn while it is shown smaller (a 2K screen's). */
+const SMALL_SIDE = 2048;
+
+/** A picture of the pane: decoded, and its small copy where it is larger than SMALL_SIDE. */
+interface Picture {
+  full: ImageBitmap | null;
+  small: ImageBitmap | null;
+  failed: boolean;
+}
+
+async function loadPicture(url: string, picture: Picture): Promise<void> {
+  try {
+    const response = await fetch(url);
+    if (!response.ok) throw new Error(`${response.status}`);
+    const blob = await response.blob();
+    const full = await createImageBitmap(blob);
+    const side = Math.max(full.width, full.height);
+    if (side > SMALL_SIDE) {
+      const k = SMALL_SIDE / side;
+      // from the file again: decoded and scaled off the page's thread too
+      picture.small = await createImageBitmap(blob, {
+        resizeWidth: Math.max(1, Math.round(full.width * k)),
+        resizeHeight: Math.max(1, Math.round(full.height * k)),
+        resizeQuality: 'medium',
+      });
+    }
+    picture.full = full;
+  } catch {
+    picture.failed = true; // tried again when the server answers (retryImages)
+  }
 }

@@ -7,7 +7,11 @@
 // time); a quick look solved at the mesh's grid (or a coarser one) comes first where the image
 // is large enough for it to pay, then the full solve under the same id. A newer request aborts
 // the one in flight, and a response whose request_id is not the newest is dropped, so a stale
-// model never arrives last.
+// model never arrives last. A large photo (more than Options.limits.large_pixels: a 12 Mpx phone
+// photo) gets its quick look from a downsampled copy, then its full solve runs in the background
+// (/api/solves): a progress bar with Cancel, which stops it and leaves the quick look shown.
+// Results are parsed and their meshes decoded in a Web Worker (meshWorker.ts), so that the page
+// never blocks on a large one.
 //
 // What the model on screen is (up to date, computing, out of date, failed) is each session's
 // ModelState (modelState.ts); the badge by the 3D view, the export menu and the dimming are drawn
@@ -21,7 +25,7 @@
 // and a page whose storage is empty offers the newest.
 import './style.css';
 import * as api from './api';
-import type { ExampleInfo, ImageInfo, Options, ProjectInfo, ReconstructRequest, ReconstructResult } from './api.gen';
+import type { ExampleInfo, ImageInfo, Options, ProjectInfo, ReconstructRequest, ReconstructResult, SolveJob } from './api.gen';
 import { connectionState, NetworkError, onReconnect, send, UNREACHABLE } from './connection';
 import { Panel, type Urgency } from './controls';
 import { ImagePane, readUnsure, type Display, type Tool, type Unsure } from './imagePane';
@@ -60,8 +64,11 @@ import { PART_COLOURS, ViewsSession } from './views';
 import { MapsPanel } from './mapsPanel';
 import { PrintPanel } from './print';
 import { Viewer } from './viewer';
+import type { MeshBounds } from './meshWorker';
 
 const DRAG_DEBOUNCE_MS = 40;
+/** How often a background solve's progress is asked for. */
+const PROGRESS_POLL_MS = 250;
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
 /** Timestamps (performance.now()) of the last applied result: where the time went. */
@@ -93,6 +100,12 @@ class App {
   private refitNext = true;
   private result: ReconstructResult | null = null;
   private mesh: api.DecodedMesh | null = null;
+  /** A large photo's mask tool is still to ask what its automatic mask is (after the first view). */
+  private describeMask = false;
+  /** The background full solve running now (a large photo's), to cancel. */
+  private job: string | null = null;
+  /** A photo refused for its size, offered downsampled (the offer that stays over the image pane). */
+  private fitOffer: { file: File; factor: number } | null = null;
   private appliedCount = 0;
   private timeline: Timeline | null = null;
   private saveTimer = 0;
@@ -217,6 +230,16 @@ class App {
     });
     this.buildMenus();
     bindToasts();
+    $('solve-cancel').addEventListener('click', () => void this.cancelJob());
+    $('solve-again').addEventListener('click', () => {
+      $('solve-progress').hidden = true;
+      this.solve();
+    });
+    $('fit-accept').addEventListener('click', () => {
+      const offer = this.fitOffer;
+      if (offer) void this.openFile(offer.file);
+    });
+    $('fit-dismiss').addEventListener('click', () => this.showFitOffer(null));
     onReconnect(() => this.reconnected());
     this.bindToolbar();
     this.bindFiles();
@@ -288,13 +311,52 @@ class App {
       return;
     }
     await this.busy('Uploading…', async () => {
-      const info = await api.uploadImage(file, file.name);
+      let info: ImageInfo;
+      try {
+        info = await api.uploadImage(file, file.name, { fit: this.fitOffer?.file === file });
+      } catch (err) {
+        if (err instanceof api.ApiError && err.status === 413 && err.headers?.has('X-Shadeform-Fit')) {
+          return this.offerFit(file, err);
+        }
+        throw err;
+      }
+      this.showFitOffer(null);
       this.views.editing = null;
       this.imageBytes = file;
       await storeImageBytes(file);
       this.projects.begin('photo');
       this.showImage(info, { kind: 'upload', name: file.name, type: file.type }, null);
     });
+  }
+
+  /**
+   * A photo over the server's pixel limit: an offer that stays over the image pane, in the
+   * server's words (its size, the limit, the CLI's tiled command for the full resolution), with
+   * one button that opens it downsampled to fit (where it is at most Limits.fit_factor times over).
+   */
+  private offerFit(file: File, err: api.ApiError): void {
+    const fit = err.headers?.get('X-Shadeform-Fit') ?? 'none';
+    this.showFitOffer(fit === 'none' ? null : { file, factor: Number(fit) }, err.message);
+  }
+
+  private showFitOffer(offer: { file: File; factor: number } | null, message: string | null = null): void {
+    this.fitOffer = offer;
+    const box = $('fit-offer');
+    box.hidden = message === null;
+    if (message === null) return;
+    const text = $('fit-offer-text');
+    text.textContent = '';
+    // the command in the message (between backquotes) as code, to copy
+    message.split('`').forEach((part, i) => {
+      if (i % 2) {
+        const code = document.createElement('code');
+        code.textContent = part;
+        text.append(code);
+      } else text.append(part);
+    });
+    const button = $<HTMLButtonElement>('fit-accept');
+    button.hidden = offer === null;
+    button.textContent = offer ? `Downsample ${offer.factor}× and open` : '';
   }
 
   async openExample(name: string): Promise<void> {
@@ -522,7 +584,8 @@ class App {
     name.textContent = info.name;
     $('image-title').append(name, ` ${info.width} × ${info.height} · ${info.channels === 1 ? 'grey' : `${info.channels} channels`}`);
     this.pane.setImage(info.width, info.height, this.sources());
-    this.maskTool.open(this.params.mask ?? null);
+    this.describeMask = this.large();
+    this.maskTool.open(this.params.mask ?? null, !this.describeMask);
     this.pane.setRegions(this.params.concave.regions);
     this.viewer.setPhoto(api.photoUrl(info.image_id));
     this.panel.show(this.params);
@@ -857,19 +920,33 @@ class App {
     this.changedAt = null;
     const version = this.model.computing();
     this.setSolving(true);
+    $('solve-progress').hidden = true; // a cancelled solve's note goes with the next request
     try {
       // ask for a quick look first (the server gives the full result instead where a quick look
       // would not pay), then the full solve; both under this request's id and abort signal
       let firstRendered: number | null = null;
       for (let preview = true; ; preview = false) {
         const sent = performance.now();
-        const result = await api.reconstruct({ ...this.request(id), preview }, controller.signal);
-        const received = performance.now();
-        if (result.request_id !== this.latestSent) return; // superseded while on the wire
-        const mesh = api.decodeMesh(result.mesh);
+        const background = !preview && this.large();
+        const answer = background
+          ? await this.solveInBackground(id, controller.signal)
+          : await api.reconstructDecoded({ ...this.request(id), preview }, controller.signal);
+        if (answer === null) {
+          // cancelled: the quick look stays, said to be one
+          if (id === this.latestSent) this.model.changed('full resolution cancelled: the quick look is shown');
+          return;
+        }
+        const { result, mesh, bounds } = answer;
+        // decoded in the worker: received is when it arrived there, decoded when it came back
         const decoded = performance.now();
-        this.applyResult(result, mesh);
+        const received = decoded - answer.decodeMs;
+        if (result.request_id !== this.latestSent) return; // superseded while on the wire
+        this.applyResult(result, mesh, bounds);
         this.model.arrived(version, !result.preview);
+        if (this.describeMask) {
+          this.describeMask = false;
+          void this.maskTool.describe();
+        }
         const rendered = await this.viewer.rendered();
         if (id !== this.latestSent) return;
         this.appliedCount += 1;
@@ -927,14 +1004,79 @@ class App {
     }
   }
 
-  private applyResult(result: ReconstructResult, mesh: api.DecodedMesh): void {
+  /** Whether the open photo is large: its full solve runs in the background, with progress. */
+  private large(): boolean {
+    return !!this.image && this.image.width * this.image.height > this.options.limits.large_pixels;
+  }
+
+  /**
+   * The full solve of request ``id`` as a background job: its progress shown with Cancel, polled
+   * until it ends; the result decoded in the worker, or null if it was cancelled. A newer request
+   * (the signal aborted) cancels it on the server too.
+   */
+  private async solveInBackground(id: number, signal: AbortSignal): Promise<api.Decoded | null> {
+    let job = await api.startSolve(this.request(id), signal);
+    const jobId = job.job_id;
+    const cancel = () => void api.cancelSolve(jobId).catch(() => undefined);
+    signal.addEventListener('abort', cancel);
+    this.job = jobId;
+    try {
+      this.showJob(job);
+      while (job.state === 'running') {
+        await new Promise((resolve) => window.setTimeout(resolve, PROGRESS_POLL_MS));
+        signal.throwIfAborted();
+        job = await api.solveProgress(jobId, signal);
+        if (this.job === jobId) this.showJob(job);
+      }
+      if (job.state === 'cancelled') return null;
+      if (job.state === 'failed') throw new api.ApiError(422, job.detail ?? 'the full-resolution solve failed');
+      return await api.solveResult(jobId, signal);
+    } finally {
+      signal.removeEventListener('abort', cancel);
+      if (this.job === jobId) {
+        this.job = null;
+        $('solve-progress').hidden = true;
+      }
+    }
+  }
+
+  /** The progress bar of the background solve: stage, share done, seconds so far. */
+  private showJob(job: SolveJob): void {
+    $('solve-progress').hidden = false;
+    $('solve-again').hidden = true;
+    $('solve-cancel').hidden = false;
+    $('solve-bar').hidden = false;
+    $('solve-stage').textContent = `Full resolution: ${job.stage_text}`;
+    $<HTMLProgressElement>('solve-bar').value = job.fraction;
+    $('solve-percent').textContent = `${Math.round(job.fraction * 100)} % · ${job.elapsed.toFixed(0)} s`;
+  }
+
+  /** Cancel: the background solve stops (its worker process ends) and the quick look stays. */
+  private async cancelJob(): Promise<void> {
+    const jobId = this.job;
+    if (!jobId) return;
+    this.job = null;
+    try {
+      await api.cancelSolve(jobId);
+    } catch (err) {
+      this.toast((err as Error).message);
+    }
+    $('solve-progress').hidden = false;
+    $('solve-cancel').hidden = true;
+    $('solve-bar').hidden = true;
+    $('solve-again').hidden = false;
+    $('solve-stage').textContent = 'Full resolution cancelled: the quick look is shown';
+    $('solve-percent').textContent = '';
+  }
+
+  private applyResult(result: ReconstructResult, mesh: api.DecodedMesh, bounds?: MeshBounds): void {
     this.result = result;
     this.mesh = mesh;
-    this.viewer.setMesh(mesh, { refit: this.refitNext });
+    this.viewer.setMesh(mesh, { refit: this.refitNext, bounds });
     this.refitNext = false;
     this.viewer.setLight(result.light);
     this.modelShown();
-    this.maskTool.solvedWith(result.mask_png);
+    if (result.mask_png) this.maskTool.solvedWith(result.mask_png); // a large photo's quick look has none
     this.showReferences();
     this.panel.showResult(result);
     // a quick look may leave the areas out: keep the last ones until a result says
@@ -948,6 +1090,7 @@ class App {
   private timingText(result: ReconstructResult, total: number): string {
     const server = (result.timings.total ?? 0) * 1000;
     const cached = result.info.cached ? ' (cached solve)' : '';
+    if (result.preview && result.info.level) return `quick look (photo ÷ ${result.info.level}) in ${total.toFixed(0)} ms`;
     if (result.preview) return `quick look in ${total.toFixed(0)} ms · refining…`;
     return `server ${server.toFixed(0)} ms${cached} · view updated in ${total.toFixed(0)} ms`;
   }
@@ -1317,6 +1460,8 @@ class App {
         return {
           request_id: r.request_id,
           preview: r.preview,
+          /** Whether its JSON was parsed and its mesh decoded in the mesh worker (the page kept no base64). */
+          decodedInWorker: r.mesh.positions === '' && this.mesh !== null && this.mesh.vertexCount === r.mesh.vertex_count,
           vertex_count: r.mesh.vertex_count,
           triangle_count: r.mesh.triangle_count,
           light: r.light,
@@ -1326,6 +1471,16 @@ class App {
           info: r.info,
         };
       },
+      /** The background full solve's progress bar (a large photo's): shown, its words, the share done. */
+      solveProgress: () => ({
+        shown: !$('solve-progress').hidden,
+        job: this.job,
+        text: $('solve-stage').textContent,
+        fraction: $<HTMLProgressElement>('solve-bar').value,
+        cancellable: !$('solve-cancel').hidden,
+      }),
+      /** The offer to downsample a photo over the pixel limit, or null. */
+      fitOffer: () => ($('fit-offer').hidden ? null : { text: $('fit-offer-text').textContent, button: !$('fit-accept').hidden }),
       /** The id of the newest reconstruct request sent. */
       requests: () => this.latestSent,
       /** How many results have been drawn in the 3D view so far. */

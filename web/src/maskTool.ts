@@ -9,6 +9,8 @@
 import * as api from './api';
 import type { Channel, MaskResult } from './api.gen';
 import { segmentDistance, type Point } from './geometry';
+import { MASK_EDGE, MASK_FILL } from './maskColours';
+import type { MaskDecodeReply } from './maskWorker';
 
 export type MaskMode = 'brush' | 'polygon' | 'object';
 export type MaskOp = 'add' | 'erase';
@@ -29,6 +31,10 @@ const THRESHOLD_STEPS = 1000; // the threshold slider's positions, on a square-r
 /** A mask, one byte per pixel (1 = object), row by row. */
 export class MaskBits {
   readonly bits: Uint8Array;
+  /** The bits' tinted layer, drawn by the mask worker: used by the first full paint, then dropped. */
+  layer: ImageBitmap | null = null;
+  /** Its copy at most SMALL_SIDE on a side (a large mask's), for the pane zoomed out; taken by the pane. */
+  small: ImageBitmap | null = null;
 
   constructor(readonly width: number, readonly height: number, bits?: Uint8Array) {
     this.bits = bits ?? new Uint8Array(width * height);
@@ -161,24 +167,37 @@ export class MaskBits {
     return api.bytesToBase64(new Uint8Array(await (await this.png()).arrayBuffer()));
   }
 
-  /** A mask from a PNG (base64) the server sent or this tool made: bright pixels are object. */
+  /** A mask from a PNG (base64) the server sent or this tool made: bright pixels are object.
+   * Read, and its layer tinted, in the mask worker (maskWorker.ts): the page never blocks on it. */
   static async fromPng(text: string, width: number, height: number): Promise<MaskBits> {
     const bytes = api.base64ToBytes(text) as Uint8Array<ArrayBuffer>;
-    const bitmap = await createImageBitmap(new Blob([bytes], { type: 'image/png' }));
-    if (bitmap.width !== width || bitmap.height !== height) {
-      throw new Error(`mask is ${bitmap.width}x${bitmap.height} but the image is ${width}x${height}; give a mask of the image's size`);
-    }
-    const canvas = document.createElement('canvas');
-    canvas.width = width;
-    canvas.height = height;
-    const ctx = canvas.getContext('2d', { willReadFrequently: true })!;
-    ctx.drawImage(bitmap, 0, 0);
-    bitmap.close();
-    const data = ctx.getImageData(0, 0, width, height).data;
-    const bits = new Uint8Array(width * height);
-    for (let i = 0; i < bits.length; i++) bits[i] = data[4 * i] > 127 ? 1 : 0;
-    return new MaskBits(width, height, bits);
+    const buffer = bytes.byteOffset === 0 && bytes.byteLength === bytes.buffer.byteLength ? bytes.buffer : bytes.slice().buffer;
+    const id = ++maskCounter;
+    const reply = await new Promise<MaskDecodeReply>((resolve) => {
+      maskDecoding.set(id, resolve);
+      maskWorker().postMessage({ id, bytes: buffer, width, height }, [buffer]);
+    });
+    if (!reply.ok) throw new Error(reply.message);
+    const mask = new MaskBits(width, height, reply.bits);
+    mask.layer = reply.layer;
+    mask.small = reply.small;
+    return mask;
   }
+}
+
+let worker: Worker | null = null;
+let maskCounter = 0;
+const maskDecoding = new Map<number, (reply: MaskDecodeReply) => void>();
+
+function maskWorker(): Worker {
+  if (worker) return worker;
+  worker = new Worker(new URL('./maskWorker.ts', import.meta.url), { type: 'module' });
+  worker.onmessage = (event: MessageEvent<MaskDecodeReply>) => {
+    const resolve = maskDecoding.get(event.data.id);
+    maskDecoding.delete(event.data.id);
+    resolve?.(event.data);
+  };
+  return worker;
 }
 
 /**
@@ -191,6 +210,15 @@ export function paintMask(mask: MaskBits, layer: HTMLCanvasElement, dirty?: Rect
     layer.width = w;
     layer.height = h;
     dirty = undefined;
+  }
+  const worker = mask.layer;
+  mask.layer = null; // the bits may change after this paint: only this one may use it
+  if (!dirty && worker && worker.width === w && worker.height === h) {
+    const ctx = layer.getContext('2d')!;
+    ctx.clearRect(0, 0, w, h);
+    ctx.drawImage(worker, 0, 0);
+    worker.close();
+    return;
   }
   const x0 = Math.max(0, (dirty?.x0 ?? 0) - 1);
   const y0 = Math.max(0, (dirty?.y0 ?? 0) - 1);
@@ -206,10 +234,7 @@ export function paintMask(mask: MaskBits, layer: HTMLCanvasElement, dirty?: Rect
       const o = 4 * ((r - y0) * (x1 - x0) + (c - x0));
       if (!bits[i]) continue; // stays transparent
       const edge = c === 0 || r === 0 || c === w - 1 || r === h - 1 || !bits[i - 1] || !bits[i + 1] || !bits[i - w] || !bits[i + w];
-      data[o] = edge ? 94 : 56;
-      data[o + 1] = edge ? 234 : 189;
-      data[o + 2] = edge ? 212 : 248;
-      data[o + 3] = edge ? 230 : 46;
+      data.set(edge ? MASK_EDGE : MASK_FILL, o);
     }
   }
   ctx.putImageData(pixels, x0, y0);
@@ -294,8 +319,12 @@ export class MaskTool {
 
   // ----------------------------------------------------------------------- state from the app
 
-  /** A new image: its mask is ``png`` (the user's, from a session or project) or the automatic one. */
-  async open(png: string | null): Promise<void> {
+  /**
+   * A new image: its mask is ``png`` (the user's, from a session or project) or the automatic one.
+   * ``describe`` false: what the automatic mask is (a full-resolution mask on the server: 1.6 s
+   * at 12 Mpx) is asked later (describe()), so that it does not compete with the first view.
+   */
+  async open(png: string | null, describe = true): Promise<void> {
     this.mask = null;
     this.solvedPng = '';
     this.user = png !== null;
@@ -315,7 +344,12 @@ export class MaskTool {
         this.error((err as Error).message);
       }
     }
-    await this.describeAutomatic();
+    if (describe) await this.describeAutomatic();
+  }
+
+  /** Say what the automatic mask is (open()'s, when it was put off). */
+  describe(): Promise<void> {
+    return this.describeAutomatic();
   }
 
   /** The mask a result was solved with: shown when the automatic one is in use. */

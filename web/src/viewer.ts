@@ -8,6 +8,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import type { DecodedMesh } from './api';
+import type { MeshBounds } from './meshWorker';
 import { Gizmo } from './gizmo';
 
 export interface ViewOptions {
@@ -56,7 +57,9 @@ export class Viewer {
   private readonly renderListeners: Array<() => void> = [];
 
   constructor(private readonly host: HTMLElement) {
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, alpha: true, preserveDrawingBuffer: true });
+    // a software renderer (SwiftShader: no GPU, or a headless browser) draws multisampling on the
+    // CPU, and the page waits for each frame at its commit: 190 ms for the first model without it
+    this.renderer = new THREE.WebGLRenderer({ antialias: !softwareGl(), alpha: true, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
     this.renderer.setClearColor(0x000000, 0);
     this.renderer.domElement.className = 'viewer-canvas';
@@ -84,17 +87,51 @@ export class Viewer {
 
     new ResizeObserver(() => this.resize()).observe(host);
     this.resize();
+    this.precompile();
+  }
+
+  /**
+   * Compile the surface's shaders before the first model comes, in parallel where the browser
+   * can (KHR_parallel_shader_compile): compiled by the first render instead, they blocked the
+   * page for 170 ms in software WebGL.
+   */
+  private precompile(): void {
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(9), 3));
+    geometry.setAttribute('normal', new THREE.BufferAttribute(new Float32Array([0, 0, 1, 0, 0, 1, 0, 0, 1]), 3));
+    geometry.setAttribute('uv', new THREE.BufferAttribute(new Float32Array(6), 2));
+    const probe = new THREE.Mesh(geometry, this.shaded);
+    this.model.add(probe);
+    this.renderer
+      .compileAsync(this.scene, this.camera)
+      .then(() => {
+        // one draw with them: a software renderer (SwiftShader) builds its pipeline on the first
+        // draw, 200-400 ms that the page then waits for; here, before any model is asked for
+        // (the corner gizmo's too, drawn with every model)
+        if (this.surface) return;
+        this.renderer.render(this.scene, this.camera);
+        this.gizmo.render(this.renderer, this.camera);
+        this.renderer.clear();
+      })
+      .catch(() => undefined) // the first render compiles them then
+      .finally(() => {
+        this.model.remove(probe);
+        geometry.dispose();
+      });
   }
 
   /**
    * Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new
    * parameter), and so does a ``frame`` other than the last mesh's. Guides go with the old mesh.
    */
-  setMesh(mesh: DecodedMesh, { refit, frame = 'model' }: { refit: boolean; frame?: string }): void {
+  setMesh(
+    mesh: DecodedMesh,
+    { refit, frame = 'model', bounds }: { refit: boolean; frame?: string; bounds?: MeshBounds },
+  ): void {
     refit ||= frame !== this.meshFrame;
     this.meshFrame = frame;
     this.setGuides(null);
-    const geometry = geometryOf(mesh);
+    const geometry = geometryOf(mesh, bounds);
     const old = this.surface?.geometry;
     if (this.surface) this.model.remove(this.surface);
     if (this.wire) {
@@ -356,14 +393,23 @@ export class Viewer {
   }
 }
 
-function geometryOf(mesh: DecodedMesh): THREE.BufferGeometry {
+/** The geometry of a decoded mesh: its arrays as they are; its bounds from the mesh worker when
+ * it found them (a loop over every vertex less on the page's thread), else computed here. */
+function geometryOf(mesh: DecodedMesh, bounds?: MeshBounds): THREE.BufferGeometry {
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute('position', new THREE.BufferAttribute(mesh.positions, 3));
   geometry.setAttribute('normal', new THREE.BufferAttribute(mesh.normals, 3));
   if (mesh.uvs) geometry.setAttribute('uv', new THREE.BufferAttribute(mesh.uvs, 2));
   geometry.setIndex(new THREE.BufferAttribute(mesh.indices, 1));
-  geometry.computeBoundingBox();
-  geometry.computeBoundingSphere();
+  if (bounds) {
+    const [x0, y0, z0, x1, y1, z1] = bounds.box;
+    geometry.boundingBox = new THREE.Box3(new THREE.Vector3(x0, y0, z0), new THREE.Vector3(x1, y1, z1));
+    const [cx, cy, cz, radius] = bounds.sphere;
+    geometry.boundingSphere = new THREE.Sphere(new THREE.Vector3(cx, cy, cz), radius);
+  } else {
+    geometry.computeBoundingBox();
+    geometry.computeBoundingSphere();
+  }
   return geometry;
 }
 
@@ -379,4 +425,14 @@ function normalColourAttribute(geometry: THREE.BufferGeometry): void {
     colours.set([colour.r, colour.g, colour.b], 3 * i);
   }
   geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+}
+
+/** Whether WebGL runs in software (SwiftShader, llvmpipe): read from a throwaway context. */
+function softwareGl(): boolean {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return false;
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const renderer = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : String(gl.getParameter(gl.RENDERER));
+  gl.getExtension('WEBGL_lose_context')?.loseContext();
+  return /swiftshader|llvmpipe|software/i.test(renderer);
 }

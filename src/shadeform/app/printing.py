@@ -260,14 +260,9 @@ def _maps_result(state, entry, body: ReconstructRequest) -> MapsResult:
 def _shrink(values: np.ndarray) -> np.ndarray:
     """A map at most :data:`PREVIEW_SIDE` on a side: the mean of each ``k`` x ``k`` block (the
     last blocks padded with their edge), so that fine detail shows as its average."""
-    k = max(1, math.ceil(max(values.shape[:2]) / PREVIEW_SIDE))
-    if k == 1:
-        return values
-    rows, cols = values.shape[:2]
-    pad = ((0, -rows % k), (0, -cols % k)) + ((0, 0),) * (values.ndim - 2)
-    padded = np.pad(values, pad, mode="edge")
-    blocks = padded.reshape(padded.shape[0] // k, k, padded.shape[1] // k, k, *values.shape[2:])
-    return blocks.mean(axis=(1, 3))
+    from shadeform.app.large import downsample
+
+    return downsample(values, max(1, math.ceil(max(values.shape[:2]) / PREVIEW_SIDE)))
 
 
 def _zip(made: dict[str, np.ndarray], stem: str, relief_px: float) -> bytes:

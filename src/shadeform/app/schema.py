@@ -39,6 +39,7 @@ __all__ = [
     "Options",
     "MeshData",
     "ReconstructResult",
+    "SolveJob",
     "StereoLights",
     "StereoParams",
     "StereoRequest",
@@ -203,6 +204,14 @@ class Limits(_Model):
 
     max_upload_bytes: int
     max_pixels: int
+    large_pixels: int = Field(
+        description="Images with more pixels get their quick look on a downsampled copy and their full "
+        "solve in the background (``/api/solves``: progress, cancel).",
+    )
+    fit_factor: int = Field(
+        description="A photo over ``max_pixels`` but at most this many times it may be opened downsampled "
+        "to fit (``POST /api/images?fit=true``).",
+    )
 
 
 class ImageInfo(_Model):
@@ -271,7 +280,8 @@ class ReconstructResult(_Model):
     )
     mesh: MeshData
     mask_png: str = Field(
-        description="The object mask as a base64 8-bit grey PNG (255 = object), the image's size.",
+        description="The object mask as a base64 8-bit grey PNG (255 = object), the image's size; empty "
+        "in a quick look of a large photo (``info.level``): the full result brings it.",
     )
     light: tuple[float, float, float] = Field(
         description="Unit vector toward the light that was used (given or estimated).",
@@ -287,6 +297,23 @@ class ReconstructResult(_Model):
     )
     info: dict[str, Any] = Field(
         description="What ran (the library's ``Reconstruction.info`` plus ``cached``: whether the solve was reused).",
+    )
+
+
+class SolveJob(_Model):
+    """A full-resolution solve running in the background (``/api/solves``)."""
+
+    job_id: str
+    request_id: int = Field(description="The request's ``request_id``, echoed.")
+    state: Literal["running", "done", "cancelled", "failed"]
+    stage: str = Field(
+        description="The stage done last (``timings``' names), ``queued``, ``mesh`` or ``done``."
+    )
+    stage_text: str = Field(description="What the solve is doing, in the user's words.")
+    fraction: float = Field(description="Rough share of the work done, 0 to 1.")
+    elapsed: float = Field(description="Seconds since it started (to its end, once ended).")
+    detail: str | None = Field(
+        description="Why it ended without a result: the error, or what cancelled it; else null."
     )
 
 
@@ -731,6 +758,7 @@ _EXPORTED = (
     Options,
     MeshData,
     ReconstructResult,
+    SolveJob,
     StereoParams,
     StereoRequest,
     PhotoSetInfo,

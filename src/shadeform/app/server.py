@@ -10,6 +10,10 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``GET  /api/images/{id}/photo.png``         the photo, 8-bit PNG
 ``GET  /api/images/{id}/channel.png``       one channel, filtered (``?channel=&filter=``)
 ``POST /api/reconstruct``                   ``ReconstructRequest`` -> ``ReconstructResult``
+``POST /api/solves``                        ``ReconstructRequest`` -> ``SolveJob``: the full solve
+                                            in the background (large photos: progress, cancel)
+``GET  /api/solves/{id}[/result]``          its progress; its ``ReconstructResult`` once done
+``DELETE /api/solves/{id}``                 cancel it
 ``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
 ``POST /api/images/{id}/mask/...``          masks: :mod:`shadeform.app.masks`
 ``/api/photosets``, ``/api/stereo``         photo sets: :mod:`shadeform.app.stereo`
@@ -17,6 +21,11 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``/api/projects``                           the users' projects: :mod:`shadeform.app.projects`
 ``/api/relief``, ``/api/maps``              prints and texture maps: :mod:`shadeform.app.printing`
 ==========================================  ===================================================
+
+Large photos (more than :data:`shadeform.app.large.LARGE_PIXELS`) get their quick look on a
+downsampled copy and their full solve in a worker process (:mod:`shadeform.app.large`,
+:mod:`shadeform.app.jobs`); a photo over ``max_pixels`` is refused with an offer
+(``X-Shadeform-Fit`` headers) and taken downsampled to fit with ``POST /api/images?fit=true``.
 
 Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a library
 :class:`~shadeform.InputError` is 422 (413 for an image with too many pixels), an unknown image
@@ -68,6 +77,8 @@ from shadeform.app.encoding import (
 )
 from shadeform.app.fusion import add_fusion_routes
 from shadeform.app.guard import ERROR_RESPONSES, AppLimits, Guard, add_error_handlers, file_too_large
+from shadeform.app.jobs import STAGE_WORDS, SolveJobs
+from shadeform.app.large import FIT_FACTOR, LARGE_PIXELS, TILED_COMMAND, downsample, fit_factor, level_factor
 from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.printing import add_print_routes
 from shadeform.app.projects import add_project_routes
@@ -83,6 +94,7 @@ from shadeform.app.schema import (
     ReconstructParams,
     ReconstructRequest,
     ReconstructResult,
+    SolveJob,
 )
 from shadeform.app.sessions import SessionStore
 from shadeform.app.stereo import add_stereo_routes
@@ -158,7 +170,7 @@ def create_app(
         docs_url=None,
         redoc_url=None,
         openapi_url="/api/openapi.json",
-        lifespan=_lifespan(warm),
+        lifespan=_lifespan(warm, state),
         responses=ERROR_RESPONSES,
     )
     add_error_handlers(app)
@@ -171,23 +183,25 @@ def create_app(
         return json_response(options)
 
     @app.post("/api/images", response_model=ImageInfo, status_code=201)
-    def post_image(file: UploadFile = File(..., description="The image file.")) -> Response:
-        from shadeform.io.images import ImageTooLargeError, read_photo
-
+    def post_image(
+        file: UploadFile = File(..., description="The image file."),
+        fit: bool = Query(
+            False,
+            description="Downsample a photo over the pixel limit to fit it (up to FIT_FACTOR times the "
+            "limit): the offer a refusal's X-Shadeform-Fit headers describe.",
+        ),
+    ) -> Response:
         data = file.file.read(limits.max_upload_bytes + 1)
         if len(data) > limits.max_upload_bytes:
             raise HTTPException(413, file_too_large(limits))
         if not data:
             raise HTTPException(400, "the uploaded file is empty (0 bytes); choose an image file")
-        try:
-            # 8-bit uploads are sRGB and are made linear; 16-bit and float ones are linear
-            photo = read_photo(data, max_pixels=limits.max_pixels)
-        except ImageTooLargeError as err:
-            raise HTTPException(413, str(err)) from None
-        except InputError as err:
-            raise HTTPException(415, str(err)) from None
-        entry = state.add(display_name(file.filename), photo.pixels, photo=_read_as(photo))
-        state.remember(entry.image_id, "upload", {"name": entry.name}, [data])
+        name = display_name(file.filename)
+        pixels, photo, factor = _read_upload(data, limits, name, fit=fit)
+        entry = state.add(name, pixels, photo=photo)
+        state.remember(entry.image_id, "upload", {"name": entry.name, "fit": factor}, [data])
+        if level_factor(pixels.shape) > 1:
+            state.jobs.warm()  # its full solve will run there: load the kernels meanwhile
         return json_response(_image_info(entry), status_code=201)
 
     @app.post("/api/examples/{name}", response_model=ImageInfo, status_code=201)
@@ -228,6 +242,30 @@ def create_app(
     @app.post("/api/reconstruct", response_model=ReconstructResult)
     async def post_reconstruct(body: ReconstructRequest, request: Request) -> Response:
         return await state.solve_json(request, _reconstruct_result, state, state.image(body.image_id), body)
+
+    @app.post("/api/solves", response_model=SolveJob, status_code=202)
+    def post_solve(body: ReconstructRequest) -> Response:
+        return json_response(_job_info(_start_job(state, state.image(body.image_id), body)), status_code=202)
+
+    @app.get("/api/solves/{job_id}", response_model=SolveJob)
+    def get_solve(job_id: str) -> Response:
+        return json_response(_job_info(_job(state, job_id)))
+
+    @app.get("/api/solves/{job_id}/result", response_model=ReconstructResult)
+    def get_solve_result(job_id: str) -> Response:
+        job = _job(state, job_id)
+        if job.state == "done":
+            return Response(job.result, media_type="application/json")
+        if job.state == "failed":
+            raise HTTPException(422, job.detail)
+        if job.state == "cancelled":
+            raise HTTPException(409, f"the solve was {job.detail}; start a new one")
+        raise HTTPException(409, "the solve is still running; ask for its progress until it is done")
+
+    @app.delete("/api/solves/{job_id}", response_model=SolveJob)
+    def delete_solve(job_id: str) -> Response:
+        _job(state, job_id)
+        return json_response(_job_info(state.jobs.cancel(job_id)))
 
     @app.post("/api/export", response_class=Response, responses=FILE_RESPONSES)
     async def post_export(
@@ -297,6 +335,8 @@ class _State:
         self.pngs = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
         self.masks = LRU(max_items=2 * limits.max_images, max_bytes=limits.max_image_bytes // 4)
         self._examples: dict[tuple[str, int | None], str] = {}
+        # full solves of large photos, in a worker process (started with the first large photo)
+        self.jobs = SolveJobs()
         # one solve at a time: two would only share the cores and both arrive late
         self.solve_lock = asyncio.Lock()
 
@@ -348,10 +388,8 @@ class _State:
         return entry
 
     def _rebuild_upload(self, key: str, recipe: dict, blobs: list[bytes]) -> StoredImage:
-        from shadeform.io.images import read_photo
-
-        photo = read_photo(blobs[0], max_pixels=self.limits.max_pixels)
-        return StoredImage(key, recipe["name"], photo.pixels, photo=_read_as(photo))
+        pixels, photo, _ = _read_upload(blobs[0], self.limits, recipe["name"], fit=recipe.get("fit", 1) > 1)
+        return StoredImage(key, recipe["name"], pixels, photo=photo)
 
     def _rebuild_example(self, key: str, recipe: dict, blobs: list[bytes]) -> StoredImage:
         from dataclasses import replace
@@ -428,14 +466,89 @@ def _store_initial(state: _State, source: str | Path) -> StoredImage:
         raise InputError(err.detail) from None
 
 
-def _lifespan(warm: bool):
+def _read_upload(data: bytes, limits: AppLimits, name: str, *, fit: bool) -> tuple[np.ndarray, dict, int]:
+    """An upload's pixels, how it was read, and the block side it was downsampled by (1: not).
+
+    A photo over ``max_pixels`` is refused (413) with the offer in the app's words and in
+    headers (``X-Shadeform-Fit``: the block side, or ``none`` beyond :data:`FIT_FACTOR` times the
+    limit; ``X-Shadeform-Size``: its ``WxH``); with ``fit`` it is decoded and downsampled to fit.
+    """
+    from shadeform.io.images import ImageTooLargeError, read_photo
+
+    try:
+        # 8-bit uploads are sRGB and are made linear; 16-bit and float ones are linear
+        photo = read_photo(data, max_pixels=limits.max_pixels * (FIT_FACTOR if fit else 1))
+    except ImageTooLargeError as err:
+        size = _declared_size(data, err)
+        if size is None:
+            raise HTTPException(413, str(err)) from None
+        width, height = size
+        factor = fit_factor(width, height, limits.max_pixels)
+
+        def mpx(pixels: int) -> str:
+            return f" ({pixels / 1e6:.1f} Mpx)" if pixels >= 1e6 else ""
+
+        tiled = TILED_COMMAND.replace("PHOTO", name if name.isprintable() and " " not in name else "PHOTO")
+        what = (
+            f"{name} is too large for the app: {width}x{height} = {width * height:,} pixels"
+            f"{mpx(width * height)}, more than its limit of {limits.max_pixels:,}{mpx(limits.max_pixels)}"
+        )
+        if factor is None:
+            detail = (
+                f"{what}, and more than {FIT_FACTOR} times it: reconstruct it with `{tiled}` on the command "
+                "line (it works in tiles)"
+            )
+        else:
+            detail = (
+                f"{what}; open it downsampled to {-(-width // factor)}x{-(-height // factor)}, or reconstruct "
+                f"it at full resolution with `{tiled}` on the command line"
+            )
+        headers = {
+            "X-Shadeform-Fit": "none" if factor is None else str(factor),
+            "X-Shadeform-Size": f"{width}x{height}",
+        }
+        raise HTTPException(413, detail, headers=headers) from None
+    except InputError as err:
+        raise HTTPException(415, str(err)) from None
+    pixels = photo.pixels
+    height, width = pixels.shape[:2]
+    factor = fit_factor(width, height, limits.max_pixels) if fit else 1
+    if factor is None:  # pragma: no cover - read_photo refused it above
+        raise HTTPException(413, f"{name} is too large to downsample here")
+    if factor > 1:
+        pixels = downsample(pixels, factor)
+    return pixels, {**_read_as(photo), **({"downsampled": factor} if factor > 1 else {})}, factor
+
+
+def _declared_size(data: bytes, err: Exception) -> tuple[int, int] | None:
+    """The width and height a file's header declares (the loader's refusal names them; else
+    Pillow reads the header), or None."""
+    import io
+    import re
+
+    from PIL import Image
+
+    declared = re.search(rb"declares (\d+)x(\d+) = ", str(err).encode())
+    if declared:
+        return int(declared[1]), int(declared[2])
+    try:
+        with Image.open(io.BytesIO(data)) as image:
+            return image.size
+    except Exception:  # not a format Pillow reads, or damaged: the loader's message stays
+        return None
+
+
+def _lifespan(warm: bool, state: _State):
     from contextlib import asynccontextmanager
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         if warm:
             threading.Thread(target=warm_up, name="shadeform-warm-up", daemon=True).start()
-        yield
+        try:
+            yield
+        finally:
+            state.jobs.close()
 
     return lifespan
 
@@ -447,9 +560,14 @@ def warm_up() -> None:
     from shadeform.solvers import available_methods
 
     scene = synth.scene("sphere", size=24)
-    for method in available_methods():
-        for integrator in (None, *available_integrators()):
-            to_mesh(reconstruct(scene.image, mask=scene.mask, method=method, integrator=integrator), step=2)
+    # float32: what uploads are (the kernels are specialised per dtype); float64: the examples
+    for image in (scene.image.astype(np.float32), scene.image):
+        for method in available_methods():
+            for integrator in (None, *available_integrators()):
+                to_mesh(reconstruct(image, mask=scene.mask, method=method, integrator=integrator), step=2)
+    # a shape with areas the photo cannot settle: the confidence's outlines (their first use took 1 s)
+    vase = synth.scene("vase", size=64)
+    reconstruct(vase.image.astype(np.float32), mask=vase.mask)
 
 
 # --- the work ----------------------------------------------------------------------------------
@@ -462,6 +580,8 @@ class _Solved:
     reconstruction: Any
     mask_png: str
     depth_range: tuple[float, float]
+    #: the block side of the pyramid level it was solved on (1: the photo itself)
+    level: int = 1
 
 
 def _solve(
@@ -474,34 +594,20 @@ def _solve(
     (:func:`shadeform.pipeline.preview_step`, :func:`shadeform.pipeline.reconstruct_preview`);
     the returned reconstruction's ``info`` has ``preview_step`` when it is the quick one.
     """
-    from shadeform.light import light_from_slant_tilt
     from shadeform.pipeline import preview_step, reconstruct, reconstruct_preview
-    from shadeform.preprocess import Filter
 
-    full_key = (entry.image_id, params.model_dump_json(exclude={"step"}))
+    full_key = _full_key(entry, params)
     solved = state.results.get(full_key)
     if solved is not None:
         return solved, True
-    if params.light.mode == "estimate":
-        light: Any = "estimate"
-    elif params.light.mode == "slant_tilt":
-        light = light_from_slant_tilt(params.light.slant, params.light.tilt)
-    else:
-        light = (0.0, 0.0, 1.0)
-    regions = params.concave.model_dump()
+    if preview and level_factor(entry.pixels.shape) > 1:
+        return _solve_level(state, entry, params, full_key)
+    settings = _settings(params)
     image, mask, mask_png = _channel(state, entry, params.channel)
     if params.mask is not None:  # the user's mask
         mask, mask_png = user_mask(state, params.mask, image.shape)
-    settings = dict(
-        light=light,
-        method=params.method,
-        mask=mask,
-        filter=Filter(params.filter.kind, params.filter.size) if params.filter.kind != "none" else None,
-        references=[tuple(ref) for ref in params.references],
-        concave=regions if regions["regions"] else None,
-        integrator=params.integrator,
-        refine=params.refine,
-    )
+    settings["mask"] = mask
+    light = settings["light"]
     spacing = preview_step(mask, params.step, method=params.method, light=light) if preview else 1
     key = (*full_key, "preview", spacing) if spacing > 1 else full_key
     if spacing > 1 and (solved := state.results.get(key)) is not None:
@@ -516,6 +622,101 @@ def _solve(
     nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
     state.results.put(key, solved, nbytes)
     return solved, False
+
+
+def _full_key(entry: StoredImage, params: ReconstructParams) -> tuple:
+    """The cache key of a full-resolution reconstruction (``step`` only re-meshes it)."""
+    return (entry.image_id, params.model_dump_json(exclude={"step"}))
+
+
+def _settings(params: ReconstructParams, factor: int = 1) -> dict[str, Any]:
+    """:func:`shadeform.pipeline.reconstruct`'s options for ``params`` (all but the mask); with
+    ``factor`` > 1 for the pyramid level of that block side: filter sizes, references and regions
+    in its pixels (a reference is checked against the level's mask by :func:`_level_references`)."""
+    from shadeform.light import light_from_slant_tilt
+    from shadeform.preprocess import Filter
+
+    if params.light.mode == "estimate":
+        light: Any = "estimate"
+    elif params.light.mode == "slant_tilt":
+        light = light_from_slant_tilt(params.light.slant, params.light.tilt)
+    else:
+        light = (0.0, 0.0, 1.0)
+    spec = None
+    if params.filter.kind != "none":
+        size = params.filter.size
+        # a window radius that is not whole stays as it is: the library says what is wrong with it
+        if factor > 1 and (params.filter.kind == "gaussian" or size == round(size)):
+            size = size / factor if params.filter.kind == "gaussian" else float(round(size / factor))
+        spec = Filter(params.filter.kind, size) if size > 0 else None
+    regions = params.concave.model_dump()
+    for region in regions["regions"]:
+        region["polygon"] = [[x / factor, y / factor] for x, y in region["polygon"]]
+    return dict(
+        light=light,
+        method=params.method,
+        filter=spec,
+        references=[tuple(ref) for ref in params.references],
+        concave=regions if regions["regions"] else None,
+        integrator=params.integrator,
+        refine=params.refine,
+    )
+
+
+def _solve_level(
+    state: _State, entry: StoredImage, params: ReconstructParams, full_key: tuple
+) -> tuple[_Solved, bool]:
+    """The quick look of a large photo: solved on its pyramid level (:func:`shadeform.app.large.
+    level`) at the solver's preview grid there, whatever the photo's size."""
+    from shadeform.app.large import level
+    from shadeform.io.images import select_channel
+    from shadeform.pipeline import preview_step, reconstruct_preview
+
+    factor = level_factor(entry.pixels.shape)
+    settings = _settings(params, factor)
+    known = state.masks.get(("level", entry.image_id, params.channel, factor))
+    if known is None:
+        from shadeform.preprocess import object_mask
+
+        image, mask = level(select_channel(entry.pixels, params.channel), entry.mask, factor)
+        known = (image, object_mask(image) if mask is None else mask)
+        state.masks.put(("level", entry.image_id, params.channel, factor), known, known[0].nbytes)
+    image, mask = known
+    if params.mask is not None:  # the user's mask, at the level
+        full, _ = user_mask(state, params.mask, entry.pixels.shape[:2])
+        mask = downsample(full.astype(np.float32), factor) >= 0.5
+        if not mask.any():  # thinner than a block: the blocks it touches
+            mask = downsample(full.astype(np.float32), factor) > 0
+    settings["references"] = _level_references(settings["references"], mask, factor)
+    spacing = preview_step(mask, 1, method=params.method, light=settings["light"])
+    key = (*full_key, "level", factor, spacing)
+    if (solved := state.results.get(key)) is not None:
+        return solved, True
+    rec = reconstruct_preview(image, step=spacing, mask=mask, **settings)
+    depth = rec.depth[rec.mask & np.isfinite(rec.depth)] * factor
+    solved = _Solved(rec, "", (float(np.min(depth)), float(np.max(depth))), level=factor)
+    state.results.put(key, solved, rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes)
+    return solved, False
+
+
+def _level_references(references: list, mask: np.ndarray, factor: int) -> list:
+    """The user's references ``(row, col[, normal])`` in the level's pixels, on its object (the
+    nearest object pixel where a block fell off it)."""
+    moved = []
+    for ref in references:
+        row, col = (
+            min(int(ref[0]) // factor, mask.shape[0] - 1),
+            min(int(ref[1]) // factor, mask.shape[1] - 1),
+        )
+        if row < 0 or col < 0:
+            moved.append(ref)  # off the image: reconstruct says so
+            continue
+        if not mask[row, col]:
+            rows, cols = np.nonzero(mask)
+            nearest = np.argmin((rows - row) ** 2 + (cols - col) ** 2)
+            row, col = int(rows[nearest]), int(cols[nearest])
+        moved.append((row, col, *ref[2:]))
+    return moved
 
 
 def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarray, np.ndarray, str]:
@@ -535,30 +736,116 @@ def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarra
 
 
 def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequest) -> ReconstructResult:
-    from shadeform import to_mesh
-
     start = time.perf_counter()
     solved, cached = _solve(state, entry, body.params, preview=body.preview)
+    return _result(entry, body, solved, cached, start)
+
+
+def _result(entry: StoredImage, body: ReconstructRequest, solved: _Solved, cached: bool, start: float):
+    """A reconstruction as the client's result: its mesh sized for the screen, in the photo's
+    pixels (a pyramid level's scaled back), with what ran."""
+    from shadeform import to_mesh
+    from shadeform.app.large import scale_mesh, scale_pixel, view_step
+
     rec = solved.reconstruction
+    factor = solved.level
     timings = {} if cached else dict(rec.info["timings"])
     lap = time.perf_counter()
-    # a quick look may be on a coarser grid than asked for (the solver's pixel budget)
-    mesh = to_mesh(rec, step=rec.info.get("preview_step", body.params.step))
+    # a quick look may be on a coarser grid than asked for (the solver's pixel budget); a full
+    # result's mesh has at most VIEW_VERTICES vertices (the exports keep the step asked for)
+    step = rec.info.get("preview_step") or view_step(int(np.count_nonzero(rec.mask)), body.params.step)
+    mesh = scale_mesh(to_mesh(rec, step=step), factor)
     timings["mesh"] = time.perf_counter() - lap
     lap = time.perf_counter()
     encoded = mesh_data(mesh)
     timings["encode"] = time.perf_counter() - lap
     timings["total"] = time.perf_counter() - start
+    info = plain(rec.info)
+    references = [scale_pixel(ref, factor) for ref in rec.info["references"]]
+    if factor > 1:
+        info["level"] = factor  # solved on the photo downsampled by this factor
+        info["references"] = references
+        info["unsure"] = [
+            {
+                **area,
+                "polygon": [[x * factor, y * factor] for x, y in area["polygon"]],
+                "centre": [area["centre"][0] * factor, area["centre"][1] * factor],
+            }
+            for area in info.get("unsure", [])
+        ]
+    if step * factor != body.params.step:
+        info["view_step"] = step * factor  # the mesh shown: pixels per vertex
     return ReconstructResult(
         request_id=body.request_id,
-        preview="preview_step" in rec.info,
+        preview="preview_step" in rec.info or factor > 1,
         mesh=encoded,
         mask_png=solved.mask_png,
         light=tuple(float(v) for v in rec.light),
-        references=[(int(r), int(c)) for r, c in rec.info["references"]],
+        references=references,
         depth_range=solved.depth_range,
         timings=timings,
-        info={**plain(rec.info), "cached": cached, **({"photo": entry.photo} if entry.photo else {})},
+        info={**info, "cached": cached, **({"photo": entry.photo} if entry.photo else {})},
+    )
+
+
+# --- background solves -------------------------------------------------------------------------
+
+
+def _start_job(state: _State, entry: StoredImage, body: ReconstructRequest):
+    """The full solve of ``body`` as a background job (:class:`shadeform.app.jobs.SolveJobs`);
+    already done when the result is cached."""
+    from shadeform.io.images import select_channel
+
+    start = time.perf_counter()
+    params = body.params
+    full_key = _full_key(entry, params)
+    settings = _settings(params)
+    image = select_channel(entry.pixels, params.channel)
+    # the automatic mask is found in the worker (1.6 s at 12 Mpx), unless it is known already
+    known = state.masks.get(("mask", entry.image_id, params.channel))
+    mask, mask_png = known if known is not None else (entry.mask, None)
+    if params.mask is not None:
+        mask, mask_png = user_mask(state, params.mask, image.shape)
+
+    def finish(job, rec) -> str:
+        nonlocal mask_png
+        if mask_png is None:
+            mask_png = png_base64(rec.mask.astype(np.float32))
+            state.masks.put(("mask", entry.image_id, params.channel), (rec.mask, mask_png), rec.mask.nbytes)
+        depth = rec.depth[rec.mask]
+        solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
+        state.results.put(full_key, solved, rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes)
+        return _result(entry, body, solved, False, start).model_dump_json()
+
+    cached = state.results.get(full_key)
+    if cached is not None:
+        job = state.jobs.finished(
+            body.request_id, _result(entry, body, cached, True, start).model_dump_json()
+        )
+        return job
+    return state.jobs.start(body.request_id, image, mask, settings, finish)
+
+
+def _job(state: _State, job_id: str):
+    job = state.jobs.get(job_id)
+    if job is None:
+        shown = job_id if len(job_id) <= 40 else job_id[:37] + "..."
+        raise HTTPException(
+            404, f"unknown solve {shown!r}: it ended long ago or the server restarted; solve again"
+        )
+    return job
+
+
+def _job_info(job) -> SolveJob:
+    return SolveJob(
+        job_id=job.job_id,
+        request_id=job.request_id,
+        state=job.state,
+        stage=job.stage,
+        stage_text=STAGE_WORDS.get(job.stage, job.stage.capitalize()),
+        fraction=round(job.fraction, 4),
+        elapsed=round(job.elapsed, 3),
+        detail=job.detail,
     )
 
 
@@ -633,7 +920,12 @@ def _options(limits: AppLimits, initial: StoredImage | None) -> Options:
         ],
         stereo_defaults=StereoParams(),
         view_set_examples=[ExampleInfo(name=name, title=title) for name, title in VIEW_SET_EXAMPLES.items()],
-        limits=Limits(max_upload_bytes=limits.max_upload_bytes, max_pixels=limits.max_pixels),
+        limits=Limits(
+            max_upload_bytes=limits.max_upload_bytes,
+            max_pixels=limits.max_pixels,
+            large_pixels=LARGE_PIXELS,
+            fit_factor=FIT_FACTOR,
+        ),
         defaults=ReconstructParams(),
         initial_image=None if initial is None else _image_info(initial),
     )

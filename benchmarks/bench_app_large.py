@@ -1,0 +1,220 @@
+"""The app with a phone-size photo: first view, full resolution, and the page's longest task.
+
+Starts ``shadeform app`` (the real command, ``--port 0``), drives Debian's Chromium (headless,
+``/usr/bin/chromium``) with Playwright, and uploads a 12 Mpx photo (4000x3000 8-bit PNG: the
+synthetic vase rendered at 1000 px and resized) through the Open image input, ``--runs`` times,
+each in a fresh page, after one warm-up upload (the kernels and the solver process loaded). Timed
+in the page from the file input's change event:
+
+- first view: the first model drawn (the quick look, solved on the photo downsampled);
+- full resolution: the full solve (in the background, with progress) drawn in its place;
+- longest task: ``PerformanceObserver({type: 'longtask'})`` over the whole run, from the file
+  chosen to the full model drawn (the page's own start-up is reported apart).
+
+One more upload is cancelled two seconds into its full solve: how long the server took to end it,
+and whether the page then takes a new setting (a new quick look) at once. Prints a Markdown table
+and writes it to ``benchmarks/results/app-large.md``; screenshots go to ``--shots``.
+
+Run with ``make web`` first, then ``.venv/bin/python benchmarks/bench_app_large.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_app import CHROMIUM, start_server
+from shadeform import synth
+
+FIRST_VIEW_BAR_MS = 1000
+
+#: What the traces said about the long tasks left (printed with the table).
+LONG_TASKS_NOTE = (
+    "Where the long tasks come from (Chromium traces of the same flow): the page's own work is off it"
+    "s thread (the result's JSON parsed, its mesh decoded and bounded in a Web Worker; the mask read "
+    "and tinted in another; the photo decoded and scaled by createImageBitmap; the shaders compiled a"
+    "nd drawn once at start-up). What is left is the commit of each new model's first frame, where th"
+    "e page waits for the GPU process: here WebGL runs in software (SwiftShader) on the same overload"
+    "ed cores, 90-120 ms for a frame at a load average of 7-9 and 200-600 ms at 16 (also with a 512 p"
+    "x photo: it does not grow with the photo); a GPU draws such a frame in a few milliseconds. The 5"
+    "0 ms bar is not met on this machine; the next step would be rendering in a worker (OffscreenCanv"
+    "as), so that the page never waits for a frame.\n"
+)
+LONG_TASK_BAR_MS = 50
+
+# the page's long tasks from its first script on, and when the file input changed
+OBSERVE = """
+window.__longTasks = [];
+new PerformanceObserver((list) => {
+  for (const entry of list.getEntries()) window.__longTasks.push({ start: entry.startTime, ms: entry.duration });
+}).observe({ type: 'longtask', buffered: true });
+document.addEventListener('change', (event) => {
+  if (event.target && event.target.id === 'file-image') window.__fileChosen = performance.now();
+}, true);
+"""
+
+
+def phone_photo(path: Path, width: int = 4000, height: int = 3000) -> None:
+    """The synthetic vase at 1000 px, resized to ``width`` x ``height`` (centre crop), 8-bit sRGB."""
+    scene = synth.scene("vase", size=1000)
+    image = Image.fromarray(np.rint(np.clip(scene.image, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8))
+    side = max(width, height)
+    big = image.resize((side, side), Image.Resampling.BILINEAR)
+    left, top = (side - width) // 2, (side - height) // 2
+    big.crop((left, top, left + width, top + height)).save(path, compress_level=1)
+
+
+def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = None, shots: Path | None = None):
+    context = browser.new_context(viewport={"width": 1440, "height": 860})
+    context.add_init_script(OBSERVE)
+    page = context.new_page()
+    page.goto(url)
+    page.evaluate("window.shadeform.ready")
+    # the image the server was started with is solved first; then the page is idle
+    page.wait_for_function(
+        "window.shadeform.applied() >= 1 && !window.shadeform.state().busy", timeout=120_000
+    )
+    page.wait_for_timeout(1000)
+    before = page.evaluate("window.shadeform.applied()")
+    page.set_input_files("#file-image", str(photo))
+    page.wait_for_function(f"window.shadeform.applied() > {before}", timeout=120_000)
+    quick = page.evaluate("window.shadeform.timeline()")
+    chosen = page.evaluate("window.__fileChosen")
+    row = {"first": quick["firstRendered"] - chosen, "quick_server": quick["serverTimings"]}
+    if cancel_after is not None:
+        page.wait_for_function("window.shadeform.solveProgress().shown", timeout=60_000)
+        page.wait_for_timeout(1000 * cancel_after)
+        if shots:
+            page.screenshot(path=str(shots / "app-large-progress.png"))
+        job = page.evaluate("window.shadeform.solveProgress().job")
+        started = time.perf_counter()
+        page.click("#solve-cancel")
+        while (
+            page.evaluate(f"fetch('/api/solves/{job}').then((r) => r.json()).then((j) => j.state)")
+            == "running"
+        ):
+            time.sleep(0.01)
+        row["cancel"] = 1000 * (time.perf_counter() - started)
+        page.wait_for_function("window.shadeform.modelState().status === 'stale'", timeout=10_000)
+        if shots:
+            page.screenshot(path=str(shots / "app-large-cancelled.png"))
+        # a new setting: its quick look
+        applied = page.evaluate("window.shadeform.applied()")
+        page.evaluate("window.__changed = performance.now()")
+        page.evaluate(
+            "() => { const s = document.getElementById('refine'); s.value = '2'; s.dispatchEvent(new Event('change')); }"
+        )
+        page.wait_for_function(f"window.shadeform.applied() > {applied}", timeout=60_000)
+        row["after_cancel"] = page.evaluate("window.shadeform.timeline().firstRendered - window.__changed")
+        page.click("#solve-cancel")
+    else:
+        page.wait_for_function(
+            "window.shadeform.state().image.width === 4000 && !window.shadeform.lastResult().preview",
+            timeout=600_000,
+        )
+        full = page.evaluate("window.shadeform.timeline()")
+        row["full"] = full["rendered"] - chosen
+        row["full_server"] = full["serverTimings"]
+        row["vertices"] = page.evaluate("window.shadeform.lastResult().vertex_count")
+        page.wait_for_timeout(1000)  # the mask arrives after the model: its tasks count too
+    tasks = page.evaluate("window.__longTasks")
+    row["longest"] = max((t["ms"] for t in tasks if t["start"] + t["ms"] > chosen), default=0.0)
+    row["startup"] = max((t["ms"] for t in tasks if t["start"] + t["ms"] <= chosen), default=0.0)
+    context.close()
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "app-large.md")
+    parser.add_argument("--shots", type=Path, default=Path(tempfile.gettempdir()))
+    args = parser.parse_args(argv)
+    if not Path(CHROMIUM).is_file():
+        raise SystemExit(f"{CHROMIUM} is not installed (Debian package chromium); it runs the benchmark")
+    from playwright.sync_api import sync_playwright
+
+    folder = Path(tempfile.mkdtemp())
+    photo = folder / "vase-4000x3000.png"
+    phone_photo(photo)
+    small = folder / "vase-256.png"
+    Image.fromarray(np.rint(synth.scene("vase", size=256).image * 255).astype(np.uint8)).save(small)
+    load_before = os.getloadavg()[0]
+    server, url = start_server(small)
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(
+                executable_path=CHROMIUM, headless=True, args=["--no-sandbox"]
+            )
+            warm = run_once(browser, url, photo)  # the kernels and the solver process loaded
+            print("warm-up:", {k: v for k, v in warm.items() if "server" not in k}, file=sys.stderr)
+            rows = []
+            for _ in range(args.runs):
+                rows.append(run_once(browser, url, photo))
+                print({k: v for k, v in rows[-1].items() if "server" not in k}, file=sys.stderr)
+            cancelled = run_once(browser, url, photo, cancel_after=2.0, shots=args.shots)
+            print(cancelled, file=sys.stderr)
+            version = browser.version
+            browser.close()
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            server.kill()
+    load_after = os.getloadavg()[0]
+
+    def stat(key):
+        values = [row[key] for row in rows]
+        return statistics.median(values), max(values)
+
+    first, full, longest = stat("first"), stat("full"), stat("longest")
+    quick_stages = rows[0]["quick_server"]
+    full_stages = rows[0]["full_server"]
+    table = (
+        f"`shadeform app` with a 12 Mpx photo (4000x3000 8-bit PNG, {photo.stat().st_size / 1e6:.1f} MB: the "
+        f"synthetic vase rendered at 1000 px and resized) uploaded through Open image; automatic mask, "
+        f"step 2. Median and worst of {args.runs} uploads, each in a fresh page after one warm-up upload, "
+        f"timed in the page from the file input's change event. Headless Chromium {version} (WebGL in "
+        f"software: SwiftShader), server, solver process and browser on the same {os.cpu_count()} cores "
+        f"(1-minute load average {load_before:.1f} before, {load_after:.1f} after: other work on the machine "
+        f"counts in); Python {platform.python_version()}. At the issue's filing: 24 s per solve, the page "
+        f"frozen for 1.9 s.\n\n"
+        "| photo | first view ms (median / worst) | full resolution ms (median / worst) | longest task ms "
+        "(median / worst) | full mesh vertices | page start-up's longest task ms |\n"
+        "|---|---:|---:|---:|---:|---:|\n"
+        f"| 4000x3000 | **{first[0]:.0f}** / {first[1]:.0f} | {full[0]:.0f} / {full[1]:.0f} | "
+        f"**{longest[0]:.0f}** / {longest[1]:.0f} | {rows[0]['vertices']:,} | "
+        f"{max(row['startup'] for row in rows):.0f} |\n\n"
+        f"Bars: first view <= {FIRST_VIEW_BAR_MS} ms, no long task > {LONG_TASK_BAR_MS} ms.\n\n"
+        f"Cancel two seconds into the full solve: the server ended it {cancelled['cancel']:.0f} ms after the "
+        f"click (the solver process is terminated); a new setting then drew its quick look "
+        f"{cancelled['after_cancel']:.0f} ms after the change; longest task of that run "
+        f"{cancelled['longest']:.0f} ms.\n\n"
+        f"{LONG_TASKS_NOTE}\n"
+        "Server seconds of the first run, quick look (on the photo downsampled) and full resolution (in the "
+        "solver process; mesh and encode in the server):\n\n"
+        "| result | " + " | ".join(full_stages) + " |\n|---|" + "---:|" * len(full_stages) + "\n"
+        "| quick look | " + " | ".join(f"{quick_stages.get(k, 0):.2f}" for k in full_stages) + " |\n"
+        "| full | " + " | ".join(f"{full_stages[k]:.2f}" for k in full_stages) + " |\n"
+    )
+    print(table)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,231 @@
+"""End-to-end tests of the app with phone-size photos, in a real browser (headless Chromium).
+
+A 12 Mpx upload (4000x3000, a synthetic vase rendered at 1000 px and resized) must show its first
+model quickly (a quick look solved on a downsampled copy), run its full solve in the background
+with a progress bar and a Cancel button that stops it and leaves the quick look, and never block
+the page: every task the page runs is watched with ``PerformanceObserver({type: 'longtask'})``
+from before the page loads. The full-resolution mesh's decoding is checked on a 2.1 Mpx photo
+(large enough for the background path and for a full-size view mesh, quick enough to solve
+whole here); the 12 Mpx full solve is timed in ``benchmarks/bench_app_large.py``. A photo over
+the server's pixel limit is offered a downsample, which opens it.
+
+Timing bars are the benchmark's. This machine is shared, and its browser draws WebGL in software
+(SwiftShader): the page waits for each new model's first frame at its commit, 50-110 ms at a load
+average of 7-9 and up to 500 ms at 17, whatever the photo's size. So here the long tasks (from the
+moment the photo is chosen) and the first view are checked against bounds a loaded CI machine
+keeps, guards against the 1.9 s freeze and the 24 s first view of the issue; that the results are
+parsed and decoded in the mesh worker (what froze the page) is checked directly.
+Screenshots: ``tests/artifacts/app-large-progress.png``, ``app-large-cancelled.png``,
+``app-large-fit-offer.png``.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import test_app_browser
+from shadeform import synth
+from test_app_browser import ARTIFACTS
+
+browser = test_app_browser.browser
+
+#: Longest task the page may run once a photo is chosen, ms. The issue's bar, 50 ms, is the
+#: benchmark's (``benchmarks/bench_app_large.py``); on a loaded 2-core CI machine the browser's
+#: software WebGL shares the cores with the solver process (see the module's docstring).
+LONG_TASK_MS = 1000
+#: What a loaded test machine is allowed for the first view of the 12 Mpx photo (the bar, 1 s,
+#: is the benchmark's).
+FIRST_VIEW_MS = 4000
+
+# the long tasks of the page from its first script on, and when the file input changed
+OBSERVE = """
+window.__longTasks = [];
+new PerformanceObserver((list) => {
+  for (const entry of list.getEntries()) window.__longTasks.push({ start: entry.startTime, ms: entry.duration });
+}).observe({ type: 'longtask', buffered: true });
+document.addEventListener('change', (event) => {
+  if (event.target && event.target.id === 'file-image') window.__fileChosen = performance.now();
+}, true);
+"""
+
+
+def vase_photo(path, width: int, height: int) -> None:
+    """A synthetic vase (rendered at 1000 px, resized: a phone photo's size in seconds) as an
+    8-bit sRGB PNG of ``width`` x ``height``."""
+    scene = synth.scene("vase", size=1000)
+    image = Image.fromarray(np.rint(np.clip(scene.image, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8))
+    side = max(width, height)
+    big = image.resize((side, side), Image.Resampling.BILINEAR)
+    left, top = (side - width) // 2, (side - height) // 2
+    big.crop((left, top, left + width, top + height)).save(path, compress_level=1)
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("large")
+    paths = {"12mpx": folder / "vase-12mpx.png", "2.1mpx": folder / "vase-2.1mpx.png"}
+    vase_photo(paths["12mpx"], 4000, 3000)
+    vase_photo(paths["2.1mpx"], 1500, 1420)  # just over LARGE_PIXELS: quick to solve whole
+    vase_photo(folder / "vase-14mpx.png", 4300, 3300)  # over the test server's limit
+    paths["over"] = folder / "vase-14mpx.png"
+    return paths
+
+
+@pytest.fixture(scope="module")
+def server():
+    """The real server (uvicorn) with a pixel limit of 13 Mpx: the 12 Mpx photo fits, a 14 Mpx
+    one is refused with the offer."""
+    import uvicorn
+
+    from shadeform.app.guard import AppLimits
+    from shadeform.app.server import STATIC_DIR, create_app, warm_up
+
+    if not (STATIC_DIR / "index.html").is_file():
+        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    warm_up()  # the kernels loaded before the clock runs (``shadeform app`` warms them at start)
+    app = create_app(limits=AppLimits(max_pixels=13_000_000, max_image_bytes=2 * 2**30))
+    uvicorn_server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=uvicorn_server.run, name="app-under-test", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not uvicorn_server.started:
+        assert thread.is_alive() and time.monotonic() < deadline, "the app server did not start"
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}/"
+    uvicorn_server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture
+def page(browser, server):
+    context = browser.new_context(viewport={"width": 1440, "height": 860})
+    context.add_init_script(OBSERVE)
+    page = context.new_page()
+    errors = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(server)
+    page.evaluate("window.shadeform.ready")
+    yield page
+    context.close()
+    assert not errors, f"uncaught errors in the page: {errors}"
+
+
+def longest_task(page) -> float:
+    """The longest task since the first photo was chosen (the page's start-up is not the photo's)."""
+    tasks = page.evaluate("window.__longTasks.filter((t) => t.start + t.ms > window.__fileChosen)")
+    return max((task["ms"] for task in tasks), default=0.0)
+
+
+def progress(page) -> dict:
+    return page.evaluate("window.shadeform.solveProgress()")
+
+
+def open_photo(page, path) -> None:
+    page.set_input_files("#file-image", str(path))
+
+
+def wait_quick_look(page, after: int = 0) -> dict:
+    page.wait_for_function(f"window.shadeform.applied() > {after}", timeout=60_000)
+    return page.evaluate("window.shadeform.lastResult()")
+
+
+def test_12mpx_photo_quick_look_progress_cancel(page, photos):
+    open_photo(page, photos["12mpx"])
+    quick = wait_quick_look(page)
+    timeline = page.evaluate("window.shadeform.timeline()")
+    first_view = timeline["firstRendered"] - page.evaluate("window.__fileChosen")
+    # the quick look: solved on the photo downsampled, its mesh in the photo's pixels
+    assert quick["preview"] and quick["info"]["level"] >= 2
+    assert quick["vertex_count"] > 1000 and quick["decodedInWorker"]
+    mesh = page.evaluate("window.shadeform.mesh().positions")
+    xs, ys = mesh[0::3], mesh[1::3]
+    assert min(xs) >= 0 and max(xs) < 4000 and min(ys) > -3000 and max(ys) <= 0
+    assert max(xs) - min(xs) > 1500  # the vase spans the photo, not the level
+    assert first_view < FIRST_VIEW_MS, f"first view after {first_view:.0f} ms"
+    # the full solve runs in the background: a progress bar with its stage and Cancel
+    page.wait_for_function("window.shadeform.solveProgress().shown", timeout=30_000)
+    shown = progress(page)
+    assert shown["job"] and shown["cancellable"] and shown["text"].startswith("Full resolution")
+    assert page.is_visible("#solve-bar") and page.is_visible("#solve-cancel")
+    assert page.evaluate("window.shadeform.state().model") == "computing"
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "app-large-progress.png"))
+    # Cancel: the job ends at once, the quick look stays, said to be one
+    job = shown["job"]
+    page.click("#solve-cancel")
+    page.wait_for_function("!window.shadeform.solveProgress().cancellable", timeout=5000)
+    status = page.evaluate(f"fetch('/api/solves/{job}').then((r) => r.json())")
+    assert status["state"] == "cancelled", status
+    assert page.evaluate("window.shadeform.lastResult().preview")
+    assert page.is_visible("#solve-again") and "cancelled" in page.inner_text("#solve-progress")
+    page.wait_for_function("window.shadeform.modelState().status === 'stale'", timeout=5000)
+    assert "quick look" in page.evaluate("window.shadeform.modelState().message")
+    page.screenshot(path=str(ARTIFACTS / "app-large-cancelled.png"))
+    # the page is usable: a new setting gives a new quick look at once, and a new background solve
+    applied = page.evaluate("window.shadeform.applied()")
+    page.evaluate(
+        "() => { const s = document.getElementById('refine'); s.value = '2'; s.dispatchEvent(new Event('change')); }"
+    )
+    wait_quick_look(page, applied)
+    page.wait_for_function(
+        f"window.shadeform.solveProgress().shown && window.shadeform.solveProgress().job !== '{job}'",
+        timeout=30_000,
+    )
+    second = progress(page)["job"]
+    page.click("#solve-cancel")
+    page.wait_for_function("!window.shadeform.solveProgress().cancellable", timeout=5000)
+    status = page.evaluate(f"fetch('/api/solves/{second}').then((r) => r.json())")
+    assert status["state"] == "cancelled"
+    # never a long task: uploading, the quick looks, the progress, the cancels
+    assert longest_task(page) <= LONG_TASK_MS, page.evaluate("window.__longTasks")
+
+
+def test_full_resolution_replaces_the_quick_look_without_long_tasks(page, photos):
+    open_photo(page, photos["2.1mpx"])
+    quick = wait_quick_look(page)
+    assert quick["preview"] and quick["info"]["level"] >= 2
+    page.wait_for_function(
+        "window.shadeform.lastResult() && !window.shadeform.lastResult().preview", timeout=120_000
+    )
+    full = page.evaluate("window.shadeform.lastResult()")
+    # the full result: the photo's own mask, a mesh sized for the screen (the server's budget)
+    assert not full["preview"] and "level" not in full["info"] and full["decodedInWorker"]
+    assert 100_000 < full["vertex_count"] <= 300_000
+    assert full["vertex_count"] > 5 * quick["vertex_count"]
+    # the photo's mask, read in the mask worker, shown on the image
+    page.wait_for_function("window.shadeform.mask().pixels > 500000", timeout=10_000)
+    assert page.evaluate("window.shadeform.state().model") == "current"
+    assert not page.is_visible("#solve-progress")
+    assert longest_task(page) <= LONG_TASK_MS, page.evaluate("window.__longTasks")
+
+
+def test_photo_over_the_limit_is_offered_a_downsample(page, photos):
+    open_photo(page, photos["over"])
+    page.wait_for_selector("#fit-offer:not([hidden])")
+    text = page.inner_text("#fit-offer")
+    # in the app's words: its size, the limit, the downsampled size, and the CLI's tiled path
+    assert "4300x3300 = 14,190,000 pixels" in text and "13,000,000 (13.0 Mpx)" in text and "2150x1650" in text
+    assert "shadeform reconstruct" in text and "--tiles auto" in text
+    assert "max_pixels" not in text
+    assert page.evaluate("window.shadeform.state().image") is None
+    page.screenshot(path=str(ARTIFACTS / "app-large-fit-offer.png"))
+    # it stays until acted on; one click opens the photo downsampled, and it is solved
+    page.wait_for_timeout(300)
+    assert page.is_visible("#fit-offer")
+    page.click("#fit-accept")
+    quick = wait_quick_look(page)
+    image = page.evaluate("window.shadeform.state().image")
+    assert (image["width"], image["height"]) == (2150, 1650)
+    assert quick["preview"] and not page.is_visible("#fit-offer")
+    page.wait_for_function("window.shadeform.solveProgress().shown", timeout=30_000)
+    page.click("#solve-cancel")
+    assert longest_task(page) <= LONG_TASK_MS, page.evaluate("window.__longTasks")
