@@ -113,7 +113,7 @@ def test_one_limit():
 
 # The commands that read no photo or mask of the user's (a new command reading one must take
 # --max-pixels, or be listed here knowingly).
-NO_PHOTOS = {"synth", "evaluate", "formats", "methods", "demo"}
+NO_PHOTOS = {"synth", "evaluate", "formats", "methods", "demo", "warm"}
 
 
 def test_every_photo_command_takes_it():

@@ -84,11 +84,42 @@ def reconstruct(
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
+    tiles: Annotated[
+        str,
+        typer.Option(
+            metavar="auto|N|off",
+            help="Solve in overlapping tiles of N pixels (shadeform.tiled): for images too large to "
+            "solve whole; auto: a TIFF over --max-pixels is tiled (tiles of 512). The depth goes to a "
+            "tiled BigTIFF (--depth, or NAME_depth.tif beside the mesh), the mesh is decimated.",
+        ),
+    ] = "auto",
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            metavar="ADDRESS",
+            help="With tiles: a Dask cluster (tcp://host:8786) or processes, threads, synchronous; "
+            "default worker processes on this machine.",
+        ),
+    ] = None,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
 
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
+    tile = tile_size(tiles, image, max_pixels)
+    if tile is not None:
+        tiled_reconstruct(
+            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json,
+            refused={"--mask": mask, "--reference": reference, "--concave": concave, "--normals": normals},
+            light=resolve_light(light, slant, tilt), method=method, filter=filter, integrator=integrator,
+            refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
+        )  # fmt: skip
+        return
+    if scheduler is not None:
+        raise InputError(
+            "--scheduler runs tiles, and this image is solved whole (--tiles off, or within "
+            "--max-pixels); add --tiles N to solve it in tiles of N pixels"
+        )
     options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
         method=method, filter=filter, integrator=integrator, refine=refine,
@@ -144,6 +175,108 @@ def reconstruct(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def tile_size(tiles: str, image: Path, max_pixels: int | None) -> int | None:
+    """The tile side for ``--tiles`` (None: solve whole): ``off``; a number; ``auto``, tiles of
+    :data:`shadeform.tiled.DEFAULT_TILE` for a TIFF whose header declares more than
+    ``max_pixels`` pixels (other formats are read whole, and refused there if too large)."""
+    text = tiles.strip().lower()
+    if text == "off":
+        return None
+    if text == "auto":
+        if max_pixels is None or not _is_tiff(image):
+            return None
+        from shadeform.tiled import DEFAULT_TILE, TiffWindows
+
+        height, width = TiffWindows(image).shape[:2]
+        return DEFAULT_TILE if height * width > max_pixels else None
+    try:
+        return int(text)
+    except ValueError:
+        raise InputError(f"--tiles must be auto, off or a tile size in pixels, got {tiles!r}") from None
+
+
+def _is_tiff(path: Path) -> bool:
+    from shadeform.io.images import _TIFF_MAGICS
+
+    try:
+        with open(path, "rb") as handle:
+            return handle.read(4) in _TIFF_MAGICS
+    except OSError:
+        return False
+
+
+def tiled_reconstruct(
+    image: Path,
+    output: Path,
+    *,
+    tile,
+    scheduler,
+    depth,
+    as_json,
+    refused,
+    channel,
+    linear,
+    max_pixels,
+    **options,
+) -> None:
+    """``reconstruct --tiles``: :func:`shadeform.tiled.reconstruct` with a progress bar on stderr."""
+    from shadeform import tiled
+
+    given = [name for name, value in refused.items() if value]
+    if given:
+        raise InputError(
+            f"{given[0]} is not available with tiles: the whole frame is the object; use --tiles off"
+        )
+    if isinstance(options["light"], str):
+        raise InputError("tiles need the light as --light X,Y,Z or --slant/--tilt, not estimated")
+    depth = depth if depth is not None else output.with_name(f"{output.stem}_depth.tif")
+    if depth.suffix.lower() not in (".tif", ".tiff"):
+        raise InputError(f"with tiles the depth map is a BigTIFF: name it .tif or .tiff, not '{depth.name}'")
+    if _is_tiff(image):
+        source = image  # read lazily, window by window
+    else:
+        from shadeform.io.images import read_photo
+
+        source = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels).image
+    err = stderr_console()
+    words = {"tiles": "solving tiles", "join": "joining tiles", "write": "writing depth"}
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err, transient=True,
+    ) as bar:  # fmt: skip
+        task = bar.add_task("reading", total=None)
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(task, description=words[stage], completed=done, total=total)
+
+        result = tiled.reconstruct(
+            source, tile=tile, scheduler=scheduler, out=depth, mesh=output, progress=progress, **options
+        )
+    height, width = result.shape
+    if as_json:
+        print_json(
+            {
+                "command": "reconstruct",
+                "input": {"path": image, "width": width, "height": height},
+                "tiles": {"count": result.tiles, "solved": result.solved, "skipped": result.skipped},
+                "seam": result.seam,
+                "files": {"mesh": output, "depth": depth},
+                "info": result.info,
+            }
+        )
+        return
+    out = stdout_console()
+    out.print(
+        f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}) in {result.tiles} tiles of {tile}"
+    )
+    out.print(
+        f"  {result.solved} solved, {result.skipped} found finished; largest seam between tiles "
+        f"{result.seam:.3g} px; time {format_seconds(result.info['timings']['total'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, [(output, "mesh"), (depth, "depth map (tiled BigTIFF)")])
 
 
 def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
