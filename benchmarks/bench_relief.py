@@ -375,7 +375,7 @@ def main(argv=None) -> int:
         f"\n## 2. From a {megapixels:.0f} Mpx photo\n",
         f"The vase rendered (light +z) in the same frame, reconstructed (`{full['method']}`), made into the "
         f"relief (outline) and written as STL; one run each. *every pixel*: `shadeform.reconstruct` on all "
-        f"{megapixels:.0f} Mpx; *budget's grid*: only every {grid['step']}th row and column solved "
+        f"{megapixels:.0f} Mpx; *budget's grid*: only the rows and columns at multiples of {grid['step']} solved "
         "(`reconstruct_on_grid` at `grid_step`, the grid the budget samples the surface on anyway: what "
         "`shadeform relief --max-triangles` does unless `--full-resolution`).\n",
         "| stage, s | every pixel | budget's grid |",
@@ -388,7 +388,7 @@ def main(argv=None) -> int:
         f"| surface vs true depth, mean / p99 mm | {full['error_mean_mm']:.3f} / {full['error_p99_mm']:.3f} "
         f"| {grid['error_mean_mm']:.3f} / {grid['error_p99_mm']:.3f} |",
         f"| checks | {full['check']} | {grid['check']} |",
-        f"\nThe two surfaces differ by {chain['gap_mean_mm']:.3f} mm on average ({chain['gap_p99_mm']:.3f} mm at the "
+        f"\nThe two surfaces differ by {chain['gap_mean_mm']:.4f} mm on average ({chain['gap_p99_mm']:.4f} mm at the "
         "99th percentile) at the grid's points, both scaled as the relief scales them (4 mm deep). "
         f"Peak resident memory {chain['rss_mib']:,.0f} MiB (both runs in one process).",
         f"\n**The command** `shadeform relief vase.png -o relief.stl --max-triangles {BUDGET:,}` on the 16-bit "
