@@ -13,14 +13,20 @@ runs it), and reports MADE in mm and wall times.
 Besides the objects as published, every method sees perturbed variants of each
 (:func:`variant`): Gaussian noise on the normals (2 degrees RMS, seeded), 2x downsampling
 (normals averaged over 2x2 blocks, mask and ground truth likewise, ``K`` scaled), the mask
-eroded by 3 pixels, and a window (the middle 60 % of the bounding box's rows and columns).
+eroded by 3 pixels, and a window (the middle 60 % of the bounding box's rows and columns); and
+a second, held-out set of perturbations that no choice of the integrator was made on
+(``EXTRA_VARIANTS``: two more noise seeds, windows of 50 % and 70 %, the 2x2 blocks shifted by
+one pixel). For the cases where the integrator is behind the re-run it reports the figure at
+0.9 and 1.1 times the floor, and for the objects as published the jumps of the ground truth
+across interior occluding contours against the capped step (:func:`contour_jumps`).
 
 MADE is measured under two ways of fitting the unknown scale (:func:`shadeform.metrics.made`):
 ``median_scale`` (the median of the depth ratios, the protocol of BiNI's DiLiGenT evaluation script
 and so of its published figures; the bar is judged under it) and ``scale`` (least squares).
 Writes ``benchmarks/results/diligent.md``.
 
-Run: ``python benchmarks/bench_diligent.py [--repeats N] [--no-sweep] [--no-rerun] [--no-variants]``.
+Run: ``python benchmarks/bench_diligent.py [--repeats N] [--no-sweep] [--no-rerun] [--no-variants]
+[--no-extra]``.
 """
 
 from __future__ import annotations
@@ -49,6 +55,9 @@ OBJECTS = ("bear", "buddha", "cat", "cow", "pot1", "reading")
 OLD_MIN_SCALE = 0.12
 #: Perturbed variants of every object (:func:`variant`).
 VARIANTS = ("original", "noise", "down2", "eroded", "window")
+#: Held-out perturbations (issue 12): added after the rule and every candidate of its follow-up
+#: had been judged on ``VARIANTS``, to see which of them carry over to cases not looked at.
+EXTRA_VARIANTS = ("noise-s1", "noise-s2", "window50", "window70", "down2-shift")
 #: Why the old ``MIN_SCALE`` was what it was (it moved here from the integrator's docstring).
 MIN_SCALE_NOTE = (
     "How the old constant `MIN_SCALE = 0.12` was chosen: the result is sensitive to it; 0.1 favours buddha, 0.15 bear, cat and "
@@ -98,6 +107,59 @@ RULE_NOTE = (
     "the normals do not determine; differences of a few per cent between two floors are of that "
     "kind. Buddha's window is behind the re-run at every floor from 0.10 up (0.59-0.68 mm against "
     "0.523): its folds want steeper slopes than any floor near 0.1 allows."
+)
+
+#: Why the rule is behind where it is, and the changes tried for issue 12's follow-up (figures
+#: measured once with scripts outside the repository on the same cases; the tables above are live).
+ISSUE12_NOTE = (
+    "Issue 12, follow-up: why the rule loses where it loses. (1) Where the error sits: in the cases "
+    "behind (and most ahead) the difference from the truth is mostly piecewise constant: whole parts "
+    "(bear's head, cat's front paw and head, buddha's sleeves and base, pot1's handle) sit at the wrong depth against the part the median "
+    "scale is "
+    "fitted to, across interior occluding contours; inside each part the error is small and alike for "
+    "the rule and the re-run. (2) What sets it: at such a contour the background pixel's equation "
+    "towards the occluder is let go by its bilateral weight (its one-sided difference is many times "
+    "the other), so the jump is carried by the occluder's last, grazing pixels alone, whose capped step "
+    "is about 1 / floor pixels. The normals hold nothing else about the jump. (The other regime, "
+    "where the reweighting never opens a contour because the uniform start spreads the jump over many "
+    "pixels and neither side's one-sided difference stands out, is not what loses here; it is what "
+    "happens to a hemisphere of radius 25 pixels floating 5 height units above a plane (orthographic, "
+    "as in tests/test_bilateral.py): at the default floor the rim pixel keeps its link to the plane with "
+    "weight 0.73 and the plane's pixel its link back with 0.47, the solution's jump there is 0.2 against "
+    "8.9 true, and the sphere sits 8.0-8.3 too low at every floor from 0.05 to 0.2.) The cap is a fair guess "
+    "(the table above: the true jumps' median is 0.8-1.5 times 1 / floor on five objects, 2.9 times "
+    "on cat) but the figures need far more: on down2 bear the mean jump across the neck is 5.30 pixel "
+    "units at the floor and 4.82 at 1.1 times it (truth 6.26), which moves the head by half a mm and "
+    "the MADE from 0.069 to 0.281 mm. (3) The same jumps drift slowly during the reweighting, so the "
+    "stopping step matters as much as the floor: MADE after 5 / 10 / 20 / 30 / 100 steps (energy "
+    "tolerance off) is 0.060 / 0.180 / 0.282 / 0.297 / 0.301 on noise bear (re-run 0.256), 1.180 / "
+    "0.915 / 0.808 / 0.722 / 0.599 on window buddha (0.523), 0.834 / 0.719 / 0.632 / 0.605 / 0.682 on "
+    "down2 pot1 (0.603), 0.111 / 0.077 / 0.079 / 0.078 / 0.078 on cat (0.074). The re-run's figures "
+    "are points on such paths too (its loose Jacobi CG stops the drift early), and they move as much "
+    "with the noise seed: noise bear, seeds 0-3, re-run 0.256 / 0.238 / 0.223 / 0.245, rule 0.295 / "
+    "0.202 / 0.318 / 0.186; noise cat, re-run 0.078 / 0.076 / 0.073 / 0.062, rule 0.071 / 0.068 / "
+    "0.074 / 0.065; noise buddha, re-run 1.604 / 1.512 / 1.345 / 1.602, rule 1.000 / 1.003 / 1.021 / "
+    "0.990. A case a few per cent behind is one draw of that spread, not a bias of the rule. (4) "
+    "Changes tried, each on the 30 cases and, where it was worth it, on the 30 held-out ones (count at "
+    "or below the re-run; mean ratio rule / re-run), against the rule's 24 (0.917) and 23 (0.913): "
+    "the floor scaled by 0.8 / 0.9 / 1.1 / 1.25: 22 / 25 / 22 / 22 of 30 (0.948 / 0.935 / 0.999 / "
+    "1.102); every reweighting step solved to CG 1e-3: 25 (0.915); the IRLS run to its fixed point "
+    "(energy tolerance 1e-6, 400 steps): 24 (0.902), held-out 23 (0.904); at most 10 / 20 / 40 steps: "
+    "9 / 21 / 23; BiNI's energy (with the updated weights) as the stopping test: 24 (0.916), held-out "
+    "23 (0.913); continuation of the sharpness, k doubling from 1 (resp. 0.5, 0.25) to 2: 26 (0.908) "
+    "(resp. 26, 25) but held-out 22 (0.910) (resp. 21), so its gain on the 30 was chance, not kept; "
+    "k halving from 32 to 2: 19 (1.068); k = 1 or 4 throughout: 1 and 9 of 30; the weights' "
+    "threshold scaled by a robust (MAD) scale of the one-sided differences: 1 of 30 (their MAD is "
+    "about 0.02, i.e. an effective k near 100: the bulk of the pixels is smooth, so a robust scale "
+    "of the bulk says nothing about the jumps; the differences are already in units of the normal's "
+    "components, scale-free); the cap only at pixels whose normal turns by more than sqrt(2/R) "
+    "towards a neighbour (a discontinuity test): 24 (0.934); R from the local profile of the "
+    "normals (n_z^2 grows by 2 / rho per pixel inwards from a rim of radius rho): 8 (1.547), its "
+    "minimum with the rule 21 (0.975); R as the largest distance to the mask's boundary pixels "
+    "whose normals lean outwards (so that a crop through a surface is not taken for a silhouette): "
+    "24 (0.916), held-out 23 (0.913); the weights compared on the uncapped scales: 8 (3.31), "
+    "held-out 8 (2.70). None is better than the rule on both sets, so the rule is unchanged. The "
+    "constant 0.12 (tuned on the six) reaches 26 (0.873) and held-out 24 (0.892)."
 )
 
 #: Published BiNI (k = 2) MADE in mm (shared/data/README.md).
@@ -215,33 +277,122 @@ def downsample2(normals, mask, K, depth):
     return n, m, K2, z
 
 
+def window(mask: np.ndarray, percent: int) -> np.ndarray:
+    """The largest 4-connected part of ``mask`` within the middle ``percent`` % of its bounding
+    box's rows and columns (integer arithmetic: 60 % leaves out a fifth on each side)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    h, w = rows[-1] + 1 - rows[0], cols[-1] + 1 - cols[0]
+    dr, dc = h * (100 - percent) // 200, w * (100 - percent) // 200
+    win = np.zeros_like(mask)
+    win[rows[0] + dr : rows[-1] + 1 - dr, cols[0] + dc : cols[-1] + 1 - dc] = True
+    labels, _ = ndimage.label(mask & win)
+    return labels == np.argmax(np.bincount(labels[labels > 0]))
+
+
 def variant(name: str, kind: str, data: Path = DATA):
     """(normals, mask, K, depth_gt) of one object as published (``"original"``) or perturbed:
-    ``"noise"`` (:func:`noisy`), ``"down2"`` (:func:`downsample2`), ``"eroded"`` (the mask
-    eroded by 3 pixels, 4-connected steps) or ``"window"`` (the mask within the middle 60 % of
-    its bounding box's rows and columns, its largest 4-connected part)."""
+    ``"noise"`` (:func:`noisy`, seed 0; ``"noise-s1"``, ``"noise-s2"``: seeds 1, 2),
+    ``"down2"`` (:func:`downsample2`; ``"down2-shift"``: the blocks start one pixel down and
+    right), ``"eroded"`` (the mask eroded by 3 pixels, 4-connected steps) or ``"window"``
+    (:func:`window`, the middle 60 %; ``"window50"``, ``"window70"``: 50 %, 70 %)."""
     normals, mask, K, depth = load(name, data)
     if kind == "original":
         return normals, mask, K, depth
-    if kind == "noise":
-        return noisy(normals, mask), mask, K, depth
+    if kind in ("noise", "noise-s1", "noise-s2"):
+        return noisy(normals, mask, seed=0 if kind == "noise" else int(kind[-1])), mask, K, depth
     if kind == "down2":
         return downsample2(normals, mask, K, depth)
+    if kind == "down2-shift":
+        # cropping one row and column moves the principal point by -1 before the halving
+        K1 = K.copy()
+        K1[0, 2], K1[1, 2] = K[0, 2] - 1, K[1, 2] - 1
+        return downsample2(normals[1:, 1:], mask[1:, 1:], K1, depth[1:, 1:])
     if kind == "eroded":
         sub = ndimage.binary_erosion(mask, iterations=3)
-    elif kind == "window":
-        rows = np.flatnonzero(mask.any(axis=1))
-        cols = np.flatnonzero(mask.any(axis=0))
-        dr, dc = (rows[-1] + 1 - rows[0]) // 5, (cols[-1] + 1 - cols[0]) // 5
-        win = np.zeros_like(mask)
-        win[rows[0] + dr : rows[-1] + 1 - dr, cols[0] + dc : cols[-1] + 1 - dc] = True
-        labels, _ = ndimage.label(mask & win)
-        sub = labels == np.argmax(np.bincount(labels[labels > 0]))
+    elif kind in ("window", "window50", "window70"):
+        sub = window(mask, 60 if kind == "window" else int(kind[-2:]))
     else:
-        raise ValueError(f"unknown variant {kind!r}; one of {', '.join(VARIANTS)}")
+        raise ValueError(f"unknown variant {kind!r}; one of {', '.join(VARIANTS + EXTRA_VARIANTS)}")
     normals = normals.copy()
     normals[~sub] = np.nan
     return normals, sub, K, depth
+
+
+def contour_jumps(normals, mask, K, depth, *, excess=3.0, grazing=0.3):
+    """The ground truth's one-pixel jumps across interior occluding contours, in pixel units.
+
+    A diagnostic of what the slope cap has to guess: a pair of neighbours inside the mask counts
+    as a discontinuity where the true step of ``log Z`` times ``f`` (pixel units, as the capped
+    step ``1 / floor``) differs by more than ``excess`` from the step the less grazing of the two
+    normals predicts, and the more grazing one has ``|d| < grazing``. Both thresholds are
+    diagnostic only (they pick the pairs; nothing is fitted to them).
+
+    Returns
+    -------
+    (int, float, float, float)
+        Number of pairs; median, lower and upper quartile of the absolute jumps.
+    """
+    h, w = mask.shape
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    xb = (np.arange(w) - cx) / fx
+    yb = (np.arange(h) - cy) / fy
+    d = normals[..., 2] + normals[..., 1] * yb[:, None] - normals[..., 0] * xb[None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        steps = (normals[..., 0] / d, -normals[..., 1] / d)
+        log_z = np.log(np.where(mask, depth, np.nan))
+    jumps = []
+    for axis, f, step in ((1, fx, steps[0]), (0, fy, steps[1])):
+        true = np.diff(log_z, axis=axis) * f
+        first = (slice(None), slice(None, -1)) if axis else (slice(None, -1), slice(None))
+        second = (slice(None), slice(1, None)) if axis else (slice(1, None), slice(None))
+        d1, d2 = np.abs(d[first]), np.abs(d[second])
+        near = np.where(d1 > d2, step[first], step[second])
+        with np.errstate(invalid="ignore"):
+            pick = (
+                mask[first] & mask[second] & (np.abs(true - near) > excess) & (np.minimum(d1, d2) < grazing)
+            )
+        jumps.append(np.abs(true[pick & np.isfinite(true)]))
+    j = np.concatenate(jumps)
+    if not j.size:
+        return 0, np.nan, np.nan, np.nan
+    return int(j.size), float(np.median(j)), float(np.percentile(j, 25)), float(np.percentile(j, 75))
+
+
+def _summary(title: str, rows: list) -> str:
+    """One line: in how many of ``rows`` the rule is at or below the re-run, which are behind
+    and by how much, the constant 0.12's count and the times (of the timed cases: not the
+    held-out ones, run once each for their figures)."""
+    behind = [r for r in rows if r["new"][0] > r["rerun"][0]]
+    ratios = [r["new"][0] / r["rerun"][0] for r in rows]
+    timed_rows = [r for r in rows if r["kind"] in VARIANTS]
+    return (
+        f"**{title[0].upper() + title[1:]}**: rule at or below the re-run in {len(rows) - len(behind)} of "
+        f"{len(rows)} (mean ratio rule / re-run {np.mean(ratios):.3f}); behind in "
+        + (
+            ", ".join(
+                f"{r['name']} {r['kind']} ({100 * (r['new'][0] / r['rerun'][0] - 1):+.0f} %)" for r in behind
+            )
+            or "none"
+        )
+        + f". 0.12 at or below the re-run in {sum(r['old'][0] <= r['rerun'][0] for r in rows)} of "
+        f"{len(rows)} (mean ratio {np.mean([r['old'][0] / r['rerun'][0] for r in rows]):.3f})."
+        + ("" if not timed_rows else " ")
+        + _times(timed_rows)
+    )
+
+
+def _times(rows: list) -> str:
+    """Total times and speed-ups of ``rows`` (empty if none)."""
+    if not rows:
+        return ""
+    t_new = sum(r["t_new"] for r in rows)
+    t_re = sum(r["t_rerun"] for r in rows)
+    return (
+        f"Total time: rule {t_new:.1f} s, re-run {t_re:.1f} s (speed-up {t_re / t_new:.1f}x; per case "
+        f"{min(r['t_rerun'] / r['t_new'] for r in rows):.1f}-"
+        f"{max(r['t_rerun'] / r['t_new'] for r in rows):.1f}x)."
+    )
 
 
 def _made2(z, gt, mask):
@@ -254,6 +405,7 @@ def main(argv=None) -> str:
     parser.add_argument("--no-sweep", action="store_true", help="skip the min_scale sensitivity table")
     parser.add_argument("--no-rerun", action="store_true", help="skip the BiNI re-runs (a few minutes)")
     parser.add_argument("--no-variants", action="store_true", help="only the objects as published")
+    parser.add_argument("--no-extra", action="store_true", help="without the held-out variants")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "diligent.md")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
@@ -261,7 +413,7 @@ def main(argv=None) -> str:
     # compile the numba kernels once
     n, m, K, _ = load("cow")
     integrate_bilateral(n, m, K=K)
-    kinds = VARIANTS[:1] if args.no_variants else VARIANTS
+    kinds = VARIANTS[:1] if args.no_variants else VARIANTS + (() if args.no_extra else EXTRA_VARIANTS)
     rows = []
     inputs = []
     for kind in kinds:
@@ -284,11 +436,23 @@ def main(argv=None) -> str:
             if kind == "original":
                 ls, row["t_ls"] = timed(partial(integrate_bilateral, normals, mask, K=K, iterations=0), 1)
                 row["ls"] = _made2(ls.depth, gt, mask)
+                row["jumps"] = contour_jumps(normals, mask, K, gt)
             if args.no_rerun:
                 row["rerun"], row["t_rerun"] = (np.nan, np.nan), np.nan
             else:
                 z_re, row["t_rerun"] = timed(partial(bini_rerun, normals, mask, K), 1)
                 row["rerun"] = _made2(z_re, gt, mask)
+            if row["new"][0] > row["rerun"][0]:
+                # how the figure responds to the floor where the rule is behind (issue 12)
+                row["near"] = [
+                    made(
+                        integrate_bilateral(normals, mask, K=K, min_scale=min(1.0, f * row["floor"])).depth,
+                        gt,
+                        mask,
+                        fit="median_scale",
+                    )
+                    for f in (0.9, 1.1)
+                ]
             rows.append(row)
             print(
                 f"{kind:8s} {name:8s} floor {row['floor']:.3f}  rule {row['new'][0]:.3f}  "
@@ -299,6 +463,8 @@ def main(argv=None) -> str:
     # machine spoils at most one run of a case, not all of them
     for _ in range(args.repeats - 1):
         for row, (normals, mask, K) in zip(rows, inputs):
+            if row["kind"] not in VARIANTS:
+                continue  # the held-out cases are not timed (the benchmark's length)
             row["t_new"] = min(row["t_new"], timed(partial(integrate_bilateral, normals, mask, K=K), 1)[1])
             if not args.no_rerun:
                 row["t_rerun"] = min(row["t_rerun"], timed(partial(bini_rerun, normals, mask, K), 1)[1])
@@ -322,7 +488,8 @@ def main(argv=None) -> str:
         "a body of the mask's largest inscribed radius R, ~ (2/3) sqrt(2/R); column *floor*). **0.12**: the same "
         "with `min_scale=0.12`, the constant it replaced. Uniform LS: the same log-depth equations "
         "with `iterations=0`.",
-        f"Times: shortest of {args.repeats} runs each (in {args.repeats} passes over all cases), wall clock, "
+        f"Times: shortest of {args.repeats} runs each (in {args.repeats} passes over all cases; the held-out "
+        "variants are not timed), wall clock, "
         f"{os.cpu_count()} CPUs shared with other work, {platform.processor() or platform.machine()}; "
         "*speed-up* = re-run time / rule time.",
         "",
@@ -355,7 +522,9 @@ def main(argv=None) -> str:
             "(seed 0); *down2*: a camera of half the resolution (2x2 blocks on the mask where all "
             "four pixels are, their mean normal renormalised and mean ground-truth depth; f / 2, "
             "c' = (c - 1/2) / 2); *eroded*: the mask eroded by 3 pixels; *window*: the mask within "
-            "the middle 60 % of its bounding box's rows and columns (largest part). *vs re-run*: "
+            "the middle 60 % of its bounding box's rows and columns (largest part). Held-out (after "
+            "the table's first 30 rows): *noise-s1*, *noise-s2* (seeds 1, 2), *window50*, *window70* "
+            "(50 %, 70 %), *down2-shift* (the blocks one pixel down and right). *vs re-run*: "
             "rule / re-run - 1 (negative: the rule is ahead).",
             "",
             "| variant | object | pixels | floor | rule | 0.12 | BiNI re-run | vs re-run "
@@ -367,26 +536,47 @@ def main(argv=None) -> str:
                 f"| {r['kind']} | {r['name']} | {r['pixels']} | {r['floor']:.3f} | {r['new'][0]:.3f} "
                 f"| {r['old'][0]:.3f} | {r['rerun'][0]:.3f} | {100 * (r['new'][0] / r['rerun'][0] - 1):+.0f} % "
                 f"| {r['new'][1]:.3f} | {r['rerun'][1]:.3f} "
-                f"| {r['t_new']:.2f} | {r['t_rerun']:.2f} | {r['t_rerun'] / r['t_new']:.1f} |"
-            )
-        behind = [r for r in rows if r["new"][0] > r["rerun"][0]]
-        t_new = sum(r["t_new"] for r in rows)
-        t_re = sum(r["t_rerun"] for r in rows)
-        lines += [
-            "",
-            f"Rule at or below the re-run in {len(rows) - len(behind)} of {len(rows)} cases; behind in "
-            + (
-                ", ".join(
-                    f"{r['name']} {r['kind']} ({100 * (r['new'][0] / r['rerun'][0] - 1):+.0f} %)"
-                    for r in behind
+                + (
+                    f"| {r['t_new']:.2f} | {r['t_rerun']:.2f} | {r['t_rerun'] / r['t_new']:.1f} |"
+                    if r["kind"] in VARIANTS
+                    else "| - | - | - |"
                 )
-                or "none"
             )
-            + f". 0.12 at or below the re-run in {sum(r['old'][0] <= r['rerun'][0] for r in rows)} of "
-            f"{len(rows)}. Total time: rule {t_new:.1f} s, re-run {t_re:.1f} s (speed-up "
-            f"{t_re / t_new:.1f}x; per case {min(r['t_rerun'] / r['t_new'] for r in rows):.1f}-"
-            f"{max(r['t_rerun'] / r['t_new'] for r in rows):.1f}x).",
-        ]
+        for title, group in (("the 30 cases", VARIANTS), ("the held-out cases", EXTRA_VARIANTS)):
+            sel = [r for r in rows if r["kind"] in group]
+            if sel:
+                lines += ["", _summary(title, sel)]
+        behind = [r for r in rows if "near" in r]
+        if behind:
+            lines += [
+                "",
+                "## Where the rule is behind: the figure at 0.9 and 1.1 times the floor (median protocol)",
+                "",
+                "| variant | object | BiNI re-run | rule x0.9 | rule | rule x1.1 |",
+                "|---|---|---:|---:|---:|---:|",
+            ]
+            for r in behind:
+                lines.append(
+                    f"| {r['kind']} | {r['name']} | {r['rerun'][0]:.3f} | {r['near'][0]:.3f} "
+                    f"| {r['new'][0]:.3f} "
+                    f"| {r['near'][1]:.3f} |"
+                )
+    lines += [
+        "",
+        "## What the slope cap has to guess: jumps across interior occluding contours",
+        "",
+        "The ground truth's one-pixel jumps of f log Z (pixel units) where it departs by more than 3 "
+        "from the "
+        "step the less grazing normal of the pair predicts and the other is grazing (|d| < 0.3; "
+        "`contour_jumps`, a diagnostic), against the step the cap allows, 1 / floor.",
+        "",
+        "| object | pairs | true jump median (quartiles) | capped step 1 / floor |",
+        "|---|---:|---:|---:|",
+    ]
+    for r in rows:
+        if r["kind"] == "original":
+            k, med, q1, q3 = r["jumps"]
+            lines.append(f"| {r['name']} | {k} | {med:.1f} ({q1:.1f}-{q3:.1f}) | {1 / r['floor']:.1f} |")
     if not args.no_sweep:
         scales = (0.01, 0.05, 0.1, 0.12, 0.15)
         lines += [
@@ -404,7 +594,7 @@ def main(argv=None) -> str:
                 z = integrate_bilateral(normals, mask, K=K, min_scale=v).depth
                 cells.append("{:.3f} / {:.3f}".format(*_made2(z, gt, mask)))
             lines.append(f"| {name} | {BINI[name]:.3f} | " + " | ".join(cells) + " |")
-    lines += ["", "## History of the slope cap", "", MIN_SCALE_NOTE, "", RULE_NOTE]
+    lines += ["", "## History of the slope cap", "", MIN_SCALE_NOTE, "", RULE_NOTE, "", ISSUE12_NOTE]
     text = "\n".join(lines) + "\n"
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.out.with_suffix(".md.tmp")
