@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 
 import shadeform
 from shadeform import metrics, synth
@@ -128,7 +129,61 @@ def test_poses_of_a_waisted_body_are_refined_to_the_exact_ones():
     wrong = [0.0, *(a + rng.choice([-1, 1]) * rng.uniform(6, 10) for a in angles[1:])]
     placement = place(list(zip(recs, wrong)))
     turns = np.degrees([np.arctan2(view.rotation[0, 2], view.rotation[0, 0]) for view in placement.views])
-    assert np.abs((turns - angles + 180) % 360 - 180).max() < 0.1
+    # the issue's claim: as accurate as from the exact poses (the diagonal views' far lobe, behind
+    # an occluding contour, is not trusted: from exact poses too they end 0.17 degrees off)
+    exact = place(list(zip(recs, angles)))
+    settled = np.degrees([np.arctan2(view.rotation[0, 2], view.rotation[0, 0]) for view in exact.views])
+    assert np.abs(turns - settled).max() < 0.05
+    assert np.abs((turns - angles + 180) % 360 - 180).max() < 0.35
+
+
+def test_the_surface_behind_a_views_own_occluding_contour_is_not_trusted():
+    # seen from 45 degrees the waisted body's far lobe shows beside the near one, beyond the near
+    # lobe's rim; one photo cannot say how far behind it lies (the solver integrates across the
+    # rim), so the view's depth is trusted on the near lobe's piece only
+    from shadeform.fusion.volume import RIM_NZ, trusted_surface
+
+    (view,) = synth.render_views("waisted", (45,), size=SMALL)
+    mask, normals = np.asarray(view.mask), np.asarray(view.normals)
+    trusted = trusted_surface(mask, normals)
+    facing = mask & (normals[..., 2] > RIM_NZ)
+    hidden = facing & ~trusted
+    assert hidden.sum() > 0.2 * facing.sum() and (trusted & facing).sum() > 0.5 * facing.sum()
+    # the hidden pixels lie behind the trusted ones' rim: deeper than every trusted facing pixel
+    # next to them, and all on one lobe (the far one)
+    assert np.median(view.depth[hidden]) < np.median(view.depth[trusted & facing]) - 0.1 * SMALL
+    near = ndimage.binary_dilation(hidden, iterations=3) & trusted & facing
+    assert view.depth[hidden].max() < np.median(view.depth[near])
+    rows, cols = np.nonzero(hidden)
+    left = cols < np.nonzero(trusted & facing)[1].mean()
+    assert left.all() or (~left).all()
+    # a view in one piece (the front view's two lobes and waist face it) is trusted everywhere
+    (front,) = synth.render_views("waisted", (0,), size=SMALL)
+    assert (
+        trusted_surface(np.asarray(front.mask), np.asarray(front.normals)) == np.asarray(front.mask)
+    ).all()
+
+
+def test_placements_are_compared_on_every_piece_of_the_views():
+    # the refinement leaves out what lies beyond a view's own occluding contour (its depth may be
+    # off), but where that depth is right it tells a turned view from the true pose: the far
+    # lobe of the waisted body seen from 45 degrees; compared with it, the turn costs more
+    from shadeform.fusion.register import _samples, disagreement
+
+    angles = tuple(range(0, 360, 45))
+    truth = place(list(zip(true_views("waisted", angles), angles)), refine=False)
+    views = list(truth.views)
+    hidden = views[1].mask & ~views[1].trusted
+    every = _samples(views[1], every_piece=True)
+    assert hidden[every[:, 0], every[:, 1]].any() and not hidden[tuple(_samples(views[1]).T)].any()
+    turned = list(views)
+    turned[1] = views[1].at(turntable(4.0)[:3, :3] @ views[1].rotation, views[1].translation, views[1].offset)
+    ratios = []
+    for every_piece in (False, True):
+        right, scale = disagreement(views, turntable=True, every_piece=every_piece)
+        wrong, _ = disagreement(turned, turntable=True, scale=scale, every_piece=every_piece)
+        ratios.append(wrong / right)
+    assert ratios[1] > 1.1 * ratios[0] and ratios[0] > 1, ratios
 
 
 def test_a_reading_chosen_at_poses_far_off_is_tried_again_from_the_given_ones(monkeypatch):

@@ -244,7 +244,7 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
     stays as settled: the user's angles are not trusted to choose (on shapes held out, trusting
     them in ties made the result worse).
     """
-    loss, scale = disagreement(placed, turntable=turntable, samples=TRIAL_SAMPLES)
+    loss, scale = disagreement(placed, turntable=turntable, samples=TRIAL_SAMPLES, every_piece=True)
     best = _Trial(placed, loss, tuple(readings), tuple(concave))
     options = [_distinct(rec, resolve, i, grid.spacing) for i, rec in enumerate(recs)]
     if all(len(choices) < 2 for choices in options):
@@ -274,7 +274,9 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
                 return None
             views = [started(k, reading) for k, reading in enumerate(tried)]
             moved = refine_poses(views, turntable=turntable, samples=TRIAL_SAMPLES)
-            loss, _ = disagreement(moved, turntable=turntable, scale=scale, samples=TRIAL_SAMPLES)
+            loss, _ = disagreement(
+                moved, turntable=turntable, scale=scale, samples=TRIAL_SAMPLES, every_piece=True
+            )
             if _turned(moved, given) > np.radians(CORRECTED):
                 loss = np.inf  # a view turned further than a pose is ever corrected
             trials[key] = _Trial(moved, loss, tried, marked)

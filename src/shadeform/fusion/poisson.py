@@ -110,7 +110,7 @@ def poisson_solid(placement, *, depth: int | None = None):
 def oriented_points(placement) -> tuple[np.ndarray, np.ndarray]:
     """Every placed view's surface points and unit normals, object frame.
 
-    A view's mask pixels whose normal is finite and faces it at least
+    A view's trusted mask pixels (:func:`~shadeform.fusion.volume.trusted_surface`) whose normal is finite and faces it at least
     :data:`~shadeform.fusion.volume.MIN_WEIGHT` (``n_z``); camera normals turned into the
     object frame by the transpose of the view's rotation.
 
@@ -121,7 +121,12 @@ def oriented_points(placement) -> tuple[np.ndarray, np.ndarray]:
     points, normals = [], []
     for view in placement.views:
         camera = np.asarray(view.normals, dtype=np.float64)
-        keep = view.mask & np.isfinite(camera).all(axis=-1) & (np.nan_to_num(camera[..., 2]) >= MIN_WEIGHT)
+        keep = (
+            view.mask
+            & view.trusted
+            & np.isfinite(camera).all(axis=-1)
+            & (np.nan_to_num(camera[..., 2]) >= MIN_WEIGHT)
+        )
         rows, cols = np.nonzero(keep)
         points.append(view.surface_points(rows, cols))
         # rows of camera normals times R: each is R.T @ n

@@ -9,8 +9,10 @@ turntable, a turn about the vertical axis and a depth offset), found by Levenber
 Tukey's biweight on the residuals (a point another part hides from a view must not pull), its
 scale re-estimated at every step as the views come together (iteratively reweighted least
 squares). The Jacobian is analytic and, as ICP linearises it, holds each pair's tangent planes
-fixed: a point crossing a depth edge of the other view must not make a jump in it. The first
-view fixes the frame.
+fixed: a point crossing a depth edge of the other view must not make a jump in it. Only the
+surface whose depth a view's photo fixes takes part, its own points and its planes
+(:func:`shadeform.fusion.volume.trusted_surface`: not what lies beyond its own occluding
+contours). The first view fixes the frame.
 
 References
 ----------
@@ -101,7 +103,12 @@ def refine_poses(views: list[FusionView], *, turntable: bool, samples: int = SAM
 
 
 def disagreement(
-    views: list[FusionView], *, turntable: bool, scale: float | None = None, samples: int = SAMPLES
+    views: list[FusionView],
+    *,
+    turntable: bool,
+    scale: float | None = None,
+    samples: int = SAMPLES,
+    every_piece: bool = False,
 ) -> tuple[float, float]:
     """How much placed views disagree: the mean Tukey loss of their residuals (the refinement's
     own, :meth:`_Fit.residuals`) at ``scale``, for comparing placements of the same views.
@@ -123,6 +130,10 @@ def disagreement(
         scale to every placement being compared.
     samples : int
         Surface points per view in the residuals.
+    every_piece : bool
+        Count the views' whole facing surface, also what lies beyond their own occluding
+        contours (not trusted by the refinement: its depth may be off by tens of pixels, which
+        the loss's ceiling bounds; where it is right, it tells placements apart).
 
     Returns
     -------
@@ -131,7 +142,7 @@ def disagreement(
     scale : float
         The scale used.
     """
-    fit = _Fit(views, turntable, samples)
+    fit = _Fit(views, turntable, samples, every_piece=every_piece)
     r = fit.residuals(views)
     if scale is None:
         scale = _scale(r)
@@ -144,12 +155,18 @@ class _Fit:
     (per view ``(turn, offset)`` on a turntable, else ``(omega, shift)``: ``R <- Rot(omega) R``,
     ``t <- t + shift``), taken at no correction."""
 
-    def __init__(self, views: list[FusionView], turntable: bool, samples: int = SAMPLES) -> None:
+    def __init__(
+        self, views: list[FusionView], turntable: bool, samples: int = SAMPLES, *, every_piece: bool = False
+    ) -> None:
         self.turntable = turntable
         self.per_view = 2 if turntable else 6
-        self.samples = [_samples(view, samples) for view in views]
-        # each view's normals as three images, NaN-free, for the bilinear lookups
-        self.normals = [np.moveaxis(np.nan_to_num(view.normals), -1, 0).copy() for view in views]
+        self.samples = [_samples(view, samples, every_piece=every_piece) for view in views]
+        # each view's normals as three images, NaN-free, for the bilinear lookups; 0 where its
+        # depth is not trusted (beyond its own occluding contours): no plane to agree with there
+        self.normals = [
+            np.moveaxis(np.nan_to_num(view.normals) * (every_piece | view.trusted[..., None]), -1, 0).copy()
+            for view in views
+        ]
         # the silhouette lies half a pixel beyond the outermost object pixels' centres
         self.outside = [np.maximum(ndimage.distance_transform_edt(~view.mask) - 0.5, 0.0) for view in views]
         # forward differences along rows and columns: the bilinear lookup's exact derivative
@@ -283,9 +300,10 @@ def _cross_matrices(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def _samples(view: FusionView, count: int = SAMPLES) -> np.ndarray:
-    """Pixels (row, col) of the view's trusted surface, evenly thinned to about ``count``."""
-    trusted = view.mask & (np.nan_to_num(view.normals[..., 2]) > TRUSTED_NZ)
+def _samples(view: FusionView, count: int = SAMPLES, *, every_piece: bool = False) -> np.ndarray:
+    """Pixels (row, col) of the view's trusted surface (``every_piece``: its whole facing
+    surface), evenly thinned to about ``count``."""
+    trusted = view.mask & (every_piece | view.trusted) & (np.nan_to_num(view.normals[..., 2]) > TRUSTED_NZ)
     rows, cols = np.nonzero(trusted)
     every = max(1, len(rows) // count)
     return np.stack([rows[::every], cols[::every]], axis=1)
