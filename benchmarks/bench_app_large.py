@@ -41,17 +41,7 @@ from shadeform import synth
 FIRST_VIEW_BAR_MS = 1000
 
 #: What the traces said about the long tasks left (printed with the table).
-LONG_TASKS_NOTE = (
-    "Where the long tasks come from (Chromium traces of the same flow): the page's own work is off it"
-    "s thread (the result's JSON parsed, its mesh decoded and bounded in a Web Worker; the mask read "
-    "and tinted in another; the photo decoded and scaled by createImageBitmap; the shaders compiled a"
-    "nd drawn once at start-up). What is left is the commit of each new model's first frame, where th"
-    "e page waits for the GPU process: here WebGL runs in software (SwiftShader) on the same overload"
-    "ed cores, 90-120 ms for a frame at a load average of 7-9 and 200-600 ms at 16 (also with a 512 p"
-    "x photo: it does not grow with the photo); a GPU draws such a frame in a few milliseconds. The 5"
-    "0 ms bar is not met on this machine; the next step would be rendering in a worker (OffscreenCanv"
-    "as), so that the page never waits for a frame.\n"
-)
+LONG_TASKS_NOTE = "Where the long tasks come from (Chromium traces of the same flow, taken during development under other load): the page's own work is off its thread (the result's JSON parsed, its mesh decoded and bounded in a Web Worker; the mask read and tinted in another; the photo decoded and scaled by createImageBitmap; the shaders compiled and drawn once at start-up). What is left is the commit of each new model's first frame, where the page waits for the GPU process: here WebGL runs in software (SwiftShader) on the same 2 cores, and the longest such wait is the figure in the table; a GPU draws such a frame in a few milliseconds. The 50 ms bar is not met on this machine; the next step would be rendering in a worker (OffscreenCanvas), so that the page never waits for a frame.\n"
 LONG_TASK_BAR_MS = 50
 
 # the page's long tasks from its first script on, and when the file input changed
