@@ -22,6 +22,7 @@ residual) by how settled the pixel's basin is.
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 
 import numba
@@ -457,61 +458,6 @@ def _basins_reference(smooth, mask, markers, count):
 
 
 @numba.njit(cache=True)
-def _before(key_a, age_a, key_b, age_b):
-    return key_a < key_b or (key_a == key_b and age_a < age_b)
-
-
-@numba.njit(cache=True)
-def _push(keys, ages, items, size, key, age, item):
-    """Add ``(key, age, item)`` to the heap of the three arrays (doubled when full); returns the
-    arrays and the new size."""
-    if size == keys.size:
-        grown = (np.empty(2 * size), np.empty(2 * size, np.int64), np.empty(2 * size, np.int64))
-        grown[0][:size] = keys[:size]
-        grown[1][:size] = ages[:size]
-        grown[2][:size] = items[:size]
-        keys, ages, items = grown
-    i = size
-    while i > 0:
-        parent = (i - 1) // 2
-        if not _before(key, age, keys[parent], ages[parent]):
-            break
-        keys[i] = keys[parent]
-        ages[i] = ages[parent]
-        items[i] = items[parent]
-        i = parent
-    keys[i] = key
-    ages[i] = age
-    items[i] = item
-    return keys, ages, items, size + 1
-
-
-@numba.njit(cache=True)
-def _pop(keys, ages, items, size):
-    """Remove the smallest ``(key, age)``; returns its item and the new size."""
-    item = items[0]
-    size -= 1
-    last_key, last_age, last_item = keys[size], ages[size], items[size]
-    i = 0
-    while True:
-        child = 2 * i + 1
-        if child >= size:
-            break
-        if child + 1 < size and _before(keys[child + 1], ages[child + 1], keys[child], ages[child]):
-            child += 1
-        if not _before(keys[child], ages[child], last_key, last_age):
-            break
-        keys[i] = keys[child]
-        ages[i] = ages[child]
-        items[i] = items[child]
-        i = child
-    keys[i] = last_key
-    ages[i] = last_age
-    items[i] = last_item
-    return item, size
-
-
-@numba.njit(cache=True)
 def _flood(smooth, allowed, labels):
     """Watershed of ``-smooth`` (H, W) float64 from the labelled pixels of ``labels`` (H, W)
     int32 (0: not yet), through the 4-connected pixels of ``allowed`` (H, W) bool, in place.
@@ -519,21 +465,20 @@ def _flood(smooth, allowed, labels):
     Priority flooding as :func:`skimage.segmentation.watershed` does it (compactness 0, no
     watershed line): a pixel takes the label of the neighbour that reaches it first, and pixels
     are taken brightest first, equal ones in the order they were reached (the seeds first). The
-    queue is a binary heap of ``(-smooth, age, pixel)`` that grows with the front, so the memory
-    is the labels' alone (skimage's copies and pads the image and the markers).
+    queue is a heap (:mod:`heapq`, compiled by numba) of ``(-smooth, age, pixel)`` that grows with
+    the front, so the memory is the labels' alone (skimage's copies and pads the image and the
+    markers).
     """
     height, width = labels.shape
-    keys = np.empty(1024)
-    ages = np.empty(1024, np.int64)
-    items = np.empty(1024, np.int64)
-    size = 0
+    queue = [(0.0, 0, 0)]  # typed by its first entry, which goes at once
+    queue.pop()
     for r in range(height):
         for c in range(width):
             if labels[r, c] != 0 and allowed[r, c]:
-                keys, ages, items, size = _push(keys, ages, items, size, -smooth[r, c], 0, r * width + c)
+                heapq.heappush(queue, (-smooth[r, c], 0, r * width + c))
     age = 0
-    while size > 0:
-        item, size = _pop(keys, ages, items, size)
+    while len(queue) > 0:
+        item = heapq.heappop(queue)[2]
         r = item // width
         c = item % width
         for k in range(4):
@@ -545,7 +490,7 @@ def _flood(smooth, allowed, labels):
                 continue
             labels[rr, cc] = labels[r, c]
             age += 1
-            keys, ages, items, size = _push(keys, ages, items, size, -smooth[rr, cc], age, rr * width + cc)
+            heapq.heappush(queue, (-smooth[rr, cc], age, rr * width + cc))
 
 
 def _unsure_areas(basins, centres, mask, origin):
