@@ -292,6 +292,21 @@ def output_temps(outputs: OutputSet, *targets: Path | None) -> dict[Path, Path]:
     return {target: outputs.temp(target) for target in targets if target is not None}
 
 
+def write_maps(rec, temps: dict[Path, Path], *, depth: Path | None, normals: Path | None) -> list:
+    """Write the reconstruction's depth and normal maps that were asked for to their temporaries;
+    returns their (file, description) rows to print."""
+    from shadeform.io.maps import save_depth, save_normal_map
+
+    written = []
+    if depth is not None:
+        save_depth(rec.depth, temps[depth])
+        written.append((depth, "depth map, pixel units, NaN off the object"))
+    if normals is not None:
+        save_normal_map(rec.normals, temps[normals])
+        written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+    return written
+
+
 def write_model(
     outputs: OutputSet,
     err: Console,
@@ -308,19 +323,13 @@ def write_model(
     temporaries, and put them all in place together; returns the mesh, the (file, description) rows
     to print and the entries every command's JSON report shares."""
     import shadeform
-    from shadeform.io.maps import save_depth, save_normal_map
 
     with stage(err, "building the mesh", timings, "mesh"):
         mesh = shadeform.to_mesh(rec, step=step)
     with stage(err, "writing files", timings, "write"):
         shadeform.export(mesh, temps[output])
         written = [(output, shadeform.available_formats()[output.suffix.lower()])]
-        if depth is not None:
-            save_depth(rec.depth, temps[depth])
-            written.append((depth, "depth map, pixel units, NaN off the object"))
-        if normals is not None:
-            save_normal_map(rec.normals, temps[normals])
-            written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+        written += write_maps(rec, temps, depth=depth, normals=normals)
     outputs.commit()
     report = {
         "files": {"mesh": output, "depth": depth, "normals": normals},

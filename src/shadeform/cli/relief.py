@@ -37,6 +37,7 @@ from shadeform.cli._shell import (
     stage,
     stderr_console,
     stdout_console,
+    write_maps,
 )
 from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
@@ -145,7 +146,6 @@ def relief_command(
 ) -> None:
     """Make a print-ready relief from one photo: a closed solid in millimetres with a flat base."""
     import shadeform
-    from shadeform.io.maps import save_depth, save_normal_map
     from shadeform.solid import check_options
 
     # everything the user typed is checked before any work
@@ -198,12 +198,7 @@ def relief_command(
         with stage(err, "writing files", timings, "write"):
             shadeform.export(solid, temps[output])
             written = [(output, shadeform.available_formats()[output.suffix.lower()] + ", millimetres")]
-            if depth is not None:
-                save_depth(rec.depth, temps[depth])
-                written.append((depth, "depth map, pixel units, NaN off the object"))
-            if normals is not None:
-                save_normal_map(rec.normals, temps[normals])
-                written.append((normals, "normal map, 16-bit, RGB = (n + 1) / 2"))
+            written += write_maps(rec, temps, depth=depth, normals=normals)
         outputs.commit()
     timings["total"] = time.perf_counter() - total
 
