@@ -400,3 +400,35 @@ class TestBadInput:
             arrival_times(cos, small.mask, **kwargs)
         with pytest.raises(InputError, match=message):
             arrival_times_reference(cos, small.mask, **kwargs)
+
+
+def test_pairwise_distances_stop_early_and_side_by_side_as_one_full_march_each():
+    """The singular points' distances (marches run on threads, each stopping once it has reached
+    the nodes after it, one target map shared) equal a full march from each node read at the
+    later nodes' pixels (the table is made symmetric from those); a node sharing its pixels with a
+    later one is at distance 0 from it."""
+    from shadeform.solvers.eikonal.marching import slope_fields
+    from shadeform.solvers.eikonal.singular import Node, _pairwise_distances
+
+    s = synth.scene("bumps", size=96)
+    c = np.clip(s.image / s.image[s.mask].max(), 0.0, 1.0)
+    c[~s.mask] = 0.0
+    f, theta = slope_fields(c)
+    spots = [(20, 20), (48, 70), (75, 30), (48, 70), (30, 60)]  # the second and fourth coincide
+    nodes = [
+        Node(pixels=np.array([[r, col], [r, col + 1]]), part=1, kind="max", size=2, top=1.0, origin="user")
+        for r, col in spots
+    ]
+    assert all(s.mask[r, col] and s.mask[r, col + 1] for r, col in spots)
+    distance = _pairwise_distances(nodes, f, theta, s.mask, 1.5)
+    for a, node in enumerate(nodes):
+        full = arrival_times(c, s.mask, [tuple(p) for p in node.pixels])
+        for b, other in enumerate(nodes[a + 1 :], start=a + 1):
+            assert distance[b, a] == distance[a, b]
+            assert distance[a, b] == pytest.approx(
+                full[other.pixels[:, 0], other.pixels[:, 1]].min(), rel=1e-12
+            )
+    assert distance[1, 3] == distance[3, 1] == 0.0
+    apart = ~np.eye(5, dtype=bool)
+    apart[1, 3] = apart[3, 1] = False
+    assert np.all(distance[apart] > 0)

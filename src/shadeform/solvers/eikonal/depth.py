@@ -26,7 +26,7 @@ from scipy import ndimage as ndi
 from shadeform._checks import StageTimer, check_mask, finite, fraction, positive, shading_image
 from shadeform.errors import InputError
 from shadeform.preprocess import Filter, apply_filter
-from shadeform.solvers.eikonal.marching import STEEP, run_march, slope_fields
+from shadeform.solvers.eikonal.marching import STEEP, run_march, side_by_side, slope_fields
 from shadeform.solvers.eikonal.normals import cone_normals
 from shadeform.solvers.eikonal.singular import (
     EIGHT,
@@ -235,11 +235,16 @@ def _surface(nodes, f, theta, mask, steep) -> np.ndarray:
     if not is_min.any():
         low, _ = run_march(f, theta, mask, steep, index, -heights)
         return np.negative(low, out=low)
-    up, _ = run_march(f, theta, mask, steep, index, heights)
     if is_min.all():
-        return up
-    low, _ = run_march(f, theta, mask, steep, index, -heights)
-    _, nearest = run_march(f, theta, mask, steep, index, np.zeros(len(index)), ids)
+        return run_march(f, theta, mask, steep, index, heights)[0]
+
+    def march(job):
+        values, labels = job
+        T, label = run_march(f, theta, mask, steep, index, values, labels)
+        return T if labels is None else label
+
+    # three independent marches, side by side: from below, from above, and which node is nearest
+    up, low, nearest = side_by_side(march, [(heights, None), (-heights, None), (np.zeros(len(index)), ids)])
     from_below = mask & is_min[np.maximum(nearest, 0)]
     return np.where(from_below, up, -low)
 

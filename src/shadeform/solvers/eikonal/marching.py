@@ -36,6 +36,8 @@ References
 from __future__ import annotations
 
 import heapq
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -221,16 +223,17 @@ def _arc_update_from(T, done, theta, r, c, pr, pc):
 # --------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
-def _march(f, theta, mask, steep, sources, goal, need, out, heap, track):
+@numba.njit(cache=True, nogil=True)
+def _march(f, theta, mask, steep, sources, goal, first, need, out, heap, track):
     """Fast marching over ``mask`` from the sources; fills the arrays of ``out``.
 
     ``sources`` is ``(index, value, label)`` of the source pixels; ``out`` is ``(T, label, done,
     reached)`` and ``heap`` the arrays of :func:`shadeform.solvers._heap.new_heap`, all from the
     caller (the heap may start small: it grows with the front). ``goal`` holds a target id per
     pixel (-1 for none; read only when ``need > 0``, so it may be a 1 x 1 placeholder otherwise);
-    the first accepted value of each target goes to ``reached`` and marching stops once ``need``
-    targets were reached (``need <= 0``: march everything). ``label`` is written only when
+    ids below ``first`` are not targets. The first accepted value of each target goes to
+    ``reached`` and marching stops once ``need`` targets were reached (``need <= 0``: march
+    everything). The GIL is released: independent marches run on threads side by side. ``label`` is written only when
     ``track`` (else it may be a 1 x 1 placeholder). Returns the targets still missing.
     """
     src_index, src_value, src_label = sources
@@ -255,7 +258,7 @@ def _march(f, theta, mask, steep, sources, goal, need, out, heap, track):
         done[r, c] = True
         if need > 0:
             g = goal[r, c]
-            if g >= 0 and reached[g] == np.inf:
+            if g >= first and reached[g] == np.inf:
                 reached[g] = T[r, c]
                 need -= 1
                 if need == 0:
@@ -281,7 +284,7 @@ def _march(f, theta, mask, steep, sources, goal, need, out, heap, track):
     return need
 
 
-def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, need=0):
+def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, first=0, need=0):
     """Allocate the work arrays and run the compiled marching (private to the package).
 
     Parameters
@@ -298,6 +301,8 @@ def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, need
         A label per source pixel, to learn which source each pixel's value came from.
     goal : (H, W) int32, optional
         A target id per pixel (-1 for none).
+    first : int
+        With ``goal``: ids below this are not targets (so one ``goal`` serves several marches).
     need : int
         With ``goal``: stop once this many targets were reached.
 
@@ -343,6 +348,7 @@ def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, need
         float(steep),
         sources,
         targets,
+        int(first),
         int(need),
         (T, label, done, reached),
         heap,
@@ -352,6 +358,22 @@ def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, need
     if goal is not None:
         return T, label, reached
     return T, label
+
+
+def side_by_side(function, items) -> list:
+    """``[function(item) for item in items]`` on up to one thread per core this process may use.
+
+    For independent marches (private to the package): the kernel releases the GIL, so two
+    marches on two idle cores take the time of one. On a machine whose other cores are busy the
+    threads share what is free; nothing waits by spinning, so a busy core slows the marches but
+    does not stall them (``benchmarks/results/stalls.md``).
+    """
+    items = list(items)
+    workers = min(len(items), len(os.sched_getaffinity(0)))
+    if workers <= 1:
+        return [function(item) for item in items]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(function, items))
 
 
 def slope_fields(cos_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -39,7 +39,7 @@ from skimage.morphology import local_maxima, reconstruction
 
 from shadeform._checks import check_choice, whole
 from shadeform.errors import InputError
-from shadeform.solvers.eikonal.marching import run_march
+from shadeform.solvers.eikonal.marching import run_march, side_by_side
 
 __all__ = ["KINDS", "MAX_DETECTED", "SOURCE_FRACTION", "TOL", "SingularPoint"]
 
@@ -324,33 +324,34 @@ def place_heights(nodes, main_of_part, f, theta, mask, steep) -> None:
 def _pairwise_distances(members, f, theta, mask, steep) -> np.ndarray:
     """``D[a, b]``: weighted distance between the pixels of nodes a and b (symmetric).
 
-    The marching from node a measures the nodes after it and stops once it has reached them all.
+    The marching from node a measures the nodes after it and stops once it has reached them all;
+    the marches are independent and run side by side.
     """
     n = len(members)
     goal = np.full(mask.shape, -1, dtype=np.int32)
     for j, node in enumerate(members):
         goal[node.pixels[:, 0], node.pixels[:, 1]] = j
+    present = np.unique(goal[goal >= 0])  # a node whose pixels all belong to later ones has none
     width = mask.shape[1]
-    distance = np.zeros((n, n))
-    T = None
-    for a, node in enumerate(members[:-1]):
-        del T  # the last march's times: free them before the next is allocated
-        goal[node.pixels[:, 0], node.pixels[:, 1]] = -1  # measured from now on
+
+    def distances_from(a: int) -> list[float]:
+        node = members[a]
         index = node.pixels[:, 0] * width + node.pixels[:, 1]
-        need = len(np.unique(goal[goal > a]))
+        need = int(np.count_nonzero(present > a))
         T, _, reached = run_march(
-            f,
-            theta,
-            mask,
-            steep,
-            index,
-            np.zeros(len(index)),
-            goal=goal,
-            need=need,
+            f, theta, mask, steep, index, np.zeros(len(index)), goal=goal, first=a + 1, need=need
         )
-        for b in range(a + 1, n):
-            # a node whose pixels all belong to others (a repeated reference) is read from T
-            pixels = members[b].pixels
-            first = reached[b] if b < len(reached) else np.inf
-            distance[a, b] = distance[b, a] = min(first, T[pixels[:, 0], pixels[:, 1]].min())
+        # the first pixel of b accepted has the least T of b's pixels (they are accepted in
+        # increasing order); a node without target pixels is read from T
+        return [
+            min(
+                reached[b] if b < len(reached) else np.inf,
+                T[members[b].pixels[:, 0], members[b].pixels[:, 1]].min(),
+            )
+            for b in range(a + 1, n)
+        ]
+
+    distance = np.zeros((n, n))
+    for a, row in enumerate(side_by_side(distances_from, range(n - 1))):
+        distance[a, a + 1 :] = distance[a + 1 :, a] = row
     return distance
