@@ -478,3 +478,24 @@ class TestObliqueOnNoisyImages:
         assert "auto_filter" not in reconstruct(noisy.image, mask=noisy.mask, light=light, filter="none").info
         clean = synth.scene("sphere", size=64, light=light)
         assert "auto_filter" not in reconstruct(clean.image, mask=clean.mask, light=light).info
+
+
+def test_the_brightest_pixel_s_tie_goes_to_the_deepest_as_by_the_distance_transform():
+    """Among equally bright pixels the default reference is the one deepest inside the mask: the
+    same pixel as the argmax of scipy's exact distance transform (raster order on ties)."""
+    from scipy import ndimage as ndi
+
+    from shadeform.pipeline import _references
+
+    rng = np.random.default_rng(5)
+    for _ in range(6):
+        mask = ndi.gaussian_filter(rng.random((80, 96)), 4) > 0.5
+        labels, n_parts = ndi.label(mask)
+        image = np.where(mask, np.round(rng.random(mask.shape) * 4) / 4, 0.0)  # many ties at 1.0
+        inside = ndi.distance_transform_edt(mask)
+        refs = _references(None, image, mask, labels, n_parts)
+        assert len(refs) == n_parts
+        for part, ref in zip(range(1, n_parts + 1), refs, strict=True):
+            tied = (labels == part) & (image >= image[labels == part].max())
+            expected = np.unravel_index(np.argmax(np.where(tied, inside, -1.0)), mask.shape)
+            assert ref.pixel == (int(expected[0]), int(expected[1]))

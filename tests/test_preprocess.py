@@ -343,3 +343,19 @@ class TestSrgbToLinear:
 
         with pytest.raises(InputError, match=r"\[0, 1\]"):
             srgb_to_linear(bad)
+
+
+def test_the_detail_s_interior_by_erosion_is_the_distance_transform_s():
+    """image_detail's pixels more than 2 px inside, found by an erosion, are those of the exact
+    distance transform, on blobs that touch the image's edge and have holes."""
+    from scipy import ndimage as ndi
+
+    from shadeform.preprocess import _more_than_two_inside
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        mask = ndi.gaussian_filter(rng.random((90, 70)), 3) > 0.5
+        assert mask.any() and not mask.all()
+        assert np.array_equal(_more_than_two_inside(mask), ndi.distance_transform_edt(mask) > 2)
+        image = rng.random(mask.shape)
+        assert image_detail(image, mask) == image_detail(image, mask, inside=ndi.distance_transform_edt(mask))

@@ -154,10 +154,9 @@ def reconstruct(
             "confidence": float(estimate.confidence),
         }
         lap("light")
-    noise = inside = None
+    noise = None
     if solver is None or solver.denoise is not None:
-        inside = ndi.distance_transform_edt(mask)  # shared with _references
-        detail = image_detail(shading, mask, inside=inside)
+        detail = image_detail(shading, mask)
         noise = detail.noise
         brightest = float(shading[mask].max())
         if solver is None:
@@ -167,7 +166,7 @@ def reconstruct(
         if solver.denoise is not None and user_filter is None and noise > NOISY * brightest:
             denoise = parse_filter(solver.denoise)
             shading = apply_filter(shading, mask, denoise)
-            noise = noise_level(shading, mask, inside=inside)
+            noise = noise_level(shading, mask)
             decided["auto_filter"] = str(denoise)
             lap("filter")
         if solver.denoise is None:
@@ -179,8 +178,7 @@ def reconstruct(
         )
     concave_x, concave_y = concave_masks(as_regions(concave), image.shape)
     labels, n_parts = ndi.label(mask)
-    refs = _references(references, shading, mask, labels, n_parts, inside=inside)
-    inside = None  # (H, W) float64, not needed past here
+    refs = _references(references, shading, mask, labels, n_parts)
     albedo = _brightness_scale(
         shading, mask, refs[0], light, estimated=float(estimate.albedo) if estimate_wanted else None
     )
@@ -313,9 +311,8 @@ def _check_shading(image, mask) -> None:
         )
 
 
-def _references(references, image, mask, labels, n_parts, *, inside=None) -> list[Reference]:
-    """User references checked, plus the brightest pixel of every part left without one.
-    ``inside``: the mask's distance transform, if the caller has it."""
+def _references(references, image, mask, labels, n_parts) -> list[Reference]:
+    """User references checked, plus the brightest pixel of every part left without one."""
     refs = [_parse_reference(item, mask) for item in references or ()]
     covered = {labels[ref.pixel] for ref in refs}
     for part in range(1, n_parts + 1):
@@ -323,14 +320,25 @@ def _references(references, image, mask, labels, n_parts, *, inside=None) -> lis
             continue
         in_part = labels == part
         top = image[in_part].max()
-        brightest = in_part & (image >= top * (1 - 1e-9))
-        if np.count_nonzero(brightest) > 1:
-            # among equally bright pixels prefer the one deepest inside its part: a flat top's centre
-            inside = ndi.distance_transform_edt(mask) if inside is None else inside
-            brightest = np.where(brightest, inside, -1.0)
-        r, c = np.unravel_index(np.argmax(brightest), brightest.shape)
-        refs.append(Reference(int(r), int(c)))
+        rows, cols = np.nonzero(in_part & (image >= top * (1 - 1e-9)))
+        # among equally bright pixels prefer the one deepest inside its part: a flat top's centre
+        best = np.argmax(_depth_inside(mask, rows, cols)) if rows.size > 1 else 0
+        refs.append(Reference(int(rows[best]), int(cols[best])))
     return refs
+
+
+def _depth_inside(mask, rows, cols) -> np.ndarray:
+    """``scipy.ndimage.distance_transform_edt(mask)`` at the given pixels only (inf where the
+    mask has no background): the distance to the nearest background pixel that touches the mask,
+    which is the nearest of all. A tree of those few pixels instead of the image's transform
+    (on a megapixel 80-160 ms, and float and index arrays of the image's size)."""
+    from scipy.spatial import cKDTree
+
+    rim = np.argwhere(ndi.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool)) & ~mask)
+    if rim.size == 0:
+        return np.full(rows.size, np.inf)
+    distance, _ = cKDTree(rim).query(np.column_stack([rows, cols]))
+    return distance
 
 
 def _brightness_scale(image, mask, main: Reference, light, *, estimated=None) -> float:

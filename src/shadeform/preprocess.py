@@ -293,16 +293,16 @@ def image_detail(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | No
     mask : (H, W) bool array
         Object pixels.
     inside : (H, W) float array, optional
-        ``scipy.ndimage.distance_transform_edt(mask)`` if the caller has it.
+        ``scipy.ndimage.distance_transform_edt(mask)`` if the caller has it; else the same
+        pixels are found by an erosion.
 
     Returns
     -------
     Detail
         Both 0 when fewer than 20 pixels lie that deep inside the object.
     """
-    if inside is None:
-        inside = ndi.distance_transform_edt(mask)
-    interior = (inside > 2) & (image > 0)
+    interior = _more_than_two_inside(mask) if inside is None else inside > 2
+    interior &= image > 0
     if np.count_nonzero(interior) < 20:
         return Detail(0.0, 0.0)
     detail = (image - ndi.uniform_filter(image, 3))[interior]
@@ -310,6 +310,14 @@ def image_detail(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | No
     scale = 1.4826 * float(np.median(spread))
     outliers = float(np.mean(spread > OUTLIER_SIGMAS * scale)) if scale > 0 else 0.0
     return Detail(scale / math.sqrt(8.0 / 9.0), outliers)
+
+
+def _more_than_two_inside(mask: np.ndarray) -> np.ndarray:
+    """``distance_transform_edt(mask) > 2``: the mask eroded by the disc of radius 2 (13 pixels;
+    the image's edge counts as inside, as for the transform), some 30 times faster."""
+    offsets = np.arange(-2, 3)
+    disc = offsets[:, None] ** 2 + offsets[None, :] ** 2 <= 4
+    return ndi.binary_erosion(mask, structure=disc, border_value=1)
 
 
 def noise_level(image: np.ndarray, mask: np.ndarray, *, inside: np.ndarray | None = None) -> float:
