@@ -885,6 +885,15 @@ class TestStatic:
 # ------------------------------------------------------------------------ schema, store, cli
 
 
+def test_the_schema_s_limits_are_the_library_s():
+    """The schema stays free of the library's imports, so its bounds repeat the library's: the
+    same numbers, or the app would accept what the solve then refuses (or the reverse)."""
+    from shadeform.pipeline import MAX_REFINE
+
+    refine = schema.ReconstructParams.model_fields["refine"].metadata
+    assert [rule.le for rule in refine if hasattr(rule, "le")] == [MAX_REFINE]
+
+
 class TestGeneratedTypes:
     def test_committed_file_is_current(self):
         committed = (ROOT / "web" / "src" / "api.gen.ts").read_text(encoding="utf-8")
