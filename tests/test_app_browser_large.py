@@ -9,70 +9,57 @@ from before the page loads. The full-resolution mesh's decoding is checked on a 
 whole here); the 12 Mpx full solve is timed in ``benchmarks/bench_app_large.py``. A photo over
 the server's pixel limit is offered a downsample, which opens it.
 
-Timing bars are the benchmark's. This machine is shared, and its browser draws WebGL in software
-(SwiftShader): the page waits for each new model's first frame at its commit, 50-110 ms at a load
-average of 7-9 and up to 500 ms at 17, whatever the photo's size. So here the long tasks (from the
-moment the photo is chosen) and the first view are checked against bounds a loaded CI machine
-keeps, guards against the 1.9 s freeze and the 24 s first view of the issue; that the results are
-parsed and decoded in the mesh worker (what froze the page) is checked directly.
+Timing bars are the benchmark's. This machine is shared (load averages of 3 to 17 while these
+tests run), so here the long tasks (from the moment the photo is chosen to the full model turned
+with the mouse) and the first view are checked against ceilings a loaded CI machine keeps; what
+blocked the page is checked directly: the results are parsed and decoded in the mesh worker, and
+the 3D view is drawn in the render worker (its canvas handed over: in software WebGL each frame of
+a full-size model held the page 200-300 ms at its commit when drawn on the page's thread).
 Screenshots: ``tests/artifacts/app-large-progress.png``, ``app-large-cancelled.png``,
 ``app-large-fit-offer.png``.
 """
 
 from __future__ import annotations
 
+import io
 import socket
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
 import test_app_browser
-from shadeform import synth
 from test_app_browser import ARTIFACTS
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+# the long-task observer and the photo are the benchmark's: the tests check what it measures
+from bench_app_large import OBSERVE, orbit, phone_photo
 
 browser = test_app_browser.browser
 
 #: Longest task the page may run once a photo is chosen, ms. The issue's bar, 50 ms, is the
-#: benchmark's (``benchmarks/bench_app_large.py``); on a loaded 2-core CI machine the browser's
-#: software WebGL shares the cores with the solver process (see the module's docstring).
-LONG_TASK_MS = 1000
+#: benchmark's (``benchmarks/bench_app_large.py``); here the browser shares 2 loaded cores with
+#: the solver process and the other tests' work, and style, layout and paint alone then pass
+#: 50 ms. 150 ms still fails a frame of the full model committed on the page's thread (200-300 ms
+#: in software WebGL, measured before the render worker).
+LONG_TASK_MS = 150
 #: What a loaded test machine is allowed for the first view of the 12 Mpx photo (the bar, 1 s,
 #: is the benchmark's).
 FIRST_VIEW_MS = 4000
-
-# the long tasks of the page from its first script on, and when the file input changed
-OBSERVE = """
-window.__longTasks = [];
-new PerformanceObserver((list) => {
-  for (const entry of list.getEntries()) window.__longTasks.push({ start: entry.startTime, ms: entry.duration });
-}).observe({ type: 'longtask', buffered: true });
-document.addEventListener('change', (event) => {
-  if (event.target && event.target.id === 'file-image') window.__fileChosen = performance.now();
-}, true);
-"""
-
-
-def vase_photo(path, width: int, height: int) -> None:
-    """A synthetic vase (rendered at 1000 px, resized: a phone photo's size in seconds) as an
-    8-bit sRGB PNG of ``width`` x ``height``."""
-    scene = synth.scene("vase", size=1000)
-    image = Image.fromarray(np.rint(np.clip(scene.image, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8))
-    side = max(width, height)
-    big = image.resize((side, side), Image.Resampling.BILINEAR)
-    left, top = (side - width) // 2, (side - height) // 2
-    big.crop((left, top, left + width, top + height)).save(path, compress_level=1)
 
 
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory):
     folder = tmp_path_factory.mktemp("large")
     paths = {"12mpx": folder / "vase-12mpx.png", "2.1mpx": folder / "vase-2.1mpx.png"}
-    vase_photo(paths["12mpx"], 4000, 3000)
-    vase_photo(paths["2.1mpx"], 1500, 1420)  # just over LARGE_PIXELS: quick to solve whole
-    vase_photo(folder / "vase-14mpx.png", 4300, 3300)  # over the test server's limit
+    # the synthetic vase rendered at 1000 px and resized: a phone photo's size in seconds
+    phone_photo(paths["12mpx"], 4000, 3000)
+    phone_photo(paths["2.1mpx"], 1500, 1420)  # just over LARGE_PIXELS: quick to solve whole
+    phone_photo(folder / "vase-14mpx.png", 4300, 3300)  # over the test server's limit
     paths["over"] = folder / "vase-14mpx.png"
     return paths
 
@@ -117,6 +104,17 @@ def page(browser, server):
     yield page
     context.close()
     assert not errors, f"uncaught errors in the page: {errors}"
+
+
+def view_in_worker(page) -> bool:
+    """Whether the 3D view's canvas was handed to a worker (a canvas whose control went to an
+    OffscreenCanvas refuses a context on the page)."""
+    return page.evaluate(
+        """() => {
+          try { document.querySelector('#view-host .viewer-canvas').getContext('webgl2'); return false; }
+          catch (err) { return err.name === 'InvalidStateError'; }
+        }"""
+    )
 
 
 def longest_task(page) -> float:
@@ -205,6 +203,11 @@ def test_full_resolution_replaces_the_quick_look_without_long_tasks(page, photos
     page.wait_for_function("window.shadeform.mask().pixels > 500000", timeout=10_000)
     assert page.evaluate("window.shadeform.state().model") == "current"
     assert not page.is_visible("#solve-progress")
+    # drawn in the render worker, turned by the mouse on the page
+    assert view_in_worker(page)
+    front = page.evaluate("window.shadeform.cameraOffset()")
+    orbit(page)
+    assert page.evaluate("window.shadeform.cameraOffset()") != front
     assert longest_task(page) <= LONG_TASK_MS, page.evaluate("window.__longTasks")
 
 
@@ -229,3 +232,34 @@ def test_photo_over_the_limit_is_offered_a_downsample(page, photos):
     page.wait_for_function("window.shadeform.solveProgress().shown", timeout=30_000)
     page.click("#solve-cancel")
     assert longest_task(page) <= LONG_TASK_MS, page.evaluate("window.__longTasks")
+
+
+def test_view_drawn_on_the_page_without_offscreen_canvas(browser, server, tmp_path):
+    """A browser that cannot hand a canvas to a worker gets the same renderer on the page, and
+    says so once in the console; the model is drawn and turns."""
+    context = browser.new_context(viewport={"width": 1440, "height": 860})
+    context.add_init_script("delete HTMLCanvasElement.prototype.transferControlToOffscreen;")
+    page = context.new_page()
+    errors, warnings = [], []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.on("console", lambda message: message.type == "warning" and warnings.append(message.text))
+    try:
+        page.goto(server)
+        page.evaluate("window.shadeform.ready")
+        photo = tmp_path / "vase-300.png"
+        phone_photo(photo, 300, 300)
+        open_photo(page, photo)
+        wait_quick_look(page)
+        page.wait_for_function("window.shadeform.lastResult() && !window.shadeform.lastResult().preview")
+        assert not view_in_worker(page)
+        assert sum("cannot draw the 3D view in a worker" in text for text in warnings) == 1, warnings
+        front = page.evaluate("window.shadeform.cameraOffset()")
+        orbit(page)
+        assert page.evaluate("window.shadeform.cameraOffset()") != front
+        # the clay-coloured model, drawn: bright pixels in the view's middle (its background is dark)
+        shot = np.asarray(Image.open(io.BytesIO(page.locator("#view-host").screenshot())).convert("L"))
+        h, w = shot.shape
+        assert (shot[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4] > 120).mean() > 0.05
+    finally:
+        context.close()
+    assert not errors, errors

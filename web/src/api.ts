@@ -127,6 +127,8 @@ export interface Decoded {
   result: ReconstructResult;
   mesh: DecodedMesh;
   bounds: MeshBounds;
+  /** A copy of the mesh's arrays for the 3D view's renderer to take (Viewer.setMesh). */
+  spare: DecodedMesh;
   /** Milliseconds the worker took to parse and decode it. */
   decodeMs: number;
 }
@@ -143,7 +145,7 @@ function meshWorker(): Worker {
     const waiting = decoding.get(reply.id);
     decoding.delete(reply.id);
     if (!waiting) return;
-    if (reply.ok) waiting.resolve({ result: reply.result, mesh: reply.mesh, bounds: reply.bounds, decodeMs: reply.decodeMs });
+    if (reply.ok) waiting.resolve({ result: reply.result, mesh: reply.mesh, bounds: reply.bounds, spare: reply.spare, decodeMs: reply.decodeMs });
     else waiting.reject(new ApiError(500, `the model could not be read: ${reply.message}`));
   };
   return worker;

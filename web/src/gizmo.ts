@@ -10,11 +10,16 @@ const AXES: Array<[string, THREE.Vector3, number]> = [
 ];
 const SUN_DISTANCE = 1.15;
 
+/** A canvas of this thread: an OffscreenCanvas where there is one (always in a worker, where the
+ * view is drawn: renderScene.ts). */
+export function scratchCanvas(width: number, height: number): HTMLCanvasElement | OffscreenCanvas {
+  if (typeof OffscreenCanvas !== 'undefined') return new OffscreenCanvas(width, height);
+  return Object.assign(document.createElement('canvas'), { width, height });
+}
+
 function textSprite(text: string, colour: string): THREE.Sprite {
-  const canvas = document.createElement('canvas');
-  canvas.width = 96;
-  canvas.height = 48;
-  const ctx = canvas.getContext('2d')!;
+  const canvas = scratchCanvas(96, 48);
+  const ctx = canvas.getContext('2d') as CanvasRenderingContext2D | OffscreenCanvasRenderingContext2D;
   ctx.font = '600 30px system-ui, sans-serif';
   ctx.textAlign = 'center';
   ctx.textBaseline = 'middle';

@@ -7,6 +7,7 @@
 // library rasterises region polygons on).
 import { insidePolygon, outlineDistance, tidy, type Point } from './geometry';
 import { paintMask, type MaskBits, type MaskTool, type Rect } from './maskTool';
+import type { PictureReply, PictureRequest } from './pictureWorker';
 import type { Axis, Region } from './state';
 
 export type Tool = 'select' | 'polygon' | 'reference' | 'mask';
@@ -92,7 +93,9 @@ export class ImagePane {
   private fitted = false;
   private sources: Sources | null = null;
   private readonly images = new Map<string, Picture>();
-  private maskLayer: HTMLCanvasElement | null = null;
+  // the mask worker's layer as it came (drawing a 12 Mpx one into a canvas took the page 40 ms),
+  // a canvas once edited
+  private maskLayer: HTMLCanvasElement | ImageBitmap | null = null;
   /** A small copy of the mask's layer (the mask worker's), drawn while the image is shown smaller. */
   private maskSmall: ImageBitmap | null = null;
   private regionList: Region[] = [];
@@ -196,12 +199,25 @@ export class ImagePane {
     if (mask) mask.small = null;
     if (small !== this.maskSmall) this.maskSmall?.close();
     this.maskSmall = small;
+    const shown = this.maskLayer;
+    const ready = mask?.layer && mask.layer.width === mask.width && mask.layer.height === mask.height ? mask.layer : null;
     if (!mask) {
       this.maskLayer = null;
+    } else if (!dirty && ready) {
+      mask.layer = null; // the bits may change after this: only this mask may use it
+      this.maskLayer = ready;
     } else {
-      this.maskLayer ??= document.createElement('canvas');
-      paintMask(mask, this.maskLayer, dirty);
+      // an edit: into a canvas, from the layer shown (where it is the worker's) or painted anew
+      let layer = shown instanceof HTMLCanvasElement ? shown : null;
+      if (!layer) {
+        layer = Object.assign(document.createElement('canvas'), { width: mask.width, height: mask.height });
+        if (shown && dirty && shown.width === mask.width && shown.height === mask.height) layer.getContext('2d')!.drawImage(shown, 0, 0);
+        else dirty = undefined;
+      }
+      paintMask(mask, layer, dirty);
+      this.maskLayer = layer;
     }
+    if (shown instanceof ImageBitmap && shown !== this.maskLayer) shown.close();
     this.redraw();
   }
 
@@ -482,7 +498,7 @@ export class ImagePane {
   /**
    * The picture at ``url`` to draw at the scale shown: decoded off the page's thread (an
    * ImageBitmap; an <img> drawn on a canvas was decoded on it, 180 ms for a 12 Mpx photo), with
-   * a copy at most SMALL_SIDE on a side for a photo shown smaller than that (a software canvas
+   * a copy at most SMALL_SIDE (pictureWorker.ts) on a side for a photo shown smaller than that (a software canvas
    * scaling 12 Mpx at every frame blocked the page too). Null until it is ready.
    */
   private image(url: string): ImageBitmap | null {
@@ -704,9 +720,6 @@ function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number
   ctx.fillText(text, x, y);
 }
 
-/** Long side of the copy of a large picture drawn while it is shown smaller (a 2K screen's). */
-const SMALL_SIDE = 2048;
-
 /** A picture of the pane: decoded, and its small copy where it is larger than SMALL_SIDE. */
 interface Picture {
   full: ImageBitmap | null;
@@ -714,24 +727,28 @@ interface Picture {
   failed: boolean;
 }
 
+let pictures: Worker | null = null;
+let pictureId = 0;
+const reading = new Map<number, (reply: PictureReply) => void>();
+
+/** Read ``url`` into ``picture`` in the picture worker (pictureWorker.ts). */
 async function loadPicture(url: string, picture: Picture): Promise<void> {
-  try {
-    const response = await fetch(url);
-    if (!response.ok) throw new Error(`${response.status}`);
-    const blob = await response.blob();
-    const full = await createImageBitmap(blob);
-    const side = Math.max(full.width, full.height);
-    if (side > SMALL_SIDE) {
-      const k = SMALL_SIDE / side;
-      // from the file again: decoded and scaled off the page's thread too
-      picture.small = await createImageBitmap(blob, {
-        resizeWidth: Math.max(1, Math.round(full.width * k)),
-        resizeHeight: Math.max(1, Math.round(full.height * k)),
-        resizeQuality: 'medium',
-      });
-    }
-    picture.full = full;
-  } catch {
+  if (!pictures) {
+    pictures = new Worker(new URL('./pictureWorker.ts', import.meta.url), { type: 'module' });
+    pictures.onmessage = (event: MessageEvent<PictureReply>) => {
+      reading.get(event.data.id)?.(event.data);
+      reading.delete(event.data.id);
+    };
+  }
+  const id = ++pictureId;
+  const reply = await new Promise<PictureReply>((resolve) => {
+    reading.set(id, resolve);
+    pictures!.postMessage({ id, url: new URL(url, location.href).href } satisfies PictureRequest);
+  });
+  if (reply.ok) {
+    picture.small = reply.small;
+    picture.full = reply.full;
+  } else {
     picture.failed = true; // tried again when the server answers (retryImages)
   }
 }

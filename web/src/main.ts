@@ -936,12 +936,12 @@ class App {
           if (id === this.latestSent) this.model.changed('full resolution cancelled: the quick look is shown');
           return;
         }
-        const { result, mesh, bounds } = answer;
+        const { result, mesh, bounds, spare } = answer;
         // decoded in the worker: received is when it arrived there, decoded when it came back
         const decoded = performance.now();
         const received = decoded - answer.decodeMs;
         if (result.request_id !== this.latestSent) return; // superseded while on the wire
-        this.applyResult(result, mesh, bounds);
+        this.applyResult(result, mesh, { bounds, spare });
         this.model.arrived(version, !result.preview);
         if (this.describeMask) {
           this.describeMask = false;
@@ -1069,10 +1069,11 @@ class App {
     $('solve-percent').textContent = '';
   }
 
-  private applyResult(result: ReconstructResult, mesh: api.DecodedMesh, bounds?: MeshBounds): void {
+  /** ``decoded``: what the mesh worker found with the mesh (its bounds, the renderer's copy). */
+  private applyResult(result: ReconstructResult, mesh: api.DecodedMesh, decoded: { bounds?: MeshBounds; spare?: api.DecodedMesh } = {}): void {
     this.result = result;
     this.mesh = mesh;
-    this.viewer.setMesh(mesh, { refit: this.refitNext, bounds });
+    this.viewer.setMesh(mesh, { refit: this.refitNext, ...decoded });
     this.refitNext = false;
     this.viewer.setLight(result.light);
     this.modelShown();
@@ -1583,6 +1584,9 @@ async function start(): Promise<void> {
   try {
     const app = new App(await api.getOptions());
     Object.assign(hook, app.hook());
+    // the page between building the app and opening its image: one task for both blocked it for
+    // 55 ms at start-up on a loaded 2-core machine (bench_app_large.py)
+    await new Promise((resolve) => setTimeout(resolve, 0));
     await app.restore();
     resolveReady();
   } catch (err) {

@@ -40,9 +40,22 @@ export class MaskBits {
     this.bits = bits ?? new Uint8Array(width * height);
   }
 
+  /** How many pixels are set. Four bits (bytes of 0 or 1) a step, added in the four byte lanes
+   * of a 32-bit word and summed before a lane could pass 255: a 12 Mpx mask is counted on the
+   * page's thread, 12 ms one byte a step there. */
   get count(): number {
+    const bits = this.bits;
+    const head = Math.min(bits.length, (4 - (bits.byteOffset % 4)) % 4);
+    const words = Math.floor((bits.length - head) / 4);
+    const lanes = new Uint32Array(bits.buffer, bits.byteOffset + head, words);
     let total = 0;
-    for (let i = 0; i < this.bits.length; i++) total += this.bits[i];
+    for (let i = 0; i < head; i++) total += bits[i];
+    for (let start = 0; start < words; start += 255) {
+      let sum = 0;
+      for (let i = start, end = Math.min(words, start + 255); i < end; i++) sum += lanes[i];
+      total += (sum & 0xff) + ((sum >>> 8) & 0xff) + ((sum >>> 16) & 0xff) + (sum >>> 24);
+    }
+    for (let i = head + 4 * words; i < bits.length; i++) total += bits[i];
     return total;
   }
 

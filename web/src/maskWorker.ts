@@ -14,7 +14,7 @@ export type MaskDecodeReply =
   | { id: number; ok: true; bits: Uint8Array; layer: ImageBitmap; small: ImageBitmap | null }
   | { id: number; ok: false; message: string };
 
-/** Long side of a large mask's small layer: the image pane's small photo's (imagePane.ts). */
+/** Long side of a large mask's small layer: the image pane's small photo's (pictureWorker.ts). */
 const SMALL_SIDE = 2048;
 
 async function decode({ bytes, width, height }: MaskDecodeRequest): Promise<{ bits: Uint8Array; layer: ImageBitmap; small: ImageBitmap | null }> {

@@ -1,189 +1,99 @@
-// The right pane: the reconstructed mesh in three.js.
-//
-// Positions arrive in the mesh convention of docs/conventions.md, (x, y, z) = (col, -row,
-// depth) in pixels, so +z points at the viewer exactly as in the photo. Smooth shading: the
-// reconstruction's per-vertex normals are interpolated across each triangle. The viewer's own
-// lights ride with the camera (a key light from the upper left, a weak fill), so the relief reads
-// from any angle; the reconstruction's light is drawn as an arrow in the corner inset (gizmo.ts).
+// The right pane: the reconstructed mesh in three.js. The page keeps the camera, its controls and
+// what it asks of the view (where a point is drawn, the depth under a pixel); the drawing is done
+// in a render worker on the canvas handed over as an OffscreenCanvas (renderScene.ts says why).
+// Each change is sent to it; each frame asked for carries the camera's pose.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import type { DecodedMesh } from './api';
-import type { MeshBounds } from './meshWorker';
-import { Gizmo } from './gizmo';
+import { meshBounds, meshBuffers, meshCopy, type MeshBounds } from './meshWorker';
+import { RenderScene, type RenderMessage, type RenderReply, type ViewOptions } from './renderScene';
 
-export interface ViewOptions {
-  wireframe: boolean;
-  normalColours: boolean;
-  texture: boolean;
-  lightArrow: boolean;
-}
-
-const BASE_COLOUR = 0xd8d2c8; // warm clay: shading reads better than on pure white
+export type { ViewOptions } from './renderScene';
 
 export class Viewer {
-  readonly renderer: THREE.WebGLRenderer;
-  private readonly scene = new THREE.Scene();
+  private readonly canvas: HTMLCanvasElement;
+  private readonly send: (message: RenderMessage, transfer?: Transferable[]) => void;
   private readonly camera = new THREE.PerspectiveCamera(32, 1, 0.1, 1e5);
   private readonly controls: OrbitControls;
-  private readonly model = new THREE.Group();
-  private readonly parts = new THREE.Group(); // partial models placed on a fused one
-  private readonly keyLight = new THREE.DirectionalLight(0xffffff, 2.6);
-  private readonly fillLight = new THREE.DirectionalLight(0xdfe8ff, 0.6);
-  private readonly gizmo = new Gizmo();
-  private readonly shaded = new THREE.MeshStandardMaterial({
-    color: BASE_COLOUR,
-    roughness: 0.9,
-    metalness: 0,
-    side: THREE.DoubleSide,
-    polygonOffset: true, // keeps the wireframe overlay in front of the surface
-    polygonOffsetFactor: 1,
-    polygonOffsetUnits: 1,
-  });
-  private readonly normalMaterial = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
-  private readonly wireMaterial = new THREE.LineBasicMaterial({ color: 0x0f172a, transparent: true, opacity: 0.45 });
-  private surface: THREE.Mesh | null = null;
-  private wire: THREE.LineSegments | null = null;
-  private texture: THREE.Texture | null = null;
-  private textureUrl = '';
+  private readonly modelPosition = new THREE.Vector3(); // the mesh's centre at the origin
+  private centred = false;
   private positions: Float32Array | null = null;
   private size = 1;
   private options: ViewOptions = { wireframe: false, normalColours: false, texture: false, lightArrow: true };
-  private frame = 0;
-  private renderWaiters: Array<(t: number) => void> = [];
+  private partCount = 0;
+  private partsOn = true;
+  private hasGuides = false;
+  private frame = 0; // the page's animation frame asked for
+  private sent = 0; // the id of the last frame asked of the renderer
+  private renderWaiters: Array<{ id: number; resolve: (t: number) => void }> = [];
   // what the mesh's coordinates are ("model": pixels; "solid": a print in mm); a mesh in another
   // frame than the last one is always fitted anew (a solid of 80 mm after a model of 1000 px)
   private meshFrame = 'none';
-  private guides: THREE.Object3D | null = null; // drawn with the mesh (a solid's measures)
   private readonly renderListeners: Array<() => void> = [];
 
   constructor(private readonly host: HTMLElement) {
-    // a software renderer (SwiftShader: no GPU, or a headless browser) draws multisampling on the
-    // CPU, and the page waits for each frame at its commit: 190 ms for the first model without it
-    this.renderer = new THREE.WebGLRenderer({ antialias: !softwareGl(), alpha: true, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
-    this.renderer.setClearColor(0x000000, 0);
-    this.renderer.domElement.className = 'viewer-canvas';
-    this.renderer.domElement.tabIndex = 0;
-    this.renderer.domElement.setAttribute('aria-label', '3D view: drag to rotate, wheel to zoom, right-drag to pan');
-    host.append(this.renderer.domElement);
+    this.canvas = document.createElement('canvas');
+    this.canvas.className = 'viewer-canvas';
+    this.canvas.tabIndex = 0;
+    this.canvas.setAttribute('aria-label', '3D view: drag to rotate, wheel to zoom, right-drag to pan');
+    Object.assign(this.canvas.style, { width: '100%', height: '100%' });
+    host.append(this.canvas);
+    this.send = connectRenderer(this.canvas, (reply) => this.rendered_(reply));
 
     this.camera.up.set(0, 1, 0);
-    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls = new OrbitControls(this.camera, this.canvas);
     this.controls.enableDamping = false; // render only on change: no animation loop on idle
     this.controls.zoomToCursor = true;
     this.controls.addEventListener('change', () => this.requestRender());
 
-    this.scene.add(new THREE.HemisphereLight(0xe8eefc, 0x1b1e24, 0.7));
-    // lights in the camera's frame (a directional light shines from its position to its target)
-    this.keyLight.position.set(-0.5, 0.6, 1);
-    this.fillLight.position.set(0.7, -0.2, 0.6);
-    for (const light of [this.keyLight, this.fillLight]) {
-      this.camera.add(light, light.target);
-      light.target.position.set(0, 0, 0);
-    }
-    this.scene.add(this.camera);
-    this.model.add(this.parts);
-    this.scene.add(this.model);
-
     new ResizeObserver(() => this.resize()).observe(host);
     this.resize();
-    this.precompile();
-  }
-
-  /**
-   * Compile the surface's shaders before the first model comes, in parallel where the browser
-   * can (KHR_parallel_shader_compile): compiled by the first render instead, they blocked the
-   * page for 170 ms in software WebGL.
-   */
-  private precompile(): void {
-    const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(9), 3));
-    geometry.setAttribute('normal', new THREE.BufferAttribute(new Float32Array([0, 0, 1, 0, 0, 1, 0, 0, 1]), 3));
-    geometry.setAttribute('uv', new THREE.BufferAttribute(new Float32Array(6), 2));
-    const probe = new THREE.Mesh(geometry, this.shaded);
-    this.model.add(probe);
-    this.renderer
-      .compileAsync(this.scene, this.camera)
-      .then(() => {
-        // one draw with them: a software renderer (SwiftShader) builds its pipeline on the first
-        // draw, 200-400 ms that the page then waits for; here, before any model is asked for
-        // (the corner gizmo's too, drawn with every model)
-        if (this.surface) return;
-        this.renderer.render(this.scene, this.camera);
-        this.gizmo.render(this.renderer, this.camera);
-        this.renderer.clear();
-      })
-      .catch(() => undefined) // the first render compiles them then
-      .finally(() => {
-        this.model.remove(probe);
-        geometry.dispose();
-      });
   }
 
   /**
    * Show a new mesh; ``refit`` moves the camera to the front view (a new image, not a new
    * parameter), and so does a ``frame`` other than the last mesh's. Guides go with the old mesh.
+   * ``bounds``: the mesh worker's, else found here. The renderer takes a copy of the arrays (the
+   * page keeps its own: the depth under a pixel, the model shown again): ``spare``, the mesh
+   * worker's copy, else one made here (cloned or copied on the page, a 273k-vertex mesh's 15 MB
+   * took it 30-40 ms).
    */
   setMesh(
     mesh: DecodedMesh,
-    { refit, frame = 'model', bounds }: { refit: boolean; frame?: string; bounds?: MeshBounds },
+    { refit, frame = 'model', bounds, spare }: { refit: boolean; frame?: string; bounds?: MeshBounds; spare?: DecodedMesh },
   ): void {
     refit ||= frame !== this.meshFrame;
     this.meshFrame = frame;
-    this.setGuides(null);
-    const geometry = geometryOf(mesh, bounds);
-    const old = this.surface?.geometry;
-    if (this.surface) this.model.remove(this.surface);
-    if (this.wire) {
-      this.model.remove(this.wire);
-      this.wire.geometry.dispose();
-      this.wire = null;
-    }
-    old?.dispose();
+    this.hasGuides = false;
+    bounds ??= meshBounds(mesh.positions);
+    const copy = spare ?? meshCopy(mesh);
+    this.send({ type: 'mesh', mesh: copy, bounds }, meshBuffers(copy));
     this.positions = mesh.positions;
-    this.surface = new THREE.Mesh(geometry, this.shaded);
-    this.model.add(this.surface);
-    this.applyOptions();
-    const box = geometry.boundingBox!;
-    if (refit || !this.model.userData.centred) this.centre(box);
+    if (refit || !this.centred) this.centre(bounds);
     if (refit) this.recenter();
     this.requestRender();
   }
 
   /**
    * Show partial models with the mesh, each in its colour (an empty list removes them): a fused
-   * model's views where the fusion placed them. They are drawn a little toward the camera, so
-   * that where one lies on the fused surface its colour shows; where none does, the fused one.
+   * model's views where the fusion placed them.
    */
   setParts(meshes: DecodedMesh[], colours: string[]): void {
-    for (const part of [...this.parts.children] as THREE.Mesh[]) {
-      this.parts.remove(part);
-      part.geometry.dispose();
-      (part.material as THREE.Material).dispose();
-    }
-    meshes.forEach((mesh, i) => {
-      const material = new THREE.MeshStandardMaterial({
-        color: colours[i % colours.length],
-        roughness: 0.85,
-        metalness: 0,
-        side: THREE.DoubleSide,
-        polygonOffset: true,
-        polygonOffsetFactor: -1,
-        polygonOffsetUnits: -4 * (i + 1), // a fixed order where two parts overlap: no flicker
-      });
-      this.parts.add(new THREE.Mesh(geometryOf(mesh), material));
-    });
+    const copies = meshes.map(meshCopy);
+    this.send({ type: 'parts', meshes: copies, colours }, copies.flatMap(meshBuffers));
+    this.partCount = meshes.length;
     this.requestRender();
   }
 
   setPartsVisible(on: boolean): void {
-    this.parts.visible = on;
+    this.partsOn = on;
+    this.send({ type: 'partsVisible', on });
     this.requestRender();
   }
 
   /** How many partial models are drawn now (0 when hidden). */
   partsShown(): number {
-    return this.parts.visible ? this.parts.children.length : 0;
+    return this.partsOn ? this.partCount : 0;
   }
 
   /** How many vertices the main mesh on screen has. */
@@ -193,74 +103,51 @@ export class Viewer {
 
   /** The frame of the mesh on screen ("model", "solid", ...), or "none". */
   get shownFrame(): string {
-    return this.surface ? this.meshFrame : 'none';
+    return this.positions ? this.meshFrame : 'none';
   }
 
   /** Lines drawn in the mesh's coordinates until the next mesh (null removes them). */
   setGuides(guides: THREE.Object3D | null): void {
-    if (this.guides) {
-      this.model.remove(this.guides);
-      this.guides.traverse((part) => {
-        if (part instanceof THREE.LineSegments) {
-          part.geometry.dispose();
-          (part.material as THREE.Material).dispose();
-        }
-      });
-    }
-    this.guides = guides;
-    if (guides) this.model.add(guides);
+    if (!guides && !this.hasGuides) return;
+    this.hasGuides = guides !== null;
+    this.send({ type: 'guides', json: guides ? guides.toJSON() : null });
     this.requestRender();
   }
 
-  /** Call ``listener`` after every frame drawn (labels that follow the camera). */
+  /** Call ``listener`` after every frame asked for (labels that follow the camera). */
   onRender(listener: () => void): void {
     this.renderListeners.push(listener);
   }
 
   /** Where a point in the mesh's coordinates is drawn, in CSS pixels of the view; null behind the camera. */
   toScreen(x: number, y: number, z: number): [number, number] | null {
-    this.model.updateMatrixWorld();
-    const point = new THREE.Vector3(x, y, z).applyMatrix4(this.model.matrixWorld).project(this.camera);
+    this.camera.updateMatrixWorld();
+    const point = new THREE.Vector3(x, y, z).add(this.modelPosition).project(this.camera);
     if (point.z > 1) return null;
     const rect = this.host.getBoundingClientRect();
     return [((point.x + 1) / 2) * rect.width, ((1 - point.y) / 2) * rect.height];
   }
 
   clear(): void {
-    this.setGuides(null);
-    if (this.surface) {
-      this.model.remove(this.surface);
-      this.surface.geometry.dispose();
-      this.surface = null;
-    }
-    if (this.wire) {
-      this.model.remove(this.wire);
-      this.wire.geometry.dispose();
-      this.wire = null;
-    }
+    this.hasGuides = false;
+    this.send({ type: 'clear' });
     this.positions = null;
     this.requestRender();
   }
 
   setLight(light: number[]): void {
-    this.gizmo.setLight(new THREE.Vector3(light[0], light[1], light[2]));
+    this.send({ type: 'light', light: [...light] });
     this.requestRender();
   }
 
+  /** The photo draped over the model when the texture is on (read only then). */
   setPhoto(url: string): void {
-    if (url === this.textureUrl) return;
-    this.textureUrl = url;
-    this.texture?.dispose();
-    this.texture = new THREE.TextureLoader().load(url, () => this.requestRender());
-    this.texture.colorSpace = THREE.SRGBColorSpace;
-    this.texture.anisotropy = 4;
-    if (this.options.texture) this.applyOptions();
+    this.send({ type: 'photo', url: new URL(url, location.href).href });
   }
 
   setOptions(options: Partial<ViewOptions>): void {
     this.options = { ...this.options, ...options };
-    this.applyOptions();
-    this.gizmo.setLightVisible(this.options.lightArrow);
+    this.send({ type: 'options', options: this.options });
     this.requestRender();
   }
 
@@ -324,115 +211,77 @@ export class Viewer {
     return best <= within * within ? z : null;
   }
 
-  /** Resolves with performance.now() once a frame showing the current scene has been drawn. */
+  /** Resolves with performance.now() once the renderer has drawn a frame showing the current scene. */
   rendered(): Promise<number> {
     return new Promise((resolve) => {
-      this.renderWaiters.push(resolve);
+      this.renderWaiters.push({ id: this.sent + 1, resolve });
       this.requestRender();
     });
   }
 
+  /** Ask for a frame at the page's next animation frame, from the camera then. */
   requestRender(): void {
     if (this.frame) return;
     this.frame = requestAnimationFrame(() => {
       this.frame = 0;
-      this.renderer.render(this.scene, this.camera);
-      if (this.surface) this.gizmo.render(this.renderer, this.camera);
+      const { position: p, quaternion: q, fov, aspect, near, far } = this.camera;
+      const m = this.modelPosition;
+      this.send({
+        type: 'frame',
+        id: ++this.sent,
+        camera: { position: [p.x, p.y, p.z], quaternion: [q.x, q.y, q.z, q.w], fov, aspect, near, far },
+        model: [m.x, m.y, m.z],
+      });
       this.renderListeners.forEach((listener) => listener());
-      const waiters = this.renderWaiters;
-      this.renderWaiters = [];
-      const now = performance.now();
-      waiters.forEach((resolve) => resolve(now));
     });
   }
 
   // --------------------------------------------------------------------------------------
 
-  private centre(box: THREE.Box3): void {
-    const centre = box.getCenter(new THREE.Vector3());
-    const extent = box.getSize(new THREE.Vector3());
-    this.size = Math.max(extent.x, extent.y, extent.z, 1);
-    this.model.position.copy(centre).negate();
-    this.model.userData.centred = true;
+  private rendered_(reply: RenderReply): void {
+    const now = performance.now();
+    const done = this.renderWaiters.filter((waiter) => waiter.id <= reply.id);
+    this.renderWaiters = this.renderWaiters.filter((waiter) => waiter.id > reply.id);
+    done.forEach((waiter) => waiter.resolve(now));
   }
 
-  private applyOptions(): void {
-    const surface = this.surface;
-    if (!surface) return;
-    const { wireframe, normalColours, texture } = this.options;
-    if (normalColours) {
-      normalColourAttribute(surface.geometry);
-      surface.material = this.normalMaterial;
-    } else {
-      surface.material = this.shaded;
-    }
-    // a mesh without texture coordinates (a fused model) is never draped
-    const map = texture && this.texture && surface.geometry.getAttribute('uv') ? this.texture : null;
-    if (this.shaded.map !== map) {
-      this.shaded.map = map;
-      this.shaded.color.set(map ? 0xffffff : BASE_COLOUR);
-      this.shaded.needsUpdate = true;
-    }
-    if (wireframe && !this.wire) {
-      this.wire = new THREE.LineSegments(new THREE.WireframeGeometry(surface.geometry), this.wireMaterial);
-      this.model.add(this.wire);
-    } else if (!wireframe && this.wire) {
-      this.model.remove(this.wire);
-      this.wire.geometry.dispose();
-      this.wire = null;
-    }
+  private centre({ box }: MeshBounds): void {
+    const [x0, y0, z0, x1, y1, z1] = box;
+    this.size = Math.max(x1 - x0, y1 - y0, z1 - z0, 1);
+    this.modelPosition.set(-(x0 + x1) / 2, -(y0 + y1) / 2, -(z0 + z1) / 2);
+    this.centred = true;
   }
 
   private resize(): void {
     const rect = this.host.getBoundingClientRect();
     if (!rect.width || !rect.height) return;
-    this.renderer.setSize(rect.width, rect.height, true);
+    this.send({ type: 'size', width: rect.width, height: rect.height, pixelRatio: window.devicePixelRatio || 1 });
     this.camera.aspect = rect.width / rect.height;
     this.camera.updateProjectionMatrix();
     this.requestRender();
   }
 }
 
-/** The geometry of a decoded mesh: its arrays as they are; its bounds from the mesh worker when
- * it found them (a loop over every vertex less on the page's thread), else computed here. */
-function geometryOf(mesh: DecodedMesh, bounds?: MeshBounds): THREE.BufferGeometry {
-  const geometry = new THREE.BufferGeometry();
-  geometry.setAttribute('position', new THREE.BufferAttribute(mesh.positions, 3));
-  geometry.setAttribute('normal', new THREE.BufferAttribute(mesh.normals, 3));
-  if (mesh.uvs) geometry.setAttribute('uv', new THREE.BufferAttribute(mesh.uvs, 2));
-  geometry.setIndex(new THREE.BufferAttribute(mesh.indices, 1));
-  if (bounds) {
-    const [x0, y0, z0, x1, y1, z1] = bounds.box;
-    geometry.boundingBox = new THREE.Box3(new THREE.Vector3(x0, y0, z0), new THREE.Vector3(x1, y1, z1));
-    const [cx, cy, cz, radius] = bounds.sphere;
-    geometry.boundingSphere = new THREE.Sphere(new THREE.Vector3(cx, cy, cz), radius);
-  } else {
-    geometry.computeBoundingBox();
-    geometry.computeBoundingSphere();
+/**
+ * Hand ``canvas`` to the render worker; what to send it. A browser that cannot hand a canvas to a
+ * worker gets the same renderer on the page's thread (its frames then block the page while drawn).
+ */
+function connectRenderer(
+  canvas: HTMLCanvasElement,
+  reply: (reply: RenderReply) => void,
+): (message: RenderMessage, transfer?: Transferable[]) => void {
+  if (typeof canvas.transferControlToOffscreen !== 'function') {
+    console.warn('this browser cannot draw the 3D view in a worker (no OffscreenCanvas): it is drawn on the page, which may pause while a large model is drawn');
+    const scene = new RenderScene(canvas, reply, (draw) => requestAnimationFrame(draw));
+    return (message) => scene.handle(message);
   }
-  return geometry;
-}
-
-/** Per-vertex colours (n + 1) / 2: the OpenGL normal-map convention the library writes. */
-function normalColourAttribute(geometry: THREE.BufferGeometry): void {
-  if (geometry.getAttribute('color')) return;
-  const normals = geometry.getAttribute('normal');
-  const colours = new Float32Array(normals.count * 3);
-  const colour = new THREE.Color();
-  for (let i = 0; i < normals.count; i++) {
-    // a normal-map file's bytes are shown as sRGB: convert so the view shows the same colours
-    colour.setRGB((normals.getX(i) + 1) / 2, (normals.getY(i) + 1) / 2, (normals.getZ(i) + 1) / 2, THREE.SRGBColorSpace);
-    colours.set([colour.r, colour.g, colour.b], 3 * i);
-  }
-  geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
-}
-
-/** Whether WebGL runs in software (SwiftShader, llvmpipe): read from a throwaway context. */
-function softwareGl(): boolean {
-  const gl = document.createElement('canvas').getContext('webgl2');
-  if (!gl) return false;
-  const info = gl.getExtension('WEBGL_debug_renderer_info');
-  const renderer = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : String(gl.getParameter(gl.RENDERER));
-  gl.getExtension('WEBGL_lose_context')?.loseContext();
-  return /swiftshader|llvmpipe|software/i.test(renderer);
+  const offscreen = canvas.transferControlToOffscreen();
+  const worker = new Worker(new URL('./renderWorker.ts', import.meta.url), { type: 'module' });
+  worker.onmessage = (event: MessageEvent<RenderReply>) => reply(event.data);
+  worker.onerror = (event) => {
+    // an error drawing the view is the page's: reported as one (and by the tests' page-error checks)
+    throw new Error(`the 3D view's renderer failed: ${event.message}`);
+  };
+  worker.postMessage({ type: 'init', canvas: offscreen }, [offscreen]);
+  return (message, transfer = []) => worker.postMessage(message, transfer);
 }
