@@ -136,6 +136,28 @@ def wait_quick_look(page, after: int = 0) -> dict:
     return page.evaluate("window.shadeform.lastResult()")
 
 
+def test_start_up_runs_no_long_task_and_leaves_the_renderer_to_the_worker(page):
+    """The page's start-up (its first script to ready) stays under the ceiling, and its own bundle
+    holds no renderer: three.js's WebGLRenderer and its shaders (their ``#include <...>`` chunks)
+    are the render worker's, and in a chunk that only a browser without OffscreenCanvas loads
+    (their evaluation was a third of the page's first task)."""
+    page.wait_for_timeout(300)  # the first frames after ready count too
+    startup = page.evaluate("window.__longTasks")
+    assert max((task["ms"] for task in startup), default=0.0) <= LONG_TASK_MS, startup
+    assert view_in_worker(page)
+    entry = page.evaluate("document.querySelector('script[type=module]').src")
+    main_js = page.evaluate("(url) => fetch(url).then((r) => r.text())", entry)
+    # three.js's core is there (it registers __THREE__: the camera's maths, OrbitControls), not its renderer
+    assert "__THREE__" in main_js and "#include <" not in main_js
+    worker_js = page.evaluate(
+        "() => fetch(performance.getEntriesByType('resource').map((e) => e.name)"
+        ".find((name) => /renderWorker-[^/]*\\.js$/.test(name))).then((r) => r.text())"
+    )
+    assert "#include <" in worker_js  # the marker is the renderer's: the worker has it
+    loaded = page.evaluate("performance.getEntriesByType('resource').map((e) => e.name)")
+    assert not any("renderScene" in name for name in loaded), loaded
+
+
 def test_12mpx_photo_quick_look_progress_cancel(page, photos):
     open_photo(page, photos["12mpx"])
     quick = wait_quick_look(page)

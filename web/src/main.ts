@@ -126,10 +126,14 @@ class App {
   private readonly maps: MapsPanel;
   /** The work open, saved to the server as a project. */
   private readonly projects: ProjectAutosave;
-  /** Nothing was kept in this browser (a first visit, storage cleared): the newest server project is offered. */
-  private readonly freshStorage = !hasSavedSession();
-
-  constructor(private readonly options: Options) {
+  /**
+   * ``freshStorage``: nothing was kept in this browser (a first visit, storage cleared), so the
+   * newest server project is offered.
+   */
+  constructor(
+    private readonly options: Options,
+    private readonly freshStorage: boolean,
+  ) {
     const session = loadSession();
     this.projects = new ProjectAutosave(() => this.projectSnapshot());
     this.params = structuredClone(options.defaults);
@@ -1582,10 +1586,20 @@ async function start(): Promise<void> {
   const hook: Partial<Hook> & { ready: Promise<void> } = { ready };
   window.shadeform = hook; // at once, so a test can wait on ready before the options arrive
   try {
-    const app = new App(await api.getOptions());
+    const options = api.getOptions();
+    options.catch(() => undefined); // awaited below, after a task
+    // the page's first read of its storage loads it (synchronously: 1-20 ms on a loaded machine):
+    // in a task of its own while the options are fetched, not in the one that builds the app
+    await new Promise((resolve) => setTimeout(resolve, 0));
+    const freshStorage = !hasSavedSession();
+    const app = new App(await options, freshStorage);
     Object.assign(hook, app.hook());
     // the page between building the app and opening its image: one task for both blocked it for
     // 55 ms at start-up on a loaded 2-core machine (bench_app_large.py)
+    await new Promise((resolve) => setTimeout(resolve, 0));
+    // the page's first number formatted for the locale (toLocaleString: the mesh's counts) sets
+    // up its number formatting, 12-25 ms: in a task of its own, not in the first result's
+    (0).toLocaleString();
     await new Promise((resolve) => setTimeout(resolve, 0));
     await app.restore();
     resolveReady();

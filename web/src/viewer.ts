@@ -6,7 +6,7 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import type { DecodedMesh } from './api';
 import { meshBounds, meshBuffers, meshCopy, type MeshBounds } from './meshWorker';
-import { RenderScene, type RenderMessage, type RenderReply, type ViewOptions } from './renderScene';
+import type { RenderMessage, RenderReply, RenderScene, ViewOptions } from './renderScene';
 
 export type { ViewOptions } from './renderScene';
 
@@ -272,8 +272,15 @@ function connectRenderer(
 ): (message: RenderMessage, transfer?: Transferable[]) => void {
   if (typeof canvas.transferControlToOffscreen !== 'function') {
     console.warn('this browser cannot draw the 3D view in a worker (no OffscreenCanvas): it is drawn on the page, which may pause while a large model is drawn');
-    const scene = new RenderScene(canvas, reply, (draw) => requestAnimationFrame(draw));
-    return (message) => scene.handle(message);
+    // the renderer (three.js's WebGLRenderer, its shaders) is loaded only here: the page's own
+    // bundle then holds three.js's maths alone, and its first task compiles and runs less
+    let scene: RenderScene | null = null;
+    const waiting: RenderMessage[] = [];
+    void import('./renderScene').then(({ RenderScene }) => {
+      scene = new RenderScene(canvas, reply, (draw) => requestAnimationFrame(draw));
+      for (const message of waiting.splice(0)) scene.handle(message);
+    });
+    return (message) => (scene ? scene.handle(message) : void waiting.push(message));
   }
   const offscreen = canvas.transferControlToOffscreen();
   const worker = new Worker(new URL('./renderWorker.ts', import.meta.url), { type: 'module' });
