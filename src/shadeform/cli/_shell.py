@@ -144,6 +144,21 @@ def stderr_console() -> Console:
     return Console(stderr=True, highlight=False)
 
 
+def progress_bar(console: Console, label: str = "{task.description}"):
+    """The commands' progress bar on ``console``: the label, the bar, how many of how many, the
+    time taken; gone once done (rich's Progress, imported only when a command shows one)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn(label),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    )
+
+
 @contextmanager
 def stage(console: Console, text: str, timings: dict[str, float], name: str) -> Iterator[None]:
     """Show a spinner on stderr while a long step runs and record its wall time."""

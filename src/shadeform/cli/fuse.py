@@ -8,7 +8,6 @@ from typing import Annotated, NamedTuple
 
 import numpy as np
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from shadeform.cli._shell import (
     MAX_PIXELS,
@@ -26,6 +25,7 @@ from shadeform.cli._shell import (
     output_temps,
     print_files,
     print_json,
+    progress_bar,
     resolve_light,
     stage,
     stderr_console,
@@ -152,14 +152,7 @@ def fuse(
                 concave=[*drawn[i], *extra] or None,
             )
 
-        with Progress(
-            TextColumn("reconstructing each view"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err,
-            transient=True,
-        ) as bar:
+        with progress_bar(err, "reconstructing each view") as bar:
             task = bar.add_task("views", total=len(entries))
             lap = time.perf_counter()
             for i, entry in enumerate(entries):

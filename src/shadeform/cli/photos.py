@@ -11,7 +11,6 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from shadeform.cli._shell import (
@@ -43,6 +42,7 @@ from shadeform.cli._shell import (
     parse_reference,
     print_files,
     print_json,
+    progress_bar,
     resolve_light,
     stage,
     stderr_console,
@@ -242,10 +242,7 @@ def tiled_reconstruct(
         source = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels).image
     err = stderr_console()
     words = {"tiles": "solving tiles", "join": "joining tiles", "write": "writing depth"}
-    with Progress(
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True,
-    ) as bar:  # fmt: skip
+    with progress_bar(err) as bar:
         task = bar.add_task("reading", total=None)
 
         def progress(stage: str, done: int, total: int) -> None:
@@ -694,14 +691,7 @@ def batch(
     # the folder is made for the run and removed again if the run is refused (bad options)
     with (
         OutputSet() as outputs,
-        Progress(
-            TextColumn("reconstructing"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err,
-            transient=True,
-        ) as bar,
+        progress_bar(err, "reconstructing") as bar,
     ):
         outputs.make_folder(out)
         task = bar.add_task("photos", total=len(photos))

@@ -11,7 +11,6 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from shadeform.cli._shell import (
@@ -25,6 +24,7 @@ from shadeform.cli._shell import (
     format_vector,
     print_files,
     print_json,
+    progress_bar,
     resolve_light,
     stage,
     stderr_console,
@@ -169,14 +169,7 @@ def evaluate(
                 runs.append((name, True, label, kwargs))
 
     rows = []
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TimeElapsedColumn(),
-        console=stderr_console(),
-        transient=True,
-    ) as progress:
+    with progress_bar(stderr_console()) as progress:
         task = progress.add_task("compiling", total=len(runs))
         # one tiny run first, so the compile/cache-load time is not billed to the first row
         warm = synth_module.scene("sphere", size=16)
@@ -237,13 +230,7 @@ def _evaluate_fusion(size: int, as_json: bool) -> None:
 
     angles = (0.0, 90.0, 180.0, 270.0)
     rows = []
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TimeElapsedColumn(),
-        console=stderr_console(),
-        transient=True,
-    ) as progress:
+    with progress_bar(stderr_console()) as progress:
         task = progress.add_task("fusing", total=len(synth.CLOSED_OBJECTS))
         for name in synth.CLOSED_OBJECTS:
             progress.update(task, description=f"{name}: 4 views")

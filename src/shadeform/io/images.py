@@ -55,7 +55,6 @@ from pathlib import Path
 
 import numpy as np
 import png
-import tifffile
 from PIL import Image
 
 from shadeform.errors import InputError
@@ -899,6 +898,8 @@ def _drop_alpha(values: np.ndarray) -> np.ndarray:
 
 
 def _decode_tiff(source: _Source, max_pixels: int) -> _Samples:
+    import tifffile  # here, not at import: most photos are PNG or JPEG
+
     with _decoding(source, "TIFF"):
         tif = tifffile.TiffFile(io.BytesIO(source.data))
     try:
@@ -973,7 +974,9 @@ def _check_tiff(source: _Source, header: dict, max_pixels: int) -> None:
         raise _unsupported(
             source, f"is a TIFF with photometric interpretation {photometric}", "save it as RGB or grayscale"
         )
-    if codec not in tifffile.TIFF.DECOMPRESSORS:
+    from tifffile import TIFF
+
+    if codec not in TIFF.DECOMPRESSORS:
         raise _unsupported(
             source, f"is a TIFF compressed with codec {codec}", "save it uncompressed or with deflate"
         )

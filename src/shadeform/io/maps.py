@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import png
-import tifffile
 
 from shadeform.errors import InputError
 from shadeform.io.atomic import atomic_write
@@ -216,6 +215,8 @@ def save_depth(depth: np.ndarray, path: str | os.PathLike[str]) -> Path:
         if suffix == ".npy":
             np.save(file_obj, depth, allow_pickle=False)
         else:
+            import tifffile  # here, not at import: most commands write no TIFF
+
             tifffile.imwrite(file_obj, depth.astype(np.float32), photometric="minisblack")
     return path
 
@@ -237,6 +238,8 @@ def load_depth(path: str | os.PathLike[str]) -> np.ndarray:
     InputError
         If the file is missing, of another format, or not a single 2-D array.
     """
+    import tifffile
+
     path = Path(path)
     suffix = _depth_suffix(path)
     if not path.is_file():
