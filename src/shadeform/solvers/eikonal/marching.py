@@ -233,8 +233,9 @@ def _march(f, theta, mask, steep, sources, goal, first, need, out, heap, track):
     pixel (-1 for none; read only when ``need > 0``, so it may be a 1 x 1 placeholder otherwise);
     ids below ``first`` are not targets. The first accepted value of each target goes to
     ``reached`` and marching stops once ``need`` targets were reached (``need <= 0``: march
-    everything). The GIL is released: independent marches run on threads side by side. ``label`` is written only when
-    ``track`` (else it may be a 1 x 1 placeholder). Returns the targets still missing.
+    everything). ``label`` is written only when ``track`` (else it may be a 1 x 1 placeholder).
+    Returns the targets still missing. The GIL is released, so independent marches run side by
+    side on threads (:func:`side_by_side`).
     """
     src_index, src_value, src_label = sources
     T, label, done, reached = out
@@ -319,8 +320,9 @@ def run_march(f, theta, mask, steep, index, values, labels=None, goal=None, firs
     Notes
     -----
     Memory: 13 bytes per pixel of the image (``T``, the accepted flags and the heap's positions;
-    4 more with ``labels``, 4 with ``goal``) plus a heap that grows with the front. One compiled specialisation: ``f`` and
-    ``theta`` float64, the labels and targets int32 (the pixel numbers int64 past 2**31 pixels).
+    4 more with ``labels``, 4 with ``goal``) plus a heap that grows with the front. One compiled
+    specialisation: ``f`` and ``theta`` float64, the labels and targets int32 (the pixel numbers
+    int64 past 2**31 pixels).
     """
     shape = mask.shape
     T = np.full(shape, np.inf)
