@@ -135,7 +135,7 @@ def test_view_photos_a_bad_angle_that_stays_and_a_reload(page, tmp_path):
     page.press('#views-list [data-index="1"] input', "Enter")
     page.wait_for_function(f"window.shadeform.views.applied() > {applied}", timeout=RESULT_MS)
     assert not page.is_visible("#views-error")
-    page.wait_for_timeout(300)  # the session is saved a moment after a change
+    page.wait_for_function("window.shadeform.sessionSaved()", timeout=RESULT_MS)
     # a reload shows the views again, fused
     page.reload()
     page.evaluate("window.shadeform.ready")
@@ -143,6 +143,7 @@ def test_view_photos_a_bad_angle_that_stays_and_a_reload(page, tmp_path):
     assert views(page, "open()") and [view["angle"] for view in views(page, "views()")] == [0, 95, 180, 270]
     assert page.input_value('#views-list [data-index="1"] input') == "95"
     # a server that forgot an uploaded view's photo: the page says which, and stays usable
+    page.wait_for_function("window.shadeform.sessionSaved()", timeout=RESULT_MS)  # the reload's own save
     page.evaluate(
         """() => {
         const session = JSON.parse(localStorage.getItem('shadeform.session.v1'));

@@ -245,6 +245,10 @@ class App {
     });
     $('fit-dismiss').addEventListener('click', () => this.showFitOffer(null));
     onReconnect(() => this.reconnected());
+    // a change made just before a reload is reopened by it, not lost with the pending save
+    window.addEventListener('pagehide', () => {
+      if (this.saveTimer !== 0) this.saveNow();
+    });
     this.bindToolbar();
     this.bindFiles();
     this.bindKeys();
@@ -1175,19 +1179,23 @@ class App {
     if (this.image && this.source && this.views.editing !== null) this.views.edited(this.image, this.source, this.params);
     this.projects.changed();
     clearTimeout(this.saveTimer);
-    this.saveTimer = window.setTimeout(
-      () => saveSession({
-          image: this.image,
-          source: this.source,
-          params: this.image ? this.params : null,
-          view: this.view,
-          initialId: this.initialId,
-          photoSet: this.stereo.session(),
-          views: this.views.session(),
-          viewsOpen: document.body.classList.contains('views-mode'),
-        }),
-      150,
-    );
+    this.saveTimer = window.setTimeout(() => this.saveNow(), 150);
+  }
+
+  /** Store what a reload reopens (a change is stored a moment later, or at once when the page goes). */
+  private saveNow(): void {
+    clearTimeout(this.saveTimer);
+    this.saveTimer = 0;
+    saveSession({
+      image: this.image,
+      source: this.source,
+      params: this.image ? this.params : null,
+      view: this.view,
+      initialId: this.initialId,
+      photoSet: this.stereo.session(),
+      views: this.views.session(),
+      viewsOpen: document.body.classList.contains('views-mode'),
+    });
   }
 
   /** The progress indicator: on while a solve or another task (upload, export, ...) runs. */
@@ -1451,6 +1459,8 @@ class App {
       modelState: (): ModelStateView => this.model.view(),
       /** The state of the model the 3D view shows now, whichever mode, as the badge says it. */
       shownModelState: () => ({ ...this.shownModel().view(), badge: $('model-badge').hidden ? null : $('model-badge').textContent }),
+      /** Whether the session a reload reopens is stored (no change waits to be). */
+      sessionSaved: () => this.saveTimer === 0,
       /** The messages at the bottom of the window, oldest first. */
       toasts: () => toasts(),
       /** The autosave to the server's projects: this page's project ids, saves taken, whether one is due. */
