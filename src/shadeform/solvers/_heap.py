@@ -5,6 +5,9 @@ Fast marching (:mod:`shadeform.solvers.eikonal`) and the oblique solver's cone m
 preallocated arrays: ``keys`` and ``items`` (its entries) and ``where`` (an item's position in it,
 -1 when it is not queued), so an item is queued at most once and its key can be lowered in place.
 Equal keys pop the smaller item first, so the order never depends on the order of insertion.
+The operations that take arrays are inlined into their callers' loops (numba's
+``inline="always"``): a call of a compiled function counts references to its array arguments,
+which costs more than a heap step.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ def _before(key_a, item_a, key_b, item_b) -> bool:
     return item_a < item_b
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def heap_update(keys, items, where, size, key, item):
     """Queue ``item`` with ``key``, or lower its key if it is queued with a larger one.
 
@@ -46,7 +49,7 @@ def heap_update(keys, items, where, size, key, item):
     return size
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def heap_pop(keys, items, where, size):
     """Remove the smallest ``(key, item)``; return ``(key, item, new size)``."""
     key = keys[0]
@@ -76,7 +79,7 @@ def heap_pop(keys, items, where, size):
     return key, item, size
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def heap_reserve(keys, items, size):
     """``keys`` and ``items`` with room for one more entry: the same arrays, or copies twice as
     long when ``size`` fills them (a heap started small grows with its front, not the image)."""
