@@ -60,6 +60,7 @@ def test_example_view_set_is_fused_with_its_partial_models_and_exports(page, tmp
     assert page.input_value('#views-list [data-index="1"] input') == "90"
     # the fused model on screen is the server's, closed; each partial model drawn with it
     assert result["watertight"] and len(result["part_vertex_counts"]) == 4
+    assert views(page, "rival()") is None and not page.is_visible("#views-rival")  # the photos decide
     assert views(page, "shownVertexCount()") == result["vertex_count"]
     assert len(page.evaluate("window.shadeform.mesh().positions")) == 3 * result["vertex_count"]
     assert views(page, "partsShown()") == 4

@@ -155,6 +155,22 @@ class TestExampleSet:
         assert glb.status_code == 200 and glb.content[:4] == b"glTF"
 
 
+def test_a_rival_placement_is_sent_with_the_model(client, view_set, monkeypatch):
+    import dataclasses
+
+    import shadeform.fusion as fusion
+
+    assert fused(client, views_of(view_set))["rivals"] == []  # exact angles: the photos decide
+    placed = fusion.place  # the server imports it when it fuses
+    rival = fusion.Rival((0.0, 16.5, 0.0, 16.4), 1.06)
+    monkeypatch.setattr(
+        fusion, "place", lambda *a, **k: dataclasses.replace(placed(*a, **k), rivals=(rival,))
+    )
+    views = views_of(view_set)
+    views[1]["angle"] = 91.0  # another request: not the cached fusion
+    assert fused(client, views)["rivals"] == [[0.0, 16.5, 0.0, 16.4]]
+
+
 def test_editing_one_views_mask_changes_the_model_and_solves_only_that_view(client, view_set):
     views = views_of(view_set)
     before = fused(client, views)

@@ -311,6 +311,8 @@ export interface FuseResult {
   volume: number;
   /** Whether the fused model is closed (every edge shared by two faces). */
   watertight: boolean;
+  /** Other placements the photos fit about as well as the fused model's (``shadeform.fusion.Rival``): per placement, per view the degrees it is turned from where the model has it (0: not turned). Not empty: the photos do not decide, and the model may be wrong. */
+  rivals: number[][];
   /** Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, total. */
   timings: Record<string, number>;
   /** What ran: ``resolution`` (the voxel edge used), ``refine``, ``settle``, ``cached`` (whether the fusion was reused). */

@@ -352,6 +352,16 @@ export class ViewsSession {
     ];
     if (solved) parts.push(`${solved} of ${result.views.length} views solved anew.`);
     $('views-note').textContent = parts.join(' ');
+    // photos that fit another placement about as well: said apart, in the colour of unsure areas
+    const rivals = result.rivals.map((turns) =>
+      turns.flatMap((turn, i) => (turn > 0 ? [`view ${i + 1} turned ${Math.round(turn)}°`] : [])).join(', '),
+    );
+    const rival = $('views-rival');
+    rival.hidden = rivals.length === 0;
+    rival.textContent = rivals.length
+      ? `The photos fit another placement about as well (${rivals.join('; or ')}), so the model may be wrong there: ` +
+        'add a photo between two views (e.g. at 45°), or give the angles exactly and untick Refine the poses.'
+      : '';
   }
 
   /** A message that stays until the next result (or the next error). */
@@ -523,6 +533,8 @@ export class ViewsSession {
       editing: () => this.editing,
       error: () => ($('views-error').hidden ? null : $('views-error').textContent),
       note: () => $('views-note').textContent,
+      /** The warning that the photos fit another placement as well, or null. */
+      rival: () => ($('views-rival').hidden ? null : $('views-rival').textContent),
       lastResult: () => {
         const r = this.result;
         if (!r) return null;

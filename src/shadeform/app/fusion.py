@@ -62,6 +62,7 @@ class _Fused:
     spacing: float
     volume: float
     watertight: bool
+    rivals: tuple[tuple[float, ...], ...]
     timings: dict[str, float]
 
 
@@ -206,6 +207,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
         placement.grid.spacing,
         measures["volume"],
         measures["watertight"],
+        tuple(rival.turns for rival in placement.rivals),
         {"place": placed - lap, "solid": time.perf_counter() - placed},
     )
     state.results.put(key, fused, mesh.vertices.nbytes + mesh.faces.nbytes + mesh.normals.nbytes)
@@ -248,6 +250,7 @@ def _result(state, entries: list, body: FuseRequest) -> FuseResult:
         axis=fused.axis,
         volume=fused.volume,
         watertight=fused.watertight,
+        rivals=[list(turns) for turns in fused.rivals],
         timings=timings,
         info={"resolution": fused.spacing, "refine": body.refine, "settle": body.settle, "cached": cached},
     )

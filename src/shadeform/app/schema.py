@@ -479,6 +479,12 @@ class FuseResult(_Model):
     watertight: bool = Field(
         description="Whether the fused model is closed (every edge shared by two faces)."
     )
+    rivals: list[list[float]] = Field(
+        default_factory=list,
+        description="Other placements the photos fit about as well as the fused model's "
+        "(``shadeform.fusion.Rival``): per placement, per view the degrees it is turned from where the "
+        "model has it (0: not turned). Not empty: the photos do not decide, and the model may be wrong.",
+    )
     timings: dict[str, float] = Field(
         description="Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, "
         "total.",

@@ -197,6 +197,7 @@ def fuse(
                     for entry, areas in zip(entries, settled)
                 ],
                 "surface": surface,
+                "rivals": [{"turns": list(rival.turns), "ratio": rival.ratio} for rival in placement.rivals],
                 "files": {"mesh": output},
                 "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **measures},
                 "timings": timings,
@@ -220,6 +221,15 @@ def fuse(
                 f"(along {area['axis']}), as the other views' silhouettes show",
                 highlight=False,
             )
+    for rival in placement.rivals:
+        turned = [f"view {i + 1} turned {turn:.0f} degrees" for i, turn in enumerate(rival.turns) if turn > 0]
+        err.print(
+            f"warning: the photos fit another placement about as well ({', '.join(turned)}), and the "
+            "model may be wrong there; add a photo between two views (e.g. at 45 degrees) or give "
+            "the angles exactly (--no-refine keeps them)",
+            soft_wrap=True,
+            highlight=False,
+        )
     out.print(
         f"  time {format_seconds(timings['total'])}: reconstruct {format_seconds(timings['reconstruct'])}, "
         f"fuse {format_seconds(timings['fuse'])}, write {format_seconds(timings['write'])}"

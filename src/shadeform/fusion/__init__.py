@@ -40,7 +40,7 @@ from shadeform.fusion.volume import (
     view_offsets,
 )
 
-__all__ = ["Placement", "fuse", "place", "solid"]
+__all__ = ["Placement", "Rival", "fuse", "place", "solid"]
 
 #: The ways :func:`fuse` turns the placed views into one surface.
 SURFACES = ("volume", "poisson")
@@ -118,7 +118,10 @@ def fuse(
     -------
     shadeform.mesh.Mesh
         Closed, watertight, outward-facing, in the object frame (the frame of the view whose
-        pose is 0 or the identity), pixel units.
+        pose is 0 or the identity), pixel units. Where the photos fit another placement about
+        as well (four views 90 degrees apart of a waisted body, given 9 degrees off), the mesh
+        is one of the two: :func:`place` names the other (:attr:`Placement.rivals`), as the CLI
+        and the app do.
 
     Raises
     ------
@@ -130,6 +133,24 @@ def fuse(
         require_open3d(load=False)  # before the placement's seconds, not after
     placement = place(views, resolution=resolution, refine=refine, axis=axis, resolve=resolve)
     return solid(placement, surface=surface)
+
+
+@dataclass(frozen=True)
+class Rival:
+    """Another placement that explains the views about as well as the one kept (:func:`_checked`).
+
+    Attributes
+    ----------
+    turns : tuple of float
+        Per view, the angle in degrees between its pose there and in the kept placement (0 for
+        views that are not turned further than a voxel's worth: :func:`_moved`).
+    ratio : float
+        Its disagreement over the kept placement's: at most :data:`CLEARLY`, below 1 where it
+        agrees slightly better but not clearly.
+    """
+
+    turns: tuple[float, ...]
+    ratio: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +171,10 @@ class Placement:
     concave : tuple of tuple of dict
         Per view, the unsure areas (its ``info["unsure"]`` entries) the other views' silhouettes
         showed to be concave (:mod:`.settle`); empty when nothing was settled.
+    rivals : tuple of Rival
+        Other placements that explain the photos about as well as this one (within
+        :data:`CLEARLY`), with views turned elsewhere: the photos do not decide between them, and
+        the fused model may be wrong. Empty when none was found.
     """
 
     views: tuple[FusionView, ...]
@@ -157,6 +182,7 @@ class Placement:
     axis: float
     readings: tuple
     concave: tuple[tuple[dict, ...], ...]
+    rivals: tuple[Rival, ...] = ()
 
     def transforms(self) -> list[np.ndarray]:
         """Per view, the 4x4 matrix taking its partial model's vertices (the mesh frame of
@@ -218,12 +244,14 @@ def place(
             placed = refine_poses(placed, turntable=turntable)
     if resolve is not None and refine:
         given = [pose.matrix for pose in poses]
-        placed, readings, concave = _checked(
+        placed, readings, concave, rivals = _checked(
             placed, readings, concave, recs, given, grid, column0, resolve, turntable=turntable
         )
+    else:
+        rivals = ()
     if refine and not hull(placed, grid).any():
         raise InputError("the views share no volume at the refined poses; check the angles")
-    return Placement(tuple(placed), grid, column0, tuple(readings), tuple(concave))
+    return Placement(tuple(placed), grid, column0, tuple(readings), tuple(concave), rivals)
 
 
 def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, turntable):
@@ -244,13 +272,15 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
     Where the views cannot tell two placements apart (four views of a body of revolution, whose
     front and back readings each explain the photos with the object turned), the placement
     stays as settled: the user's angles are not trusted to choose (on shapes held out, trusting
-    them in ties made the result worse).
+    them in ties made the result worse). The trials that come within :data:`CLEARLY` of the
+    placement kept with a view turned elsewhere are returned as its rivals (:class:`Rival`),
+    so that the user learns the photos do not decide.
     """
     loss, scale = disagreement(placed, turntable=turntable, samples=TRIAL_SAMPLES, every_piece=True)
     best = _Trial(placed, loss, tuple(readings), tuple(concave))
     options = [_distinct(rec, resolve, i, grid.spacing) for i, rec in enumerate(recs)]
     if all(len(choices) < 2 for choices in options):
-        return placed, readings, concave
+        return placed, readings, concave, ()
     # each view at its given pose, touching the hull there; the hull's front seen from a view is
     # the same for every reading of it (a reading changes depth, not mask)
     start = [_placed(rec, pose, column0) for rec, pose in zip(readings, given)]
@@ -308,9 +338,56 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
         if kept.loss * CLEARLY >= best.loss:
             break
         best = kept
+    rivals = _rivals(best, trials.values(), grid.spacing, turntable=turntable)
     if best.placed is placed:
-        return placed, readings, concave
-    return refine_poses(best.placed, turntable=turntable), list(best.readings), best.concave
+        return placed, readings, concave, rivals
+    return refine_poses(best.placed, turntable=turntable), list(best.readings), best.concave, rivals
+
+
+def _rivals(best: _Trial, trials, spacing: float, *, turntable: bool) -> tuple[Rival, ...]:
+    """The trials within :data:`CLEARLY` of ``best`` with a view turned elsewhere, each once."""
+    out: list[tuple[_Trial, Rival]] = []
+    for trial in sorted(trials, key=lambda trial: trial.loss):
+        if not np.isfinite(trial.loss) or trial.loss > best.loss * CLEARLY:
+            continue
+        if not _apart(trial.placed, best.placed, spacing, turntable=turntable):
+            continue
+        if any(not _apart(trial.placed, seen.placed, spacing, turntable=turntable) for seen, _ in out):
+            continue
+        turns = tuple(
+            float(np.degrees(_angle(a.rotation, b.rotation)))
+            if _moved(a, b, spacing, turntable=turntable)
+            else 0.0
+            for a, b in zip(trial.placed, best.placed)
+        )
+        out.append((trial, Rival(turns, float(trial.loss / best.loss) if best.loss > 0 else 1.0)))
+    return tuple(rival for _, rival in out)
+
+
+def _apart(a: list[FusionView], b: list[FusionView], spacing: float, *, turntable: bool) -> bool:
+    """Whether two placements of the same views differ: a view turned by more than a voxel's worth."""
+    return any(_moved(u, v, spacing, turntable=turntable) for u, v in zip(a, b))
+
+
+def _moved(a: FusionView, b: FusionView, spacing: float, *, turntable: bool) -> bool:
+    """Whether the turn between two poses of one view moves its trusted surface by more than
+    ``spacing`` (:func:`_reach`)."""
+    return _angle(a.rotation, b.rotation) * _reach(a, turntable=turntable) > spacing
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (radians) of the rotation between two rotation matrices."""
+    cosine = (np.trace(a.T @ b) - 1.0) / 2.0
+    return float(np.arccos(np.clip(cosine, -1.0, 1.0)))
+
+
+def _reach(view: FusionView, *, turntable: bool) -> float:
+    """How far the view's trusted surface point farthest from the axis (from the origin, for poses
+    given as matrices) lies, in pixels: a turn by ``t`` radians moves it ``t`` times that."""
+    rows, cols = np.nonzero(view.mask & view.trusted & np.isfinite(view.depth))
+    points = view.surface_points(rows, cols)
+    reach = np.hypot(points[:, 0], points[:, 2]) if turntable else np.linalg.norm(points, axis=1)
+    return float(reach.max(initial=0.0))
 
 
 @dataclass(frozen=True)
@@ -346,14 +423,8 @@ def _beyond(placed: list[FusionView], given: list[np.ndarray], spacing: float, *
     point by a voxel is finer than the fused volume, the hull and the settling resolve.
     """
     for view, pose in zip(placed, given):
-        cosine = (np.trace(pose[:3, :3].T @ view.rotation) - 1.0) / 2.0
-        excess = float(np.arccos(np.clip(cosine, -1.0, 1.0))) - np.radians(CORRECTED)
-        if excess <= 0:
-            continue
-        rows, cols = np.nonzero(view.mask & view.trusted & np.isfinite(view.depth))
-        points = view.surface_points(rows, cols)
-        reach = np.hypot(points[:, 0], points[:, 2]) if turntable else np.linalg.norm(points, axis=1)
-        if excess * float(reach.max(initial=0.0)) > spacing:
+        excess = _angle(pose[:3, :3], view.rotation) - np.radians(CORRECTED)
+        if excess > 0 and excess * _reach(view, turntable=turntable) > spacing:
             return True
     return False
 
