@@ -83,6 +83,12 @@ _GOLDEN = 0.3819660112501051  # (3 - sqrt(5)) / 2
 _GOLDEN_STEPS = 24
 
 
+# The local fit's functions are inlined into the marching loop (numba's inline="always", as are
+# the heap's operations): a compiled call counts references to each array argument, and the
+# cost alone is called about 70 times a pixel (kernel 10-20 % faster, median of 9 scene runs:
+# benchmarks/results/inline.md; the values are bit-identical).
+
+
 @numba.njit(cache=True)
 def _fit_work():
     """Work arrays of the local fit: ``nb, db, zb, wb, prefer, a0, a1, a2, tmp`` (8 neighbours)."""
@@ -99,7 +105,7 @@ def _fit_work():
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _gather(r, c, state, convex, kappa, work, lb):
     """Accepted 8-neighbours of ``(r, c)`` into ``work`` (:func:`_fit_work`): normals ``nb``,
     displacements ``db = (dx, dy)`` to them, heights ``zb``, weights ``wb = 1 / |d|^2``, and their
@@ -145,7 +151,7 @@ def _gather(r, c, state, convex, kappa, work, lb):
     return count, spans
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx, cy, out_z):
     """Cost of azimuth ``phi`` in the local fit; its best height goes to ``out_z[0]``.
 
@@ -183,7 +189,7 @@ def _local_cost(phi, a0, a1, a2, nb, db, zb, wb, count, gamma, prefer, hinge, cx
     return cost
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _fit_pixel(r, c, state, cone, convex, weights, samples, work, labels, out):
     """The marching's local fit at ``(r, c)``: ``out = (n_x, n_y, n_z, z, phi, datum)``.
 
