@@ -22,6 +22,7 @@ Screenshots: ``tests/artifacts/app-large-progress.png``, ``app-large-cancelled.p
 from __future__ import annotations
 
 import io
+import re
 import socket
 import sys
 import threading
@@ -140,7 +141,8 @@ def test_start_up_runs_no_long_task_and_leaves_the_renderer_to_the_worker(page):
     """The page's start-up (its first script to ready) stays under the ceiling, and its own bundle
     holds no renderer: three.js's WebGLRenderer and its shaders (their ``#include <...>`` chunks)
     are the render worker's, and in a chunk that only a browser without OffscreenCanvas loads
-    (their evaluation was a third of the page's first task)."""
+    (their evaluation was a third of the page's first task); the mesh worker sets up number
+    formatting before the page's first result needs it."""
     page.wait_for_timeout(300)  # the first frames after ready count too
     startup = page.evaluate("window.__longTasks")
     assert max((task["ms"] for task in startup), default=0.0) <= LONG_TASK_MS, startup
@@ -156,6 +158,13 @@ def test_start_up_runs_no_long_task_and_leaves_the_renderer_to_the_worker(page):
     assert "#include <" in worker_js  # the marker is the renderer's: the worker has it
     loaded = page.evaluate("performance.getEntriesByType('resource').map((e) => e.name)")
     assert not any("renderScene" in name for name in loaded), loaded
+    # the page's first number formatted for its locale (a mesh's counts) set up ICU's number
+    # formatting on the page, 11-18 ms: the mesh worker does it first, for the whole renderer
+    # process. A bundler drops the call if its result goes unused: it must be in the worker's bundle
+    mesh_worker = re.search(r"meshWorker-[\w-]+\.js", main_js)
+    assert mesh_worker, "the mesh worker's script is not named in the page's bundle"
+    mesh_js = page.evaluate("(url) => fetch(url).then((r) => r.text())", "assets/" + mesh_worker.group(0))
+    assert "toLocaleString()" in mesh_js
 
 
 def test_12mpx_photo_quick_look_progress_cancel(page, photos):

@@ -109,6 +109,12 @@ export class ImagePane {
   private pressAt: Point = [0, 0];
   private split = 0.5;
   private frame = 0;
+  /**
+   * The host's size as its ResizeObserver last saw it: a new image is fitted to it without
+   * reading layout right after the page changed (a forced style and layout in the task that
+   * opens an image), null until it is observed.
+   */
+  private hostSize: { width: number; height: number } | null = null;
   tool: Tool = 'select';
   display: Display = 'photo';
   showMask = true;
@@ -123,7 +129,11 @@ export class ImagePane {
     this.canvas.setAttribute('aria-label', 'Image: references and concave regions');
     host.append(this.canvas);
     this.context = this.canvas.getContext('2d')!;
-    new ResizeObserver(() => this.resize()).observe(host);
+    new ResizeObserver((entries) => {
+      const box = entries[entries.length - 1].borderBoxSize?.[0];
+      this.hostSize = box ? { width: box.inlineSize, height: box.blockSize } : null;
+      this.resize();
+    }).observe(host);
     this.canvas.addEventListener('pointerdown', (e) => this.onDown(e));
     this.canvas.addEventListener('pointermove', (e) => this.onMove(e));
     this.canvas.addEventListener('pointerup', (e) => this.onUp(e));
@@ -279,7 +289,7 @@ export class ImagePane {
   }
 
   fit(): void {
-    const rect = this.host.getBoundingClientRect();
+    const rect = this.hostSize ?? this.host.getBoundingClientRect();
     if (!this.width || !rect.width || !rect.height) return;
     const margin = 24;
     this.scale = Math.max(0.01, Math.min((rect.width - 2 * margin) / this.width, (rect.height - 2 * margin) / this.height));
@@ -485,7 +495,10 @@ export class ImagePane {
   // ----------------------------------------------------------------------------- drawing
 
   private resize(): void {
-    const rect = this.host.getBoundingClientRect();
+    // before its first observation the observer is due (and calls this): reading the size here
+    // would force a style and layout in the middle of the app's start
+    const rect = this.hostSize;
+    if (!rect) return;
     const dpr = window.devicePixelRatio || 1;
     this.canvas.width = Math.max(1, Math.round(rect.width * dpr));
     this.canvas.height = Math.max(1, Math.round(rect.height * dpr));
@@ -710,7 +723,27 @@ export class ImagePane {
 
 /** A small text tag with a dark halo, readable on any photo. */
 function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number, colour: string): void {
-  ctx.font = '600 11px system-ui, sans-serif';
+  const m = ctx.getTransform();
+  // drawn once into a sprite and copied at every frame after: the halo (strokeText) is the glyphs'
+  // outlines stroked anew at each call, 3-5 ms a frame of the page's thread for a relief's
+  // numbered unsure areas in a software canvas (Chromium traces of bench_app_large.py's page).
+  // Only where the tag is drawn upright at the pane's scale and without a dash (every caller now)
+  if (m.b !== 0 || m.c !== 0 || m.a !== m.d || m.a <= 0 || ctx.getLineDash().length) {
+    drawLabel(ctx, text, x, y, colour);
+    return;
+  }
+  const sprite = labelSprite(text, colour, m.a);
+  // at whole device pixels: the copy is the sprite's pixels, unscaled (at most half a pixel moved)
+  const left = Math.round(m.a * x + m.e - sprite.width / 2);
+  const top = Math.round(m.d * y + m.f - sprite.height / 2);
+  ctx.save();
+  ctx.setTransform(1, 0, 0, 1, 0, 0);
+  ctx.drawImage(sprite, left, top);
+  ctx.restore();
+}
+
+function drawLabel(ctx: CanvasRenderingContext2D | OffscreenCanvasRenderingContext2D, text: string, x: number, y: number, colour: string): void {
+  ctx.font = LABEL_FONT;
   ctx.textAlign = 'center';
   ctx.textBaseline = 'middle';
   ctx.lineWidth = 3;
@@ -718,6 +751,31 @@ function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number
   ctx.strokeText(text, x, y);
   ctx.fillStyle = colour;
   ctx.fillText(text, x, y);
+}
+
+const LABEL_FONT = '600 11px system-ui, sans-serif';
+/** The tags drawn so far, by text, colour and device pixel ratio (a few dozen at most in use). */
+const labelSprites = new Map<string, HTMLCanvasElement>();
+
+function labelSprite(text: string, colour: string, ratio: number): HTMLCanvasElement {
+  const key = `${text}\u0000${colour}\u0000${ratio}`;
+  let sprite = labelSprites.get(key);
+  if (sprite) return sprite;
+  sprite = document.createElement('canvas');
+  const measure = sprite.getContext('2d')!;
+  measure.font = LABEL_FONT;
+  // the text's width, the halo (3 px wide) and a pixel to spare on each side; 11 px text in 24 px
+  const width = Math.ceil(measure.measureText(text).width) + 8;
+  const height = 24;
+  // even sizes: the middle, where the text is drawn, is a whole pixel in the sprite and the pane
+  sprite.width = 2 * Math.ceil((width * ratio) / 2);
+  sprite.height = 2 * Math.ceil((height * ratio) / 2);
+  const ctx = sprite.getContext('2d')!;
+  ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
+  drawLabel(ctx, text, sprite.width / ratio / 2, sprite.height / ratio / 2, colour);
+  if (labelSprites.size >= 256) labelSprites.delete(labelSprites.keys().next().value!);
+  labelSprites.set(key, sprite);
+  return sprite;
 }
 
 /** A picture of the pane: decoded, and its small copy where it is larger than SMALL_SIDE. */

@@ -117,13 +117,14 @@ class App {
   private readonly model = new ModelState(() => this.showModelState());
   private readonly pane: ImagePane;
   private readonly viewer: Viewer;
-  private readonly panel: Panel;
   private readonly maskTool: MaskTool;
-  private readonly stereo: StereoSession;
-  private readonly views: ViewsSession;
+  // built in a task after the constructor's (App.create)
+  private panel!: Panel;
+  private stereo!: StereoSession;
+  private views!: ViewsSession;
   /** The Print and Maps panels: the one photo's model as a solid in mm, and as texture maps. */
-  private readonly print: PrintPanel;
-  private readonly maps: MapsPanel;
+  private print!: PrintPanel;
+  private maps!: MapsPanel;
   /** The work open, saved to the server as a project. */
   private readonly projects: ProjectAutosave;
   /**
@@ -163,6 +164,24 @@ class App {
       notice: (text) => this.notice(text),
     });
     this.pane.maskEditor = this.maskTool;
+  }
+
+  /**
+   * The app, built in three tasks: the image pane, the 3D view and the mask tool; the panels and
+   * the other modes' sessions; the menus, the bindings and what the panel shows. Built in one
+   * task it held the page 13 ms of thread time, 26-35 ms of wall time on a loaded 2-core
+   * machine (Chromium traces of bench_app_large.py's page).
+   */
+  static async create(options: Options, freshStorage: boolean): Promise<App> {
+    const app = new App(options, freshStorage);
+    await nextTask();
+    app.buildPanels(options);
+    await nextTask();
+    app.bind();
+    return app;
+  }
+
+  private buildPanels(options: Options): void {
     this.stereo = new StereoSession(options, {
       showMesh: (result, mesh, refit) => {
         this.mesh = mesh;
@@ -232,6 +251,9 @@ class App {
       clearRegions: () => this.regionsEdited([], true),
       markUnsure: (i) => this.markUnsure(i),
     });
+  }
+
+  private bind(): void {
     this.buildMenus();
     bindToasts();
     $('solve-cancel').addEventListener('click', () => void this.cancelJob());
@@ -1535,6 +1557,16 @@ class App {
 
 type Hook = ReturnType<App['hook']>;
 
+/**
+ * The rest of the work in a later task, so that the page can draw and take input between: the
+ * scheduler's yield where there is one (it keeps this work's priority), else a timer.
+ */
+function nextTask(): Promise<void> {
+  const scheduler = (globalThis as { scheduler?: { yield?: () => Promise<void> } }).scheduler;
+  if (scheduler?.yield) return scheduler.yield();
+  return new Promise((resolve) => setTimeout(resolve, 0));
+}
+
 /** Why an image id stopped working, in the user's words. */
 function forgotten(name: string): string {
   return `The server no longer had ${name} (it was restarted without its sessions, or let it go)`;
@@ -1600,17 +1632,15 @@ async function start(): Promise<void> {
     options.catch(() => undefined); // awaited below, after a task
     // the page's first read of its storage loads it (synchronously: 1-20 ms on a loaded machine):
     // in a task of its own while the options are fetched, not in the one that builds the app
-    await new Promise((resolve) => setTimeout(resolve, 0));
+    await nextTask();
     const freshStorage = !hasSavedSession();
-    const app = new App(await options, freshStorage);
+    const app = await App.create(await options, freshStorage);
     Object.assign(hook, app.hook());
     // the page between building the app and opening its image: one task for both blocked it for
-    // 55 ms at start-up on a loaded 2-core machine (bench_app_large.py)
-    await new Promise((resolve) => setTimeout(resolve, 0));
-    // the page's first number formatted for the locale (toLocaleString: the mesh's counts) sets
-    // up its number formatting, 12-25 ms: in a task of its own, not in the first result's
-    (0).toLocaleString();
-    await new Promise((resolve) => setTimeout(resolve, 0));
+    // 55 ms at start-up on a loaded 2-core machine (bench_app_large.py). The page's number
+    // formatting (toLocaleString: the mesh's counts) is set up by the mesh worker, before the
+    // first result (meshWorker.ts), no longer in a task of the page's here (11 ms of thread time)
+    await nextTask();
     await app.restore();
     resolveReady();
   } catch (err) {
