@@ -2,8 +2,9 @@
 //
 // Every error body is {"detail": "<one line>"}; ApiError carries that line and the status so
 // the UI can show it as it is and react to 404 (the server forgot an image) specially. Every
-// request goes through connection.send: one that cannot reach the server is a NetworkError, and
-// the connection says so and waits for the server to come back.
+// request goes through connection.send (the results the mesh worker fetches tell the connection
+// how they went, by answered and unreachable): one that cannot reach the server is a
+// NetworkError, and the connection says so and waits for the server to come back.
 import type {
   AutoMaskRequest,
   FuseRequest,
@@ -25,8 +26,8 @@ import type {
   StereoResult,
   ViewSetInfo,
 } from './api.gen';
-import { send } from './connection';
-import type { DecodeReply, MeshBounds } from './meshWorker';
+import { answered, send, unreachable } from './connection';
+import type { DecodeReply, DecodeRequest, MeshBounds } from './meshWorker';
 
 export type StereoRequestBody = StereoRequest;
 
@@ -122,7 +123,7 @@ export function reconstruct(request: ReconstructRequest, signal?: AbortSignal): 
   return json<ReconstructResult>(postJson('/api/reconstruct', request, signal));
 }
 
-/** A reconstruct result and its mesh, decoded in the mesh worker (its ``mesh`` strings emptied). */
+/** A reconstruct result and its mesh, fetched and decoded in the mesh worker (its ``mesh`` strings emptied). */
 export interface Decoded {
   result: ReconstructResult;
   mesh: DecodedMesh;
@@ -145,28 +146,44 @@ function meshWorker(): Worker {
     const waiting = decoding.get(reply.id);
     decoding.delete(reply.id);
     if (!waiting) return;
-    if (reply.ok) waiting.resolve({ result: reply.result, mesh: reply.mesh, bounds: reply.bounds, spare: reply.spare, decodeMs: reply.decodeMs });
-    else waiting.reject(new ApiError(500, `the model could not be read: ${reply.message}`));
+    if (reply.ok) {
+      answered();
+      waiting.resolve({ result: reply.result, mesh: reply.mesh, bounds: reply.bounds, spare: reply.spare, decodeMs: reply.decodeMs });
+    } else if (reply.status === 0) {
+      waiting.reject(unreachable());
+    } else {
+      answered();
+      waiting.reject(new ApiError(reply.status, reply.message));
+    }
   };
   return worker;
 }
 
-/** A response's JSON result, parsed and its mesh decoded in the worker: the page never blocks on it. */
-async function decodedResult(response: Promise<Response>, signal?: AbortSignal): Promise<Decoded> {
-  const done = await response;
-  if (!done.ok) throw await failure(done);
-  const bytes = await done.arrayBuffer(); // read off the page's thread; parsed in the worker
+/**
+ * A result fetched, parsed and its mesh decoded in the mesh worker: the page's thread never reads
+ * its bytes (``body``: a JSON request's, sent with POST). ``signal`` cancels the worker's request.
+ */
+function decodedResult(url: string, body: unknown, signal?: AbortSignal): Promise<Decoded> {
   signal?.throwIfAborted();
   const id = ++decodeCounter;
   return new Promise<Decoded>((resolve, reject) => {
     decoding.set(id, { resolve, reject });
-    meshWorker().postMessage({ id, bytes }, [bytes]);
+    const request: DecodeRequest =
+      body === undefined ? { id, url, method: 'GET' } : { id, url, method: 'POST', body: JSON.stringify(body) };
+    meshWorker().postMessage(request);
+    // an aborted request never resolves (its reply, if the worker had it already, is dropped)
+    const abort = () => {
+      if (!decoding.delete(id)) return;
+      meshWorker().postMessage({ cancel: id } satisfies DecodeRequest);
+      reject(new DOMException('The request was cancelled', 'AbortError'));
+    };
+    signal?.addEventListener('abort', abort, { once: true });
   });
 }
 
-/** ``reconstruct``, decoded in the mesh worker. */
+/** ``reconstruct``, fetched and decoded in the mesh worker. */
 export function reconstructDecoded(request: ReconstructRequest, signal?: AbortSignal): Promise<Decoded> {
-  return decodedResult(postJson('/api/reconstruct', request, signal), signal);
+  return decodedResult('/api/reconstruct', request, signal);
 }
 
 // ------------------------------------------------------------- background full solves
@@ -181,7 +198,7 @@ export function solveProgress(jobId: string, signal?: AbortSignal): Promise<Solv
 }
 
 export function solveResult(jobId: string, signal?: AbortSignal): Promise<Decoded> {
-  return decodedResult(send(`/api/solves/${encodeURIComponent(jobId)}/result`, { cache: 'no-store', signal }), signal);
+  return decodedResult(`/api/solves/${encodeURIComponent(jobId)}/result`, undefined, signal);
 }
 
 export function cancelSolve(jobId: string): Promise<SolveJob> {

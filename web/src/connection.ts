@@ -56,6 +56,18 @@ export async function send(input: string, init?: RequestInit): Promise<Response>
   return response;
 }
 
+/** A request made in a worker (the mesh worker's fetch) never reached the server: the error to
+ * throw, the connection told, as :func:`send` tells it. */
+export function unreachable(): NetworkError {
+  lost();
+  return new NetworkError();
+}
+
+/** A request made in a worker was answered: the connection is online. */
+export function answered(): void {
+  reached();
+}
+
 function lost(): void {
   if (state === 'lost') return;
   state = 'lost';

@@ -1,15 +1,17 @@
-// A Web Worker that turns a reconstruct result's JSON bytes into what the 3D view draws, off the
-// page's thread: JSON parsing, base64 to typed arrays, the bounding box and sphere. A 12 Mpx
-// photo's full-resolution mesh is up to 300,000 vertices (the server's VIEW_VERTICES), about
-// 20 MB of JSON: parsed on the page it blocked it for hundreds of milliseconds. The arrays come
-// back transferred (no copy); the result comes back without its mesh strings.
+// A Web Worker that fetches a reconstruct result and turns its JSON into what the 3D view draws,
+// off the page's thread: the response's bytes, JSON parsing, base64 to typed arrays, the bounding
+// box and sphere. A 12 Mpx photo's full-resolution mesh is up to 300,000 vertices (the server's
+// VIEW_VERTICES), about 20 MB of JSON: parsed on the page it blocked it for hundreds of
+// milliseconds, and its bytes read there (fetched by the page) took 10-29 ms of the page's thread
+// a chunk (Chromium traces of bench_app_large.py). The arrays come back transferred (no copy);
+// the result comes back without its mesh strings.
 import { decodeMesh, type DecodedMesh } from './api';
 import type { ReconstructResult } from './api.gen';
 
-export interface DecodeRequest {
-  id: number;
-  bytes: ArrayBuffer;
-}
+/** Fetch ``url`` and decode its result (``id`` names the reply), or cancel request ``cancel``. */
+export type DecodeRequest =
+  | { id: number; url: string; method: 'GET' | 'POST'; body?: string }
+  | { cancel: number };
 
 /** Axis-aligned box (min x, y, z, max x, y, z) and bounding sphere (centre x, y, z, radius). */
 export interface MeshBounds {
@@ -17,9 +19,12 @@ export interface MeshBounds {
   sphere: [number, number, number, number];
 }
 
+/** The decoded result; or why not: the server's answer (``status`` and its one line), a request
+ * that never reached it or was cancelled (``status`` 0; the page drops a cancelled one's reply),
+ * or bytes that did not decode (500). */
 export type DecodeReply =
   | { id: number; ok: true; result: ReconstructResult; mesh: DecodedMesh; bounds: MeshBounds; spare: DecodedMesh; decodeMs: number }
-  | { id: number; ok: false; message: string };
+  | { id: number; ok: false; status: number; message: string };
 
 /** The box and a sphere round it (its centre, the farthest vertex from it), as three.js finds them. */
 export function meshBounds(positions: Float32Array): MeshBounds {
@@ -73,18 +78,56 @@ if (typeof scope.document === 'undefined' && typeof (globalThis as { WorkerGloba
   // included: done here, before the first result is decoded, the page's first call then takes
   // under 1 ms (measured in headless Chromium). Kept on the scope: a bundler drops an unused call.
   scope.numberFormat = (0).toLocaleString();
-  scope.onmessage = (event: MessageEvent<DecodeRequest>) => {
-    const { id, bytes } = event.data;
-    const start = performance.now();
+  const requests = new Map<number, AbortController>();
+  const reply = (message: DecodeReply, transfer: Transferable[] = []) => scope.postMessage(message, transfer);
+  scope.onmessage = async (event: MessageEvent<DecodeRequest>) => {
+    const request = event.data;
+    if ('cancel' in request) {
+      requests.get(request.cancel)?.abort();
+      return;
+    }
+    const { id, url, method, body } = request;
+    const controller = new AbortController();
+    requests.set(id, controller);
     try {
-      const { result, mesh, bounds } = decodeResult(bytes);
-      const decodeMs = performance.now() - start;
-      // the 3D view's renderer takes a copy of the arrays (the page keeps the mesh): made here, as
-      // copied on the page a 273k-vertex mesh's 15 MB blocked it for 30-40 ms
-      const spare = meshCopy(mesh);
-      scope.postMessage({ id, ok: true, result, mesh, bounds, spare, decodeMs } satisfies DecodeReply, [...meshBuffers(mesh), ...meshBuffers(spare)]);
-    } catch (err) {
-      scope.postMessage({ id, ok: false, message: (err as Error).message } satisfies DecodeReply, []);
+      let response: Response;
+      let bytes: ArrayBuffer;
+      try {
+        const headers = body === undefined ? undefined : { 'Content-Type': 'application/json' };
+        response = await fetch(url, { method, body, headers, cache: 'no-store', signal: controller.signal });
+        bytes = await response.arrayBuffer();
+      } catch {
+        reply({ id, ok: false, status: 0, message: 'the server is not reachable' });
+        return;
+      }
+      if (!response.ok) {
+        reply({ id, ok: false, status: response.status, message: failureLine(response, bytes) });
+        return;
+      }
+      const start = performance.now();
+      try {
+        const { result, mesh, bounds } = decodeResult(bytes);
+        const decodeMs = performance.now() - start;
+        // the 3D view's renderer takes a copy of the arrays (the page keeps the mesh): made here, as
+        // copied on the page a 273k-vertex mesh's 15 MB blocked it for 30-40 ms
+        const spare = meshCopy(mesh);
+        reply({ id, ok: true, result, mesh, bounds, spare, decodeMs }, [...meshBuffers(mesh), ...meshBuffers(spare)]);
+      } catch (err) {
+        reply({ id, ok: false, status: 500, message: `the model could not be read: ${(err as Error).message}` });
+      }
+    } finally {
+      requests.delete(id);
     }
   };
+}
+
+/** An error answer's one line: its ``{"detail": ...}``, else its status line (a proxy's page). */
+function failureLine(response: Response, bytes: ArrayBuffer): string {
+  try {
+    const body = JSON.parse(new TextDecoder().decode(bytes));
+    if (body && typeof body.detail === 'string') return body.detail;
+  } catch {
+    // not JSON: the status line
+  }
+  return `${response.status} ${response.statusText}`.trim();
 }
