@@ -43,7 +43,7 @@ from shadeform import synth
 FIRST_VIEW_BAR_MS = 1000
 
 #: What the traces said about the long tasks left (printed with the table).
-LONG_TASKS_NOTE = "Where the long tasks went (Chromium traces of the same flow, Playwright's tracing with the V8 sampler): at the issue's last figure (257 ms) they were the commits of the 3D view's frames, where the page waited for the GPU process to draw the canvas and read it back (GLES2::ReadPixels in LayerTreeHost::DoUpdateLayers; WebGL in software, SwiftShader, on the same 2 cores): 210-290 ms for each frame of the 273k-vertex model, the first and every frame of an orbit. The view is now drawn in a render worker on an OffscreenCanvas (web/src/renderWorker.ts), so those waits are the worker's. Also moved off the page's thread: the 12 Mpx photo's small copy (createImageBitmap's resize runs where its promise resolves: 500 ms on the page; now in web/src/pictureWorker.ts), the copy of the mesh the renderer takes (made in the mesh worker), the mask's layer (shown as the mask worker's bitmap, no longer drawn into a canvas), and the app's start-up split in two tasks. What is left on the page's thread is style, layout, paint and the image pane's 2D canvas, 20-45 ms a task on this machine under load. The intermittent 60-360 ms tasks seen in about 1 flow in 4 during the full solve (traced: 7-22 ms of thread time in 50-220 ms of wall time, the rest the page's thread waiting for a core, and once an 83 ms paint) were frames of the busy bar's sweep, which animated left: the page was restyled, laid out and painted at every frame (about 900 main-thread paints a flow); it now moves by transform, on the compositor. The benchmark's wait for the full result polls every 100 ms (Playwright's default polls at every animation frame, which also drew a frame each 16 ms). The page's start-up (traced the same way, CDP's profiler for the lines): its longest tasks were the bundle's first task (46-50 ms median at a load of 2-3: three.js's renderer and shaders evaluated at load for the fallback drawing on the page, now in a chunk only a browser without OffscreenCanvas loads: 25 ms), the first result's (the page's first toLocaleString set up number formatting, 12-25 ms: now in a task of its own), the app's build (its first read of localStorage, 1-20 ms: now a task of its own while the options are fetched), and, left, the first style and layout of the whole page (25-50 ms under load) and the opening of the first image (its requests and the image pane, 25-45 ms under load).\n"
+LONG_TASKS_NOTE = "Where the long tasks went (Chromium traces of the same flow, Playwright's tracing with the V8 sampler): at the issue's last figure (257 ms) they were the commits of the 3D view's frames, where the page waited for the GPU process to draw the canvas and read it back (GLES2::ReadPixels in LayerTreeHost::DoUpdateLayers; WebGL in software, SwiftShader, on the same 2 cores): 210-290 ms for each frame of the 273k-vertex model, the first and every frame of an orbit. The view is now drawn in a render worker on an OffscreenCanvas (web/src/renderWorker.ts), so those waits are the worker's. Also moved off the page's thread: the 12 Mpx photo's small copy (createImageBitmap's resize runs where its promise resolves: 500 ms on the page; now in web/src/pictureWorker.ts), the copy of the mesh the renderer takes (made in the mesh worker), the mask's layer (shown as the mask worker's bitmap, no longer drawn into a canvas), and the app's start-up split in two tasks. What is left on the page's thread is style, layout, paint and the image pane's 2D canvas, 20-45 ms a task on this machine under load. The intermittent 60-360 ms tasks seen in about 1 flow in 4 during the full solve (traced: 7-22 ms of thread time in 50-220 ms of wall time, the rest the page's thread waiting for a core, and once an 83 ms paint) were frames of the busy bar's sweep, which animated left: the page was restyled, laid out and painted at every frame (about 900 main-thread paints a flow); it now moves by transform, on the compositor. The benchmark's wait for the full result polls every 100 ms (Playwright's default polls at every animation frame, which also drew a frame each 16 ms). The page's start-up (traced the same way, CDP's profiler for the lines): its longest tasks were the bundle's first task (46-50 ms median at a load of 2-3: three.js's renderer and shaders evaluated at load for the fallback drawing on the page, now in a chunk only a browser without OffscreenCanvas loads: 25 ms), the first result's (the page's first toLocaleString set up number formatting, 12-25 ms: now set up by the mesh worker, for the whole renderer process, before the first result), the app's build (its first read of localStorage, 1-20 ms: now a task of its own while the options are fetched), and, left, the first style and layout of the whole page (25-50 ms under load) and the opening of the first image (its requests and the image pane, 25-45 ms under load). Since (traced again, thread and wall time): the app is built in three tasks (13 ms of thread time in one before), the image pane takes its size from its ResizeObserver (no style and layout forced while an image opens), the unsure areas' tags are drawn once into sprites (3-5 ms a frame), and the results with a mesh are fetched by the mesh worker (the page read the full result's bytes, 10-29 ms of thread time a chunk). Every page task is then at most about 16 ms of thread time; under a load of 2-8 its wall time runs 3-7 times that, the first style and layout (12-17 ms of thread time) the largest.\n"
 LONG_TASK_BAR_MS = 50
 
 #: The page's long tasks from its first script on, and when the file input changed (run before the
@@ -82,7 +82,7 @@ def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = Non
     page.wait_for_timeout(1000)
     before = page.evaluate("window.shadeform.applied()")
     page.set_input_files("#file-image", str(photo))
-    page.wait_for_function(f"window.shadeform.applied() > {before}", timeout=120_000)
+    page.wait_for_function(f"window.shadeform.applied() > {before}", timeout=120_000, polling=100)
     quick = page.evaluate("window.shadeform.timeline()")
     chosen = page.evaluate("window.__fileChosen")
     row = {"first": quick["firstRendered"] - chosen, "quick_server": quick["serverTimings"]}
@@ -113,10 +113,14 @@ def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = Non
         row["after_cancel"] = page.evaluate("window.shadeform.timeline().firstRendered - window.__changed")
         page.click("#solve-cancel")
     else:
-        # the timeline is the page's record of a result drawn: the full result is applied
-        # (lastResult) a frame before the render worker has drawn it. Polled every 100 ms, not at
-        # every animation frame (Playwright's default): its predicate made the page draw a frame
-        # every 16 ms of the solve on the page's thread, the harness's work, not the page's
+        # the full solve's end is asked of the server from here, not polled in the page: the
+        # harness's polls there are tasks of the page's thread (Playwright's injected script: 5-9
+        # ms of thread time, stretched to 50-100 ms of wall time while the solver takes the
+        # cores, traced), which the observer counts as the page's. Then the timeline, the page's
+        # record of a result drawn (the full result is applied a frame before the render worker
+        # has drawn it), polled every 100 ms, not at every animation frame (Playwright's default)
+        page.wait_for_function("window.shadeform.solveProgress().job !== null", timeout=60_000, polling=100)
+        wait_for_job(url, page.evaluate("window.shadeform.solveProgress().job"))
         page.wait_for_function(
             "window.shadeform.state().image.width === 4000 && !window.shadeform.lastResult().preview"
             " && window.shadeform.timeline() && !window.shadeform.timeline().preview",
@@ -134,6 +138,20 @@ def run_once(browser, url: str, photo: Path, *, cancel_after: float | None = Non
     row["startup"] = max((t["ms"] for t in tasks if t["start"] + t["ms"] <= chosen), default=0.0)
     context.close()
     return row
+
+
+def wait_for_job(url: str, job: str, timeout: float = 600.0) -> None:
+    """Until the server's background solve ``job`` is no longer running (``GET /api/solves/{job}``)."""
+    import json
+    import urllib.request
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with urllib.request.urlopen(f"{url.rstrip('/')}/api/solves/{job}") as response:
+            if json.load(response)["state"] != "running":
+                return
+        time.sleep(0.1)
+    raise TimeoutError(f"solve {job} still running after {timeout:.0f} s")
 
 
 def orbit(page) -> None:
