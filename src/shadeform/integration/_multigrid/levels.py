@@ -24,6 +24,8 @@ References
 
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 from numba import prange
@@ -100,11 +102,12 @@ def pseudo_inverse(A: np.ndarray) -> np.ndarray:
     ``1e-10`` of the largest count as 0)."""
     if A.shape[0] == 0:
         return np.zeros((0, 0))
-    vals, vecs = np.linalg.eigh(A)
-    keep = vals > 1e-10 * max(vals[-1], 0.0)
-    if not keep.any():
-        return np.zeros_like(A)
-    return (vecs[:, keep] / vals[keep]) @ vecs[:, keep].T
+    with _one_blas_thread():
+        vals, vecs = np.linalg.eigh(A)
+        keep = vals > 1e-10 * max(vals[-1], 0.0)
+        if not keep.any():
+            return np.zeros_like(A)
+        return (vecs[:, keep] / vals[keep]) @ vecs[:, keep].T
 
 
 def graph_pseudo_inverse(A: np.ndarray) -> np.ndarray:
@@ -123,8 +126,25 @@ def graph_pseudo_inverse(A: np.ndarray) -> np.ndarray:
     n_parts, labels = csgraph.connected_components(A != 0, directed=False)
     E = np.zeros((m, n_parts))
     E[np.arange(m), labels] = 1.0
-    J = (E / E.sum(axis=0)) @ E.T
-    return np.linalg.inv(A + J) - J
+    with _one_blas_thread():
+        J = (E / E.sum(axis=0)) @ E.T
+        return np.linalg.inv(A + J) - J
+
+
+def _one_blas_thread():
+    """The coarsest grid's matrix is small: BLAS threads give little there, and OpenBLAS's, which
+    spin after their work, made every solve on a machine with a busy core up to 2.5x slower now
+    and then (``benchmarks/results/stalls.md``: the propagation solver's refinement)."""
+    return _blas_libraries().limit(limits=1, user_api="blas")
+
+
+@functools.cache
+def _blas_libraries():
+    """The process's thread pools, found once (``threadpool_limits`` looks for them at each call:
+    0.8 ms, against 0.01 ms for a limit on the ones found)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
 
 
 class Levels:
