@@ -56,15 +56,20 @@ export interface DecodedMesh {
   indices: Uint32Array;
 }
 
-async function failure(response: Response): Promise<ApiError> {
-  let detail = `${response.status} ${response.statusText}`.trim();
+/** An error answer's one line: its ``{"detail": ...}``, else its status line (a proxy's page). */
+export function errorLine(response: Response, body: string): string {
   try {
-    const body = await response.json();
-    if (body && typeof body.detail === 'string') detail = body.detail;
+    const parsed = JSON.parse(body);
+    if (parsed && typeof parsed.detail === 'string') return parsed.detail;
   } catch {
-    // not JSON (e.g. a proxy's page): keep the status line
+    // not JSON: the status line
   }
-  return new ApiError(response.status, detail, response.headers);
+  return `${response.status} ${response.statusText}`.trim();
+}
+
+async function failure(response: Response): Promise<ApiError> {
+  const body = await response.text().catch(() => '');
+  return new ApiError(response.status, errorLine(response, body), response.headers);
 }
 
 async function json<T>(response: Promise<Response>): Promise<T> {

@@ -5,7 +5,7 @@
 // milliseconds, and its bytes read there (fetched by the page) took 10-29 ms of the page's thread
 // a chunk (Chromium traces of bench_app_large.py). The arrays come back transferred (no copy);
 // the result comes back without its mesh strings.
-import { decodeMesh, type DecodedMesh } from './api';
+import { decodeMesh, errorLine, type DecodedMesh } from './api';
 import type { ReconstructResult } from './api.gen';
 
 /** Fetch ``url`` and decode its result (``id`` names the reply), or cancel request ``cancel``. */
@@ -101,7 +101,7 @@ if (typeof scope.document === 'undefined' && typeof (globalThis as { WorkerGloba
         return;
       }
       if (!response.ok) {
-        reply({ id, ok: false, status: response.status, message: failureLine(response, bytes) });
+        reply({ id, ok: false, status: response.status, message: errorLine(response, new TextDecoder().decode(bytes)) });
         return;
       }
       const start = performance.now();
@@ -119,15 +119,4 @@ if (typeof scope.document === 'undefined' && typeof (globalThis as { WorkerGloba
       requests.delete(id);
     }
   };
-}
-
-/** An error answer's one line: its ``{"detail": ...}``, else its status line (a proxy's page). */
-function failureLine(response: Response, bytes: ArrayBuffer): string {
-  try {
-    const body = JSON.parse(new TextDecoder().decode(bytes));
-    if (body && typeof body.detail === 'string') return body.detail;
-  } catch {
-    // not JSON: the status line
-  }
-  return `${response.status} ${response.statusText}`.trim();
 }
