@@ -343,6 +343,19 @@ class TestUsage:
             assert "Traceback" not in result.output
         assert list(out.iterdir()) == []
 
+    def test_bare_command_shows_the_commands_main_job_first(self):
+        result = invoke()
+        assert "error:" not in result.output and "Traceback" not in result.output
+        listed = [
+            line.split()[1]
+            for line in result.output.splitlines()
+            if line.startswith("│ ") and len(line.split()) > 2
+        ]
+        names = [name for name in listed if name.isalpha()]
+        assert names[:3] == ["reconstruct", "stereo", "fuse"] and names[-1] == "warm", names
+        # each command's summary is whole sentences, however its docstring wraps
+        assert "does not wait for them." in result.output
+
     def test_console_script_end_to_end(self, inputs, out):
         script = Path(sys.executable).parent / "shadeform"
         if not script.exists():

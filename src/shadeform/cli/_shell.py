@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -34,6 +35,15 @@ DEPTH_SUFFIXES = (".tif", ".tiff", ".npy")
 
 # the base of click's usage errors, whichever click typer runs on (its own copy, or click itself)
 _CLICK_ERROR = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
+#: click's "no arguments: the help was shown" (a usage error with no message of its own).
+_NO_ARGS = getattr(sys.modules[_CLICK_ERROR.__module__], "NoArgsIsHelpError", ())
+
+
+#: The order of ``shadeform --help``'s command list: the main job first, the tools last.
+COMMAND_ORDER = (
+    "reconstruct", "stereo", "fuse", "relief", "maps", "lights", "batch", "app", "demo",
+    "synth", "evaluate", "methods", "formats", "warm",
+)  # fmt: skip
 
 
 class _Group(TyperGroup):
@@ -51,12 +61,22 @@ class _Group(TyperGroup):
         except typer.Abort:
             typer.echo("error: stopped", err=True)
             sys.exit(1)
+        except _NO_ARGS as err:  # a bare ``shadeform``: the help is the answer, not an error line
+            sys.exit(err.exit_code)
         except _CLICK_ERROR as err:
             where = err.ctx.command_path if getattr(err, "ctx", None) is not None else "shadeform"
             message = " ".join(err.format_message().split()).rstrip(".")
             typer.echo(f"error: {message}; see '{where} --help'", err=True)
             sys.exit(err.exit_code)
         sys.exit(code if isinstance(code, int) else 0)
+
+    def list_commands(self, ctx):
+        """The commands in ``--help`` in the order a user reaches for them, not the order their
+        modules register them (``warm`` came first)."""
+        names = super().list_commands(ctx)
+        return sorted(
+            names, key=lambda name: COMMAND_ORDER.index(name) if name in COMMAND_ORDER else len(COMMAND_ORDER)
+        )
 
     def invoke(self, ctx):
         try:
@@ -118,8 +138,9 @@ def main() -> None:
 
 @app.command()
 def warm() -> None:
-    """Compile the numba kernels of the common paths now (set-up does it), so that the first
-    reconstruction does not wait for the compiler."""
+    """Compile the numba kernels now, so that the first reconstruction does not wait for them.
+
+    Set-up does it; the kernels of the common paths are cached where the package is installed."""
     from shadeform.pipeline import warm as warm_kernels
 
     err = stderr_console()

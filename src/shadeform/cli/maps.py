@@ -109,8 +109,9 @@ def maps(
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
-    """Make texture maps of one photo: normal maps (OpenGL and DirectX), height, ambient occlusion
-    and curvature, as PNG files named after the photo."""
+    """Make texture maps of one photo: normals, height, ambient occlusion and curvature as PNGs.
+
+    Normal maps in both the OpenGL and the DirectX convention; each file is named after the photo."""
     import shadeform
     from shadeform.errors import InputError
     from shadeform.io.maps import save_gray

@@ -1,5 +1,6 @@
 """The commands that turn photos into models: ``reconstruct`` (one photo), ``stereo`` (several
-photos under known lights) and ``batch`` (many photos in parallel)."""
+photos under different lights), ``lights`` (lights from a shiny sphere) and ``batch`` (many photos
+in parallel)."""
 
 from __future__ import annotations
 
@@ -413,7 +414,10 @@ def stereo(
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
-    """Reconstruct a mesh from several photos of an object under known lights (photometric stereo)."""
+    """Reconstruct a mesh from several photos of an object under different lights (photometric stereo).
+
+    The lights come from a light file (``--lights``, also RTI ``.lp``), a shiny sphere in the
+    photos (``--sphere``), or are found from the photos themselves (``--unknown-lights``)."""
     from shadeform._checks import check_choice
     from shadeform.io.photoset import load_photo_set
     from shadeform.photometric import METHODS, reconstruct_stereo
