@@ -781,6 +781,14 @@ class TestStereo:
             "stereo", *photo_set["photos"][:2], "--lights", photo_set["lights"], "-o", out / "m.glb"
         )
         assert_fails(result, out, "at least 3 photos")
+        # too few photos is said first, whatever else is missing
+        assert_fails(
+            invoke("stereo", *photo_set["photos"][:2], "-o", out / "m.glb"), out, "at least 3 photos"
+        )
+
+    def test_no_lights_names_every_way_to_give_them(self, photo_set, out):
+        message = assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "lights")
+        assert all(option in message for option in ("--lights", "--sphere", "--unknown-lights")), message
 
     @pytest.mark.parametrize(
         "text, fragment",

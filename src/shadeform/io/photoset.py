@@ -383,9 +383,18 @@ def match_lp(photos, names, directions, path) -> np.ndarray:
     )
 
 
+#: The ways to give a photo set's lights, in the words of the command line.
+_LIGHTS_FROM = (
+    "give --lights FILE (one direction toward the light per photo, x y z, or an RTI .lp file), "
+    "--sphere X,Y,R or --sphere auto (a shiny sphere in the photos), or --unknown-lights"
+)
+
+
 def _find(sources: list[Path], lights, intensities, mask, *, need_lights=True):
     """The photos and the files that describe them."""
     photos = photo_files(sources)
+    if len(photos) < 3:
+        raise InputError(f"photometric stereo needs at least 3 photos, got {len(photos)}")
     if len(sources) == 1 and sources[0].is_dir():
         folder = sources[0]
         found = {
@@ -398,9 +407,7 @@ def _find(sources: list[Path], lights, intensities, mask, *, need_lights=True):
             intensities = intensities or found.get("light_intensities.txt")
         mask = mask or found.get("mask.png")
         if lights is None and need_lights:
-            raise InputError(f"folder '{folder}' has no light_directions.txt; give --lights FILE")
+            raise InputError(f"folder '{folder}' has no light_directions.txt; {_LIGHTS_FROM}")
     elif lights is None and need_lights:
-        raise InputError("give --lights FILE: one direction toward the light per photo (x y z)")
-    if len(photos) < 3:
-        raise InputError(f"photometric stereo needs at least 3 photos, got {len(photos)}")
+        raise InputError(f"the lights are not given; {_LIGHTS_FROM}")
     return photos, lights, intensities, mask
