@@ -261,6 +261,37 @@ def test_regions_file_load_move_delete_and_save(page, tmp_path):
     assert centre_minus_ring(lambda r, c: depth(page, r, c)) > 10
 
 
+def test_an_unsure_light_estimate_says_so_and_a_sure_one_does_not(page, tmp_path):
+    """The sphere's light is read from its outline (sure); a cylinder seen side-on shows only the
+    light's component across its axis, so its estimate is unsure, and the panel says what to do."""
+    open_example(page, SPHERE)
+    before = applied(page)
+    page.click('#light-mode [data-mode="estimate"]')
+    wait_for_result(page, before)
+    assert "confidence 1.00" in page.inner_text("#light-readout")
+    assert not page.is_visible("#light-unsure")
+    open_example(page, "synth:cylinder")  # a new image starts from the default light, +z
+    assert not page.is_visible("#light-unsure")
+    before = applied(page)
+    page.click('#light-mode [data-mode="estimate"]')
+    wait_for_result(page, before)
+    estimate = page.evaluate("window.shadeform.lastResult().info.light_estimate")
+    assert estimate["unsure"] and estimate["confidence"] < 0.5
+    assert f"confidence {estimate['confidence']:.2f}" in page.inner_text("#light-readout")
+    assert page.is_visible("#light-unsure") and "Slant / tilt" in page.inner_text("#light-unsure")
+    page.locator("#light-unsure").scroll_into_view_if_needed()
+    page.screenshot(path=str(tmp_path / "light-unsure.png"))
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.locator("section.group", has=page.locator("#light-mode")).screenshot(
+        path=str(ARTIFACTS / "light-unsure.png")
+    )
+    # a light given by its angles: nothing is estimated, nothing to be unsure of
+    before = applied(page)
+    page.click('#light-mode [data-mode="slant_tilt"]')
+    wait_for_result(page, before)
+    assert not page.is_visible("#light-unsure") and "confidence" not in page.inner_text("#light-readout")
+
+
 def test_reference_clicks_add_and_remove_the_depth_origin(page):
     open_example(page, BOWL)
     auto = page.evaluate("window.shadeform.lastResult().references")

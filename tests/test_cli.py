@@ -442,6 +442,25 @@ class TestReconstruct:
             else:
                 assert info["method"] == "eikonal" and info["singular_points"]
 
+    def test_an_unsure_light_estimate_is_said_and_a_sure_one_is_not(self, sphere, out, tmp_path):
+        """A cylinder seen side-on shows only the light's component across its axis (every light
+        in the plane of the axis and the viewer gives the same image): its estimate is unsure."""
+        result = invoke("synth", "cylinder", "-o", tmp_path / "cylinder.png", "--size", 64)
+        assert result.exit_code == 0, result.output
+        said = {}
+        for name, image in (("sphere", sphere["image"]), ("cylinder", tmp_path / "cylinder.png")):
+            result = invoke("reconstruct", image, "-o", out / f"{name}.glb", "--light", "estimate")
+            assert result.exit_code == 0, result.output
+            said[name] = [line for line in result.stderr.splitlines() if "light read from the photo" in line]
+            assert "read from the photo" in result.stdout  # the summary says where the light came from
+        assert said["sphere"] == []
+        assert len(said["cylinder"]) == 1 and "--slant and --tilt" in said["cylinder"][0], said
+        result = invoke(
+            "reconstruct", tmp_path / "cylinder.png", "-o", out / "c.glb", "--light", "estimate", "--json"
+        )
+        estimate = json.loads(result.stdout)["info"]["light_estimate"]
+        assert estimate["unsure"] and estimate["confidence"] < 0.5
+
     @pytest.mark.parametrize("depth_name", ["depth.tiff", "depth.npy"])
     def test_depth_and_normals_are_readable_and_right(self, sphere, out, depth_name):
         result = invoke(

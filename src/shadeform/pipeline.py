@@ -152,6 +152,7 @@ def reconstruct(
             "albedo": float(estimate.albedo),
             "evidence": estimate.evidence,
             "confidence": float(estimate.confidence),
+            "unsure": estimate.unsure,
         }
         lap("light")
     noise = None

@@ -156,6 +156,13 @@ export class Panel {
   /** The light the result was solved with (the estimate, when estimated). */
   showResult(result: ReconstructResult | null): void {
     const out = $('light-readout');
+    const unsure = $('light-unsure');
+    // the estimate's own confidence: the chance that the true light is within 10 degrees of it
+    const estimate = result?.info.light_estimate as { confidence: number; unsure: boolean } | undefined;
+    unsure.hidden = !estimate?.unsure;
+    unsure.textContent = estimate?.unsure
+      ? `The light read from the photo is unsure (a ${Math.round(100 * estimate.confidence)}\u00a0% chance of being within 10°): if you know where the light was, choose Slant / tilt and set it.`
+      : '';
     if (!result) {
       out.textContent = '';
       return;
@@ -165,7 +172,8 @@ export class Panel {
     const tilt = (Math.atan2(y, x) * 180) / Math.PI;
     const estimated = this.params.light.mode === 'estimate' ? 'Estimated: ' : 'Used: ';
     const angles = slant < 0.05 ? 'frontal' : `slant ${slant.toFixed(1)}°, tilt ${tilt.toFixed(1)}°`;
-    out.textContent = `${estimated}L = (${x.toFixed(2)}, ${y.toFixed(2)}, ${z.toFixed(2)}) · ${angles}`;
+    const sure = estimate ? ` · confidence ${estimate.confidence.toFixed(2)}` : '';
+    out.textContent = `${estimated}L = (${x.toFixed(2)}, ${y.toFixed(2)}, ${z.toFixed(2)}) · ${angles}${sure}`;
   }
 
   showReferences(user: Array<[number, number]>, used: Array<[number, number]>): void {

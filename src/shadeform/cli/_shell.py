@@ -294,6 +294,41 @@ def note_channel(console: Console, info: dict) -> None:
     )
 
 
+def print_notes(console: Console, photo_info: dict, info: dict) -> None:
+    """The notes on stderr of a photo solved: the channel chosen, an unsure light estimate, the
+    areas the shading cannot settle."""
+    note_channel(console, photo_info)
+    note_light(console, info)
+    note_unsure(console, info)
+
+
+def note_light(console: Console, info: dict) -> None:
+    """One line on stderr when the light read from the photo is unsure (``info["light_estimate"]``)."""
+    estimate = info.get("light_estimate")
+    if not estimate or not estimate["unsure"]:
+        return
+    from shadeform.light import CONFIDENCE_ANGLE  # the estimator's modules only when it ran
+
+    console.print(
+        f"warning: the light read from the photo is unsure (slant {estimate['slant']:.0f}°, tilt "
+        f"{estimate['tilt']:.0f}°, a {100 * estimate['confidence']:.0f} % chance of being within "
+        f"{CONFIDENCE_ANGLE:.0f}°); if you know where the light was, give --slant and --tilt (or --light X,Y,Z)",
+        soft_wrap=True,
+        highlight=False,
+    )
+
+
+def read_light(info: dict) -> str:
+    """ " read from the photo (slant, tilt, confidence)" when the light was estimated, else ""."""
+    estimate = info.get("light_estimate")
+    if not estimate:
+        return ""
+    return (
+        f" read from the photo (slant {estimate['slant']:.0f}°, tilt {estimate['tilt']:.0f}°, "
+        f"confidence {estimate['confidence']:.2f})"
+    )
+
+
 def note_unsure(console: Console, info: dict) -> None:
     """One line on stderr when part of the shape rests on a convex/concave guess the photo cannot
     settle (``info["unsure"]``, largest area first)."""

@@ -29,10 +29,9 @@ from shadeform.cli._shell import (
     TiltOption,
     app,
     format_seconds,
-    note_channel,
-    note_unsure,
     print_files,
     print_json,
+    print_notes,
     resolve_light,
     stderr_console,
     stdout_console,
@@ -151,8 +150,7 @@ def maps(
     timings["total"] = time.perf_counter() - total
 
     relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
-    note_channel(err, photo.info)
-    note_unsure(err, rec.info)
+    print_notes(err, photo.info, rec.info)
     lines = legend(relief)
     rows = [(files[name], lines[name][1]) for name in wanted]
     if as_json:

@@ -37,13 +37,13 @@ from shadeform.cli._shell import (
     describe_photo,
     format_seconds,
     format_vector,
-    note_channel,
-    note_unsure,
     output_temps,
     parse_reference,
     print_files,
     print_json,
+    print_notes,
     progress_bar,
+    read_light,
     resolve_light,
     stage,
     stderr_console,
@@ -141,8 +141,7 @@ def reconstruct(
     timings["total"] = time.perf_counter() - total
 
     height, width = pixels.shape
-    note_channel(err, photo.info)
-    note_unsure(err, rec.info)
+    print_notes(err, photo.info, rec.info)
     if as_json:
         print_json(
             {
@@ -163,7 +162,7 @@ def reconstruct(
     out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {describe_photo(photo.info)})")
     out.print(
         f"  {info['method']} (refine {info['refine']}), {info['integrator']} integration, "
-        f"filter {info['filter']}, light {format_vector(rec.light)}"
+        f"filter {info['filter']}, light {format_vector(rec.light)}{read_light(info)}"
     )
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels in {info['parts']} part(s), reference pixel(s) {refs}"

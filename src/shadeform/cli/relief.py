@@ -29,11 +29,10 @@ from shadeform.cli._shell import (
     check_outputs,
     describe_photo,
     format_seconds,
-    note_channel,
-    note_unsure,
     output_temps,
     print_files,
     print_json,
+    print_notes,
     stage,
     stderr_console,
     stdout_console,
@@ -204,8 +203,7 @@ def relief_command(
 
     size = [float(v) for v in solid.size_mm]
     volume = solid.volume_mm3
-    note_channel(err, photo.info)
-    note_unsure(err, rec.info)
+    print_notes(err, photo.info, rec.info)
     if as_json:
         print_json(
             {

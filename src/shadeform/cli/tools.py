@@ -25,6 +25,7 @@ from shadeform.cli._shell import (
     print_files,
     print_json,
     progress_bar,
+    read_light,
     resolve_light,
     stage,
     stderr_console,
@@ -403,12 +404,8 @@ def demo(
         f"  {int(rec.mask.sum()):,} object pixels -> {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles "
         f"(step {mesh_step}) in {format_seconds(timings['total'])}"
     )
-    estimate = rec.info.get("light_estimate")
-    if estimate is not None:
-        console.print(
-            f"  light estimated from the photo: slant {estimate['slant']:.0f}°, tilt {estimate['tilt']:.0f}° "
-            f"(confidence {estimate['confidence']:.2f})"
-        )
+    if "light_estimate" in rec.info:
+        console.print(f"  light{read_light(rec.info)}")
     console.print(f"[bold]wrote[/] to {escape(str(out))}/")
     print_files(console, [(out / name, what) for name, what in files])
     console.print(

@@ -85,6 +85,13 @@ class LightEstimate:
     confidence: float = 0.0
     info: dict = field(default_factory=dict)
 
+    @property
+    def unsure(self) -> bool:
+        """Whether the estimate is less likely than not to be within :data:`CONFIDENCE_ANGLE` of
+        the true light (``confidence < 0.5``: even odds, not a tuned level); the CLI and the app
+        then say so and ask for the light."""
+        return self.confidence < 0.5
+
 
 def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = True) -> LightEstimate:
     """Estimate the direction and brightness of a distant light from one shading image.
