@@ -732,6 +732,20 @@ class TestStereo:
         mesh = trimesh.load(out / "m.ply", force="mesh")
         assert len(mesh.vertices) == np.isfinite(depth).sum()
 
+    def test_a_photo_brighter_than_said_is_named_and_rescaled(self, photo_set, inputs, out):
+        scene = photo_set["scene"]
+        lights = np.loadtxt(photo_set["lights"])
+        photos = []
+        for i, path in enumerate(photo_set["photos"]):
+            photos.append(inputs / path.name)
+            strength = 1.3 if i == 3 else 1.0  # its lamp was brighter than the others
+            image = synth.render(scene.normals, scene.mask, light=lights[i], albedo=0.6 * strength)
+            save_gray(image, photos[-1], bitdepth=16)
+        result = invoke("stereo", *photos, "--lights", photo_set["lights"], "-o", out / "m.glb")
+        assert result.exit_code == 0, result.output
+        said = [line for line in result.stdout.splitlines() if "rescaled" in line]
+        assert len(said) == 1 and said[0].rstrip().endswith("003.png x1.30"), said
+
     def test_files_and_json(self, photo_set, out):
         result = invoke(
             "stereo",

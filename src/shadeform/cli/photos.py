@@ -487,16 +487,17 @@ def stereo(
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
     )
+    name = [Path(path).name for path in photos.paths]  # the user's names for the photos, not indices
     if rec.info["photos_rescaled"]:
-        listed = ", ".join(f"{i + 1} (x{f:.2f})" for i, f in rec.info["photos_rescaled"])
-        out.print(f"  photos whose light was not as bright as its strength said, rescaled: {listed}")
+        listed = ", ".join(f"{escape(name[i])} x{f:.2f}" for i, f in rec.info["photos_rescaled"])
+        out.print(f"  photos whose light was brighter or dimmer than its strength said, rescaled: {listed}")
     if rec.info["light_scale"] != 1.0:
         out.print(
             f"  the lights' slant was refined: tan(slant) x{rec.info['light_scale']:.3f} "
             "(--keep-lights takes them as given)"
         )
     if rec.info["photos_dropped"]:
-        listed = ", ".join(str(i + 1) for i in rec.info["photos_dropped"])
+        listed = ", ".join(escape(name[i]) for i in rec.info["photos_dropped"])
         out.print(f"  photos left out because they contradict the others: {listed}")
     out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
     out.print(
