@@ -150,3 +150,32 @@ def test_maps_previewed_and_downloaded_as_a_zip(page, tmp_path):
     page.select_option("#filter-kind", "gaussian")
     page.wait_for_function("window.shadeform.maps.modelState().status === 'stale'")
     assert page.evaluate("window.shadeform.maps.zipEnabled()") is False
+
+
+def test_a_refused_maps_request_is_said_and_the_next_one_supersedes_it(page):
+    """The server's one-line refusal fails the previews and stays in the panel; of two requests
+    only the latest one's answer is shown."""
+    open_example(page, BOWL)
+    page.locator("#maps-group").scroll_into_view_if_needed()
+    detail = "the maps cannot be made: test refusal"
+    page.route(
+        "**/api/maps",
+        lambda route: route.fulfill(
+            status=422, content_type="application/json", body=f'{{"detail": "{detail}"}}'
+        ),
+    )
+    page.click("#maps-make")
+    state = wait_for(page, "maps", "failed")
+    assert state["message"] == detail and page.evaluate("window.shadeform.maps.error()") == detail
+    assert page.evaluate("window.shadeform.maps.zipEnabled()") is False
+    # held, then superseded: only the second request's answer makes the previews current
+    page.unroute("**/api/maps")
+    held = []
+    page.route("**/api/maps", lambda route: held.append(route))
+    page.click("#maps-make")
+    page.wait_for_function("window.shadeform.maps.modelState().status === 'computing'")
+    assert page.evaluate("window.shadeform.maps.error()") is None  # the old message goes with a new request
+    page.unroute("**/api/maps")
+    page.click("#maps-make")
+    wait_for(page, "maps", "current")
+    assert page.evaluate("window.shadeform.maps.maps().length") == 5

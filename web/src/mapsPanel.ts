@@ -8,8 +8,7 @@
 // them current, and the zip is offered only then, so that what is downloaded is what is shown.
 import * as api from './api';
 import type { MapsResult, ReconstructRequest } from './api.gen';
-import { NetworkError, UNREACHABLE } from './connection';
-import { ModelState, statusText } from './modelState';
+import { LatestRequest, ModelState, statusText } from './modelState';
 import { inputsKey } from './print';
 import { download } from './state';
 import './print.css';
@@ -36,8 +35,7 @@ export class MapsPanel {
   /** The previews' state: current only when they were made from the settings shown. */
   readonly model = new ModelState(() => this.render());
   private key: string | null = null;
-  private inFlight: AbortController | null = null;
-  private counter = 0;
+  private readonly requests = new LatestRequest(this.model, (message) => this.showError(message), () => this.render());
   private result: MapsResult | null = null;
   private made: ReconstructRequest | null = null; // what the previews on record were made from
   private ready = false;
@@ -66,7 +64,7 @@ export class MapsPanel {
     if (key === this.key) return;
     this.key = key;
     if (key === null) {
-      this.inFlight?.abort();
+      this.requests.abort();
       this.result = null;
       this.model.reset();
     } else if (this.model.status !== 'none') {
@@ -80,28 +78,15 @@ export class MapsPanel {
     const base = this.host.request();
     if (!base) return this.host.toast('Open a photo first, then make its maps');
     this.sync();
-    this.inFlight?.abort();
-    const controller = new AbortController();
-    this.inFlight = controller;
-    const request: ReconstructRequest = { ...base, request_id: ++this.counter, preview: false };
-    const version = this.model.computing();
-    this.showError(null);
-    try {
-      const result = await api.maps(request, controller.signal);
-      if (controller !== this.inFlight) return;
-      this.result = result;
-      this.made = request;
-      this.showMaps(result);
-      this.model.arrived(version);
-    } catch (err) {
-      if ((err as Error).name === 'AbortError' || controller !== this.inFlight) return;
-      const message = err instanceof NetworkError ? UNREACHABLE : (err as Error).message;
-      this.model.failed(version, message);
-      if (!(err instanceof NetworkError)) this.showError(message);
-    } finally {
-      if (controller === this.inFlight) this.inFlight = null;
-      this.render();
-    }
+    const request: ReconstructRequest = { ...base, request_id: this.requests.nextId(), preview: false };
+    await this.requests.run(
+      (signal) => api.maps(request, signal),
+      (result) => {
+        this.result = result;
+        this.made = request;
+        this.showMaps(result);
+      },
+    );
   }
 
   /** Download every map of the current previews' settings as one zip. */

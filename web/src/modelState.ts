@@ -11,6 +11,8 @@
 // Every change of the inputs bumps a version; a request remembers the version it was sent for,
 // so an answer to older inputs can never make the model "current".
 
+import { NetworkError, UNREACHABLE } from './connection';
+
 export type ModelStatus = 'none' | 'computing' | 'current' | 'stale' | 'failed';
 
 export interface ModelStateView {
@@ -94,6 +96,55 @@ export class ModelState {
       if (this.log.length > HISTORY) this.log.shift();
     }
     this.onChange();
+  }
+}
+
+/**
+ * A panel's requests for its model, one at a time: a new one aborts the one out; only the latest
+ * one's answer is applied (``apply``) and makes the model current; its failure fails the model
+ * with the server's message, shown by ``showError`` unless the server could not be reached (the
+ * connection's banner says that). ``render`` redraws the panel when the request has ended.
+ */
+export class LatestRequest {
+  private inFlight: AbortController | null = null;
+  private counter = 0;
+
+  constructor(
+    private readonly model: ModelState,
+    private readonly showError: (message: string | null) => void,
+    private readonly render: () => void,
+  ) {}
+
+  /** The id of the next request (its ``request_id``). */
+  nextId(): number {
+    return ++this.counter;
+  }
+
+  /** Abort the request out, if any (its answer is dropped). */
+  abort(): void {
+    this.inFlight?.abort();
+  }
+
+  async run<T>(send: (signal: AbortSignal) => Promise<T>, apply: (result: T) => void): Promise<void> {
+    this.inFlight?.abort();
+    const controller = new AbortController();
+    this.inFlight = controller;
+    const version = this.model.computing();
+    this.showError(null);
+    try {
+      const result = await send(controller.signal);
+      if (controller !== this.inFlight) return;
+      apply(result);
+      this.model.arrived(version);
+    } catch (err) {
+      if ((err as Error).name === 'AbortError' || controller !== this.inFlight) return;
+      const message = err instanceof NetworkError ? UNREACHABLE : (err as Error).message;
+      this.model.failed(version, message);
+      if (!(err instanceof NetworkError)) this.showError(message);
+    } finally {
+      if (controller === this.inFlight) this.inFlight = null;
+      this.render();
+    }
   }
 }
 

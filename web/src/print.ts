@@ -13,8 +13,7 @@
 import * as THREE from 'three';
 import * as api from './api';
 import type { Options, ReconstructRequest, ReliefParams, ReliefRequest, ReliefResult } from './api.gen';
-import { NetworkError, UNREACHABLE } from './connection';
-import { ModelState, statusText } from './modelState';
+import { LatestRequest, ModelState, statusText } from './modelState';
 import { download } from './state';
 import type { Viewer } from './viewer';
 import './print.css';
@@ -57,8 +56,7 @@ export class PrintPanel {
   private options: ReliefParams;
   private key: string | null = null; // the inputs the state is about (sync())
   private modelKey: string | null = null;
-  private inFlight: AbortController | null = null;
-  private counter = 0;
+  private readonly requests = new LatestRequest(this.model, (message) => this.showError(message), () => this.render());
   private result: ReliefResult | null = null;
   private built: ReliefRequest | null = null; // what the solid on record was built from
   private mesh: api.DecodedMesh | null = null;
@@ -100,7 +98,7 @@ export class PrintPanel {
     this.key = key;
     this.modelKey = modelKey;
     if (modelKey === null) {
-      this.inFlight?.abort();
+      this.requests.abort();
       this.model.reset();
     } else if (this.model.status !== 'none') {
       this.model.changed(why);
@@ -114,31 +112,18 @@ export class PrintPanel {
     if (!base) return this.host.toast('Open a photo first, then build its print');
     if (this.problem) return this.showError(this.problem);
     this.sync();
-    this.inFlight?.abort();
-    const controller = new AbortController();
-    this.inFlight = controller;
     const request: ReliefRequest = {
-      image_id: base.image_id, params: base.params, relief: structuredClone(this.options), request_id: ++this.counter,
+      image_id: base.image_id, params: base.params, relief: structuredClone(this.options), request_id: this.requests.nextId(),
     };
-    const version = this.model.computing();
-    this.showError(null);
-    try {
-      const result = await api.relief(request, controller.signal);
-      if (controller !== this.inFlight) return;
-      this.result = result;
-      this.built = request;
-      this.mesh = api.decodeMesh(result.mesh);
-      this.showSolid();
-      this.model.arrived(version);
-    } catch (err) {
-      if ((err as Error).name === 'AbortError' || controller !== this.inFlight) return;
-      const message = err instanceof NetworkError ? UNREACHABLE : (err as Error).message;
-      this.model.failed(version, message);
-      if (!(err instanceof NetworkError)) this.showError(message);
-    } finally {
-      if (controller === this.inFlight) this.inFlight = null;
-      this.render();
-    }
+    await this.requests.run(
+      (signal) => api.relief(request, signal),
+      (result) => {
+        this.result = result;
+        this.built = request;
+        this.mesh = api.decodeMesh(result.mesh);
+        this.showSolid();
+      },
+    );
   }
 
   /** Download the current solid as ``suffix`` (.stl, .3mf). */
