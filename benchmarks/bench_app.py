@@ -29,6 +29,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -81,7 +83,10 @@ PAGE_HELPERS = """() => {
 }"""
 
 
-def start_server(image: Path) -> tuple[subprocess.Popen, str]:
+@contextmanager
+def running_app(image: Path, *, stop_within: float = 20.0) -> Iterator[str]:
+    """``shadeform app IMAGE`` in its own process for the ``with`` block: its URL. Stopped as the
+    user stops it (Ctrl+C, SIGINT), killed if it has not ended within ``stop_within`` seconds."""
     command = [
         str(Path(sys.executable).with_name("shadeform")),
         "app",
@@ -91,18 +96,26 @@ def start_server(image: Path) -> tuple[subprocess.Popen, str]:
         "0",
     ]
     server = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    deadline = time.monotonic() + 120
-    seen = []
-    while time.monotonic() < deadline:
-        line = server.stdout.readline()
-        if not line and server.poll() is not None:
-            break
-        seen.append(line)
-        found = re.search(r"http://127\.0\.0\.1:\d+/", line)
-        if found:
-            return server, found.group(0)
-    server.kill()
-    raise SystemExit("shadeform app did not start:\n" + "".join(seen))
+    try:
+        deadline = time.monotonic() + 120
+        seen = []
+        url = None
+        while url is None and time.monotonic() < deadline:
+            line = server.stdout.readline()
+            if not line and server.poll() is not None:
+                break
+            seen.append(line)
+            found = re.search(r"http://127\.0\.0\.1:\d+/", line)
+            url = found.group(0) if found else None
+        if url is None:
+            raise SystemExit("shadeform app did not start:\n" + "".join(seen))
+        yield url
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=stop_within)
+        except subprocess.TimeoutExpired:
+            server.kill()
 
 
 def measure(page, script: str, runs: int) -> list[dict]:
@@ -157,51 +170,41 @@ def main(argv=None) -> int:
     scene = synth.scene("vase", size=args.size)
     Image.fromarray(np.round(scene.image * 255).astype(np.uint8)).save(image)
     load_before = os.getloadavg()[0]  # other work on the machine slows both sides: say so
-    server, url = start_server(image)
     rows = []
-    try:
-        with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(
-                executable_path=CHROMIUM, headless=True, args=["--no-sandbox"]
+    with running_app(image, stop_within=10) as url, sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1440, "height": 860})
+        page.goto(url)
+        page.evaluate("window.shadeform.ready")
+        page.evaluate(PAGE_HELPERS)
+        page.wait_for_function("window.shadeform.applied() >= 1", timeout=300_000)
+        page.evaluate("setSlider('step', 2)")
+        page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
+        measure(
+            page, "setSlider('step', i % 2 ? 2 : 3)", 2
+        )  # warm-up (ends at step 2): first geometry uploads
+        result = page.evaluate("window.shadeform.lastResult()")
+        stages: dict[str, list[float]] = {}
+        for name, setup, script in CHANGES:
+            if setup:
+                page.evaluate(f"() => {{ {setup}; }}")
+                page.wait_for_timeout(200)
+                page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
+            timelines = measure(page, script, args.runs)
+            summary = summarise(timelines)
+            for timeline in timelines:
+                if not timeline["cached"] and "eikonal" in name:
+                    for stage, seconds in timeline["serverTimings"].items():
+                        stages.setdefault(stage, []).append(1000 * seconds)
+            rows.append(
+                f"| {name} | **{summary['first']:.0f}** | {summary['first_p90']:.0f} | "
+                f"{summary['total']:.0f} | {summary['p90']:.0f} | {summary['server']:.0f} | "
+                f"{summary['wire']:.0f} | {summary['decode']:.1f} | {summary['draw']:.0f} | "
+                f"{summary['cached']}/{args.runs} |"
             )
-            page = browser.new_page(viewport={"width": 1440, "height": 860})
-            page.goto(url)
-            page.evaluate("window.shadeform.ready")
-            page.evaluate(PAGE_HELPERS)
-            page.wait_for_function("window.shadeform.applied() >= 1", timeout=300_000)
-            page.evaluate("setSlider('step', 2)")
-            page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
-            measure(
-                page, "setSlider('step', i % 2 ? 2 : 3)", 2
-            )  # warm-up (ends at step 2): first geometry uploads
-            result = page.evaluate("window.shadeform.lastResult()")
-            stages: dict[str, list[float]] = {}
-            for name, setup, script in CHANGES:
-                if setup:
-                    page.evaluate(f"() => {{ {setup}; }}")
-                    page.wait_for_timeout(200)
-                    page.wait_for_function("!window.shadeform.state().busy", timeout=120_000)
-                timelines = measure(page, script, args.runs)
-                summary = summarise(timelines)
-                for timeline in timelines:
-                    if not timeline["cached"] and "eikonal" in name:
-                        for stage, seconds in timeline["serverTimings"].items():
-                            stages.setdefault(stage, []).append(1000 * seconds)
-                rows.append(
-                    f"| {name} | **{summary['first']:.0f}** | {summary['first_p90']:.0f} | "
-                    f"{summary['total']:.0f} | {summary['p90']:.0f} | {summary['server']:.0f} | "
-                    f"{summary['wire']:.0f} | {summary['decode']:.1f} | {summary['draw']:.0f} | "
-                    f"{summary['cached']}/{args.runs} |"
-                )
-                print(rows[-1], file=sys.stderr)
-            chromium_version = browser.version
-            browser.close()
-    finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            server.kill()
+            print(rows[-1], file=sys.stderr)
+        chromium_version = browser.version
+        browser.close()
 
     load_after = os.getloadavg()[0]
     header = (

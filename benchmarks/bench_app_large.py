@@ -25,9 +25,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import signal
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -37,7 +35,7 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_app import CHROMIUM, start_server
+from bench_app import CHROMIUM, running_app
 from shadeform import synth
 
 FIRST_VIEW_BAR_MS = 1000
@@ -187,28 +185,18 @@ def main(argv=None) -> int:
     small = folder / "vase-256.png"
     Image.fromarray(np.rint(synth.scene("vase", size=256).image * 255).astype(np.uint8)).save(small)
     load_before = os.getloadavg()[0]
-    server, url = start_server(small)
-    try:
-        with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(
-                executable_path=CHROMIUM, headless=True, args=["--no-sandbox"]
-            )
-            warm = run_once(browser, url, photo)  # the kernels and the solver process loaded
-            print("warm-up:", {k: v for k, v in warm.items() if "server" not in k}, file=sys.stderr)
-            rows = []
-            for _ in range(args.runs):
-                rows.append(run_once(browser, url, photo))
-                print({k: v for k, v in rows[-1].items() if "server" not in k}, file=sys.stderr)
-            cancelled = run_once(browser, url, photo, cancel_after=2.0, shots=args.shots)
-            print(cancelled, file=sys.stderr)
-            version = browser.version
-            browser.close()
-    finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            server.kill()
+    with running_app(small) as url, sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--no-sandbox"])
+        warm = run_once(browser, url, photo)  # the kernels and the solver process loaded
+        print("warm-up:", {k: v for k, v in warm.items() if "server" not in k}, file=sys.stderr)
+        rows = []
+        for _ in range(args.runs):
+            rows.append(run_once(browser, url, photo))
+            print({k: v for k, v in rows[-1].items() if "server" not in k}, file=sys.stderr)
+        cancelled = run_once(browser, url, photo, cancel_after=2.0, shots=args.shots)
+        print(cancelled, file=sys.stderr)
+        version = browser.version
+        browser.close()
     load_after = os.getloadavg()[0]
 
     def stat(key):
