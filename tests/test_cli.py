@@ -769,7 +769,8 @@ class TestStereo:
         path = inputs / "lights.csv"
         path.write_text(
             "# x, y, z toward each light\n\n"
-            + "\n".join(", ".join(f"{v:.17g}" for v in row) for row in rows)
+            # a comment after the numbers too (MIT-Berkeley's light_intensities.txt has them)
+            + "\n".join(", ".join(f"{v:.17g}" for v in row) + f"  # photo {i}" for i, row in enumerate(rows))
             + "\n"
         )
         result = invoke(

@@ -273,7 +273,7 @@ def photo_files(sources) -> list[Path]:
 
 def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
     """A text file of ``count`` rows of numbers (whitespace or commas; blank lines and ``#``
-    lines skipped) as ``(count, columns)``, or ``(count,)`` for one column."""
+    comments skipped) as ``(count, columns)``, or ``(count,)`` for one column."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -285,15 +285,11 @@ def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int
 
 
 def parse_rows(text: str, what: str, name: str, count: int, columns: tuple[int, ...]) -> np.ndarray:
-    """:func:`read_rows` on a file's text; ``name`` is the file's name for messages."""
+    """:func:`read_rows` on a file's text; ``name`` is the file's name for messages. A ``#``
+    starts a comment, on a line of its own or after the numbers."""
+    rows = (line.split("#", 1)[0].replace(",", " ").split() for line in text.splitlines())
     try:
-        values = np.array(
-            [
-                [float(v) for v in line.split()]
-                for line in text.replace(",", " ").splitlines()
-                if line.strip() and not line.lstrip().startswith("#")
-            ]
-        )
+        values = np.array([[float(v) for v in row] for row in rows if row])
     except ValueError:
         raise InputError(f"{what} file '{name}' must hold numbers only, one row per photo") from None
     if values.ndim != 2 or values.shape[0] != count or values.shape[1] not in columns:
