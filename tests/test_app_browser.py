@@ -925,6 +925,37 @@ def test_photo_set_relights_live_under_a_dragged_light_and_exports(page, tmp_pat
     assert vertices == result["vertex_count"]
 
 
+def test_a_whole_folder_opens_as_its_filenames_txt_lists_it(page, tmp_path):
+    """A whole MIT-Berkeley-style folder selected at once: filenames.txt names the photos (the
+    folder's other pictures, of other bit depths and sizes, are not photos), light_directions.txt
+    is the light file among other text files, and its strengths carry comments after the numbers."""
+    from PIL import Image
+
+    from shadeform import synth
+    from shadeform.light import light_from_slant_tilt
+
+    scene = synth.scene("sphere", size=96)
+    lights = np.array([light_from_slant_tilt(30, t) for t in range(0, 360, 60)])
+    names = [f"light{i + 1:02d}.png" for i in range(len(lights))][::-1]  # listed in reverse
+    for name, light in zip(names, lights, strict=True):
+        image = synth.render(scene.normals, scene.mask, light=light, albedo=0.8)
+        Image.fromarray(np.rint(image * 65535).astype(np.uint16)).save(tmp_path / name)
+    Image.fromarray(np.full((40, 50), 255, np.uint8)).save(tmp_path / "original.png")  # not a photo
+    Image.fromarray(np.zeros((96, 96), bool)).save(tmp_path / "depth_valid.png")  # 1-bit, not a photo
+    (tmp_path / "filenames.txt").write_text("\n".join(names) + "\n")
+    (tmp_path / "light_directions.txt").write_text(
+        "\n".join(" ".join(f"{v:.8f}" for v in row) for row in lights)
+    )
+    (tmp_path / "light_intensities.txt").write_text("# strength\n" + "1.0  # residual 0.1\n" * len(lights))
+    (tmp_path / "shading_light.txt").write_text("0 0 1\n")  # another text file: not the lights
+    page.set_input_files("#file-photos", sorted(str(p) for p in tmp_path.iterdir()))
+    wait_for_stereo(page, 0)
+    result = stereo(page, "lastResult()")
+    np.testing.assert_allclose(result["lights"], lights, atol=1e-6)  # each photo with its own light
+    normal = np.array(stereo(page, "mapsAt(48, 48)")["normal"])
+    assert np.degrees(np.arccos(min(1.0, normal[2]))) < 2
+
+
 def test_photos_opened_with_their_light_file_and_errors_that_stay(page, tmp_path):
     from PIL import Image
 

@@ -157,14 +157,25 @@ export class StereoSession {
   // ----------------------------------------------------------------------- opening
 
   async openFiles(files: File[]): Promise<boolean> {
-    // as a DiLiGenT-style folder is read: a mask, ground-truth normal maps and the list of file
-    // names are not photos (the photos are ordered by their names, numbers as numbers)
+    // as a DiLiGenT-style folder is read (the CLI's photo_files): a mask and ground-truth normal
+    // maps are not photos; filenames.txt, where there is one, names the photos in order (a whole
+    // MIT-Berkeley folder holds other pictures too), else they are ordered by their names,
+    // numbers as numbers
+    const listing = files.find((f) => /^filenames\.txt$/i.test(f.name)) ?? null;
     const ignored = /^(normal_gt|normal_map)\.|^filenames\.txt$/i;
     files = files.filter((f) => !ignored.test(f.name));
-    const images = files.filter((f) => !/\.(txt|lp|json|csv|mat)$/i.test(f.name) && !/^mask\./i.test(f.name));
+    let images = files.filter((f) => !/\.(txt|lp|json|csv|mat)$/i.test(f.name) && !/^mask\./i.test(f.name));
+    images.sort((a, b) => a.name.localeCompare(b.name, undefined, { numeric: true }));
+    if (listing) {
+      const byName = new Map(images.map((f) => [f.name, f]));
+      const named = (await listing.text()).split(/\s+/).filter(Boolean).map((name) => byName.get(name.split(/[\\/]/).pop() ?? ''));
+      if (named.every((f) => f !== undefined) && named.length >= 3) images = named as File[];
+    }
     const texts = files.filter((f) => /\.(txt|lp|csv)$/i.test(f.name));
     const intensities = texts.find((f) => /intensit/i.test(f.name)) ?? null;
-    const lights = texts.find((f) => f !== intensities) ?? null;
+    // the light file by its usual names first (a folder may hold other text files)
+    const lights =
+      texts.find((f) => /^light_directions\.txt$|\.lp$/i.test(f.name)) ?? texts.find((f) => f !== intensities) ?? null;
     const mask = files.find((f) => /^mask\./i.test(f.name)) ?? null;
     if (images.length < 3) {
       this.host.toast(
@@ -178,7 +189,6 @@ export class StereoSession {
       this.host.toast(`The photos together are ${(total / 1e6).toFixed(1)} MB; the limit is ${(limit / 1e6).toFixed(1)} MB — open fewer or smaller photos`);
       return false;
     }
-    images.sort((a, b) => a.name.localeCompare(b.name, undefined, { numeric: true }));
     let opened = false;
     await this.host.busy(`Uploading ${images.length} photos…`, async () => {
       const info = await api.uploadPhotoSet(images, { lights, intensities, mask });
