@@ -292,6 +292,21 @@ def test_an_unsure_light_estimate_says_so_and_a_sure_one_does_not(page, tmp_path
     assert not page.is_visible("#light-unsure") and "confidence" not in page.inner_text("#light-readout")
 
 
+def test_whatever_is_hidden_is_not_shown(page):
+    """The page hides with the ``hidden`` attribute; no class's display may override it (a .btn's
+    inline-flex showed the hidden "Downsample and open" button as an empty blue button)."""
+    open_example(page, BOWL)
+    shown = page.evaluate(
+        """() => {
+          document.getElementById('fit-accept').hidden = true;  // as when no downsample is offered
+          return [...document.querySelectorAll('[hidden]')]
+            .filter((e) => getComputedStyle(e).display !== 'none')
+            .map((e) => e.id || e.className);
+        }"""
+    )
+    assert shown == []
+
+
 def test_reference_clicks_add_and_remove_the_depth_origin(page):
     open_example(page, BOWL)
     auto = page.evaluate("window.shadeform.lastResult().references")
