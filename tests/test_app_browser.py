@@ -292,6 +292,27 @@ def test_an_unsure_light_estimate_says_so_and_a_sure_one_does_not(page, tmp_path
     assert not page.is_visible("#light-unsure") and "confidence" not in page.inner_text("#light-readout")
 
 
+def test_a_new_photo_that_fails_shows_nothing_of_the_last_one(page, tmp_path):
+    """A photo whose first solve fails (all black: no object) leaves no model of the photo before
+    it on screen, nor its mask's description; the message says what failed."""
+    from PIL import Image
+
+    open_example(page, "coin")
+    assert page.evaluate("window.shadeform.views.shownVertexCount()") > 0
+    assert "pixels" in page.evaluate("window.shadeform.mask().note")  # the coin's automatic mask
+    black = tmp_path / "black.png"
+    Image.fromarray(np.zeros((64, 80), np.uint8)).save(black)
+    page.set_input_files("#file-image", str(black))
+    page.wait_for_function("window.shadeform.modelState().status === 'failed'", timeout=RESULT_MS)
+    assert page.evaluate("window.shadeform.state().image.name") == "black.png"
+    assert page.evaluate("window.shadeform.views.shownVertexCount()") == 0
+    assert page.is_visible("#view-empty") and page.inner_text("#mesh-info") == ""
+    assert page.evaluate("window.shadeform.mesh()") is None
+    note = page.evaluate("window.shadeform.mask().note")
+    assert "pixels" not in note, note  # not the bowl's automatic mask
+    assert "object" in page.evaluate("window.shadeform.modelState().message")
+
+
 def test_whatever_is_hidden_is_not_shown(page):
     """The page hides with the ``hidden`` attribute; no class's display may override it (a .btn's
     inline-flex showed the hidden "Downsample and open" button as an empty blue button)."""

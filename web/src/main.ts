@@ -1020,7 +1020,9 @@ class App {
         this.toast(`${forgotten(name)}; ${why}`);
         return;
       }
-      // the old model stays on screen, dimmed and not exportable, until the next change
+      // the old model stays on screen, dimmed and not exportable, until the next change; a model
+      // of another image does not: a new image whose first solve failed shows none
+      if (this.result === null) this.clearModel();
       this.model.failed(version, (err as Error).message);
       this.toast((err as Error).message);
     } finally {

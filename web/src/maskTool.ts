@@ -347,6 +347,7 @@ export class MaskTool {
     this.host.show(null);
     this.clearError();
     this.what = png ? 'from the saved session' : '';
+    this.autoNote = ''; // the last image's, until this one's is known
     this.showNote();
     if (png) {
       const image = this.host.image();
@@ -451,7 +452,9 @@ export class MaskTool {
     if (value !== null && Number.isFinite(value)) {
       this.thresholdInput.value = String(Math.round(Math.sqrt(Math.min(1, Math.max(0, value))) * THRESHOLD_STEPS));
     }
-    $('mask-threshold-out').textContent = this.thresholdValue().toPrecision(3);
+    // three digits, in the output's width: 0.310, 5.6e-3 (a dark photo's 0.00562 ran past the panel)
+    const shown = this.thresholdValue();
+    $('mask-threshold-out').textContent = shown >= 0.01 || shown === 0 ? shown.toFixed(3) : shown.toExponential(1);
   }
 
   private showNote(): void {
