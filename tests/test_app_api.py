@@ -232,14 +232,15 @@ class TestUploadErrors:
         assert_error(upload(small, png_bytes(disk_photo(size=80, colour=False))), 413, "too large")
 
     def test_not_an_image(self, client):
-        assert_error(upload(client, b"#!/bin/sh\nrm -rf /\n", name="run.sh"), 415, "not an image")
+        # named as the user's file, not as the bytes the server read
+        assert_error(upload(client, b"#!/bin/sh\nrm -rf /\n", name="run.sh"), 415, "not an image: 'run.sh'")
 
     def test_damaged(self, client):
         data = png_bytes(disk_photo())
-        assert_error(upload(client, data[: len(data) // 2]), 415, "damaged")
+        assert_error(upload(client, data[: len(data) // 2], name="cut.png"), 415, "damaged", "'cut.png'")
 
     def test_too_small(self, client):
-        assert_error(upload(client, png_bytes(np.ones((2, 2), np.uint8))), 415, "too small")
+        assert_error(upload(client, png_bytes(np.ones((2, 2), np.uint8))), 415, "too small: 'photo.png'")
 
     def test_empty(self, client):
         assert_error(upload(client, b""), 400, "empty")

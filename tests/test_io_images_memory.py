@@ -57,7 +57,7 @@ class TestBytes:
         np.testing.assert_array_equal(load_image(data, channel="g", linear=True), unit8(RGB8[:, :, 1]))
 
     def test_empty(self):
-        with pytest.raises(InputError, match="empty file: the image data has 0 bytes"):
+        with pytest.raises(InputError, match="empty file: 'image data' has 0 bytes"):
             load_image(b"")
 
     def test_not_an_image(self):

@@ -473,7 +473,7 @@ def _read_upload(data: bytes, limits: AppLimits, name: str, *, fit: bool) -> tup
     headers (``X-Shadeform-Fit``: the block side, or ``none`` beyond :data:`FIT_FACTOR` times the
     limit; ``X-Shadeform-Size``: its ``WxH``); with ``fit`` it is decoded and downsampled to fit.
     """
-    from shadeform.io.images import ImageTooLargeError, read_photo
+    from shadeform.io.images import ImageTooLargeError, naming, read_photo
 
     try:
         # 8-bit uploads are sRGB and are made linear; 16-bit and float ones are linear
@@ -481,7 +481,7 @@ def _read_upload(data: bytes, limits: AppLimits, name: str, *, fit: bool) -> tup
     except ImageTooLargeError as err:
         size = _declared_size(data, err)
         if size is None:
-            raise HTTPException(413, str(err)) from None
+            raise HTTPException(413, naming(str(err), name)) from None
         width, height = size
         factor = fit_factor(width, height, limits.max_pixels)
 
@@ -508,8 +508,8 @@ def _read_upload(data: bytes, limits: AppLimits, name: str, *, fit: bool) -> tup
             "X-Shadeform-Size": f"{width}x{height}",
         }
         raise HTTPException(413, detail, headers=headers) from None
-    except InputError as err:
-        raise HTTPException(415, str(err)) from None
+    except InputError as err:  # named as the user's file, not as bytes
+        raise HTTPException(415, naming(str(err), name)) from None
     pixels = photo.pixels
     height, width = pixels.shape[:2]
     factor = fit_factor(width, height, limits.max_pixels) if fit else 1

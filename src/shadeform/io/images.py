@@ -115,6 +115,14 @@ logging.getLogger("tifffile").addHandler(logging.NullHandler())
 
 #: What a file's content, given as bytes instead of a path, is called in messages.
 MEMORY_NAME = "image data"
+
+
+def naming(message: str, name: str) -> str:
+    """A loader's ``message`` about bytes read from memory, naming ``name`` (the file the bytes
+    came from: an upload's file name) where it said :data:`MEMORY_NAME`."""
+    return message.replace(f"'{MEMORY_NAME}'", f"'{name}'")
+
+
 _EXIF_ORIENTATION = 0x0112
 
 # TIFF photometric interpretations the TIFF decoder understands; YCbCr only JPEG-compressed,
@@ -659,8 +667,7 @@ def _read_source(path: str | PathLike | bytes, max_pixels: int) -> _Source:
         except OSError as err:
             raise _unreadable(path, err) from None
     if not source.data:
-        what = f"the {MEMORY_NAME}" if source.path is None else f"'{source}'"
-        raise InputError(f"empty file: {what} has 0 bytes; give an image file")
+        raise InputError(f"empty file: '{source}' has 0 bytes; give an image file")
     return source
 
 

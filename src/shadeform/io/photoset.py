@@ -217,7 +217,7 @@ def read_photos(photos, *, linear: bool | None = None, names=None, max_pixels: i
     InputError
         A photo that cannot be read, or one of another size or bit depth than the first.
     """
-    from shadeform.io.images import MEMORY_NAME
+    from shadeform.io.images import naming
 
     limit = {} if max_pixels is None else {"max_pixels": max_pixels}
     shown = list(photos) if names is None else list(names)
@@ -230,7 +230,7 @@ def read_photos(photos, *, linear: bool | None = None, names=None, max_pixels: i
         except InputError as err:
             if names is None:
                 raise
-            raise type(err)(str(err).replace(MEMORY_NAME, f"photo {names[i]}")) from None
+            raise type(err)(naming(str(err), names[i])) from None
         height, width, planes = read.pixels.shape
         if images is None:
             first, bits, encoding = read, read.bits, read.encoding
