@@ -114,6 +114,20 @@ def test_a_refused_request_fails_the_model_and_its_message_stays_until_dismissed
     assert not page.evaluate("document.getElementById('view-host').classList.contains('outdated')")
 
 
+def test_a_failures_message_goes_once_a_model_for_the_inputs_is_drawn(page):
+    """An error stays until dismissed while it holds; once the next change's model is drawn (up
+    to date) the failure is outlived and its message goes with it."""
+    open_example(page, BOWL)
+    refusals = refuse(page, "**/api/reconstruct", lambda body: body["params"].update(refine=101))
+    page.click('#light-mode [data-mode="estimate"]')
+    message = assert_refused(page, refusals)
+    assert error_toasts(page) == [message]
+    page.unroute("**/api/reconstruct")
+    page.click('#light-mode [data-mode="z"]')
+    wait_for_status(page, "current")
+    assert error_toasts(page) == []
+
+
 def test_a_parameter_change_makes_the_model_stale_then_computing_then_current(page, tmp_path):
     open_example(page, BOWL)
     assert model(page)["status"] == "current"

@@ -99,6 +99,7 @@ class App {
   private changedAt: number | null = null;
   private refitNext = true;
   private result: ReconstructResult | null = null;
+  private failureShown: (() => void) | null = null; // takes the last solve failure's message away
   private mesh: api.DecodedMesh | null = null;
   /** A large photo's mask tool is still to ask what its automatic mask is (after the first view). */
   private describeMask = false;
@@ -607,6 +608,7 @@ class App {
     this.mesh = null;
     this.refitNext = true;
     this.model.changed('another image opened');
+    this.outlived();
     this.params = structuredClone(params ?? { ...this.options.defaults, ...(info.suggested ?? {}) });
     $('image-empty').hidden = true;
     $('image-title').innerHTML = '';
@@ -973,6 +975,7 @@ class App {
         if (result.request_id !== this.latestSent) return; // superseded while on the wire
         this.applyResult(result, mesh, { bounds, spare });
         this.model.arrived(version, !result.preview);
+        if (!result.preview) this.outlived();
         if (this.describeMask) {
           this.describeMask = false;
           void this.maskTool.describe();
@@ -1017,14 +1020,14 @@ class App {
           return this.solve(true);
         }
         this.model.failed(version, `${forgotten(name)}; ${why}`);
-        this.toast(`${forgotten(name)}; ${why}`);
+        this.failureShown = toast(`${forgotten(name)}; ${why}`);
         return;
       }
       // the old model stays on screen, dimmed and not exportable, until the next change; a model
       // of another image does not: a new image whose first solve failed shows none
       if (this.result === null) this.clearModel();
       this.model.failed(version, (err as Error).message);
-      this.toast((err as Error).message);
+      this.failureShown = toast((err as Error).message);
     } finally {
       if (id === this.latestSent) {
         this.setSolving(false);
@@ -1250,6 +1253,13 @@ class App {
 
   toast(message: string, kind: 'error' | 'info' = 'error'): void {
     toast(message, kind);
+  }
+
+  /** The last solve's failure is outlived (a model for the current inputs is drawn, or another
+   * image opened): its message goes; the badge said the same and now says what holds. */
+  private outlived(): void {
+    this.failureShown?.();
+    this.failureShown = null;
   }
 
   private buildMenus(): void {
