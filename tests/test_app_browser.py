@@ -787,6 +787,10 @@ def test_mask_save_load_and_reload(page, tmp_path):
     assert mask_state(page)["pixels"] == 0 and mask_state(page)["user"] is True
     assert page.evaluate("window.shadeform.state().params.mask") is None
     assert page.evaluate("window.shadeform.requests()") == sent
+    # the model on screen was solved with the mask that is gone: out of date, not exportable
+    state = page.evaluate("window.shadeform.modelState()")
+    assert state["status"] == "stale" and "mask was cleared" in state["message"]
+    assert page.is_disabled("#export-button")
 
     # load the right half of it: the solve follows
     half = info["mask"].copy()

@@ -155,6 +155,7 @@ class App {
         this.refitNext ||= refit;
         this.change({ mask: png }, 'now');
       },
+      cleared: () => this.model.changed('the mask was cleared: paint or outline the object'),
       show: (mask, dirty) => this.pane.setMask(mask, dirty),
       redraw: () => this.pane.redraw(),
       hint: (text) => {

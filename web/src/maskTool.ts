@@ -264,6 +264,9 @@ export interface MaskHost {
    * ``refit``: the mask may hold another object (a click, a threshold, a file): frame it anew.
    */
   changed(png: string | null, refit: boolean): void;
+  /** The mask was cleared to be painted anew: the model, solved with the old one, is out of date
+   * (nothing is solved on an empty mask; the next edit solves). */
+  cleared(): void;
   /** Show these bits in the image pane; ``dirty`` is the part that changed. */
   show(mask: MaskBits | null, dirty?: Rect): void;
   /** Redraw the pane's overlays (cursor, corners, clicks). */
@@ -588,6 +591,7 @@ export class MaskTool {
     this.what = 'cleared: paint or outline the object';
     this.clearError();
     this.show(mask);
+    this.host.cleared();
   }
 
   invert(): void {
