@@ -923,6 +923,10 @@ def test_photo_set_relights_live_under_a_dragged_light_and_exports(page, tmp_pat
     assert page.evaluate("document.body.classList.contains('stereo-mode')")
     assert page.is_visible("#stereo-group") and not page.is_visible("#mask-group")
     assert stereo(page, "info().count") == 12 and "12 lights from the light file" in stereo(page, "note()")
+    # the pane starts relit, and its button says so
+    assert page.eval_on_selector_all("#stereo-show button.on", "(bs) => bs.map((b) => b.dataset.show)") == [
+        "relight"
+    ]
     result = stereo(page, "lastResult()")
     assert len(shown_mesh(page).vertices) == result["vertex_count"]
     # the vase's left and right flanks at mid height; the light the pane starts with

@@ -246,7 +246,7 @@ export class StereoSession {
     $('stereo-summary').textContent = parts.join(' · ');
     this.showParams();
     this.setError(null);
-    this.draw();
+    this.setShow(this.show); // its button marked as the one on (none was, at the first set)
     this.solve();
   }
 
