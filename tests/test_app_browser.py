@@ -313,6 +313,21 @@ def test_a_new_photo_that_fails_shows_nothing_of_the_last_one(page, tmp_path):
     assert "object" in page.evaluate("window.shadeform.modelState().message")
 
 
+def test_the_model_never_covers_the_corner_inset(page, tmp_path):
+    """The bumps fill the 3D view down to its bottom-left corner, where the inset (the camera
+    frame's axes and the light) sits: the inset shows its own dark frame, not the model's clay."""
+    from PIL import Image
+
+    open_example(page, "synth:bumps")
+    page.wait_for_timeout(300)  # the render worker's frame
+    shot = tmp_path / "inset.png"
+    page.locator(".gizmo-frame").screenshot(path=str(shot))
+    pixels = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    clay = (r > 120) & (g > 120) & (b > 120) & (abs(r - b) < 40)  # the lit model's warm grey
+    assert clay.mean() < 0.01, f"{100 * clay.mean():.1f} % of the inset is the model"
+
+
 def test_whatever_is_hidden_is_not_shown(page):
     """The page hides with the ``hidden`` attribute; no class's display may override it (a .btn's
     inline-flex showed the hidden "Downsample and open" button as an empty blue button)."""

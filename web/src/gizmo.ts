@@ -79,7 +79,9 @@ export class Gizmo {
     renderer.setScissorTest(true);
     renderer.setScissor(MARGIN, MARGIN, SIZE, SIZE);
     renderer.setViewport(MARGIN, MARGIN, SIZE, SIZE);
-    renderer.clearDepth();
+    // the inset's square cleared (the canvas is transparent there): the model never covers the
+    // frame and its label drawn under the canvas
+    renderer.clear(true, true, false);
     renderer.render(this.scene, this.camera);
     renderer.setScissorTest(false);
     renderer.setViewport(full.x / pixelRatio, full.y / pixelRatio, full.z / pixelRatio, full.w / pixelRatio);
