@@ -292,6 +292,24 @@ def test_an_unsure_light_estimate_says_so_and_a_sure_one_does_not(page, tmp_path
     assert not page.is_visible("#light-unsure") and "confidence" not in page.inner_text("#light-readout")
 
 
+def test_slant_and_tilt_start_at_the_estimate(page):
+    """From Estimate to Slant / tilt the sliders start where the estimate was (the coin's light,
+    read from the photo), to be corrected from there, not at their last manual values."""
+    open_example(page, "coin")
+    before = applied(page)
+    page.click('#light-mode [data-mode="estimate"]')
+    wait_for_result(page, before)
+    estimate = page.evaluate("window.shadeform.lastResult().info.light_estimate")
+    assert estimate["slant"] > 5  # a light off the camera's axis, or the test says nothing
+    before = applied(page)
+    page.click('#light-mode [data-mode="slant_tilt"]')
+    wait_for_result(page, before)
+    light = page.evaluate("window.shadeform.state().params.light")
+    assert light["mode"] == "slant_tilt"
+    assert (light["slant"], light["tilt"]) == (round(estimate["slant"]), round(estimate["tilt"]))
+    assert page.input_value("#slant") == str(round(estimate["slant"]))
+
+
 def test_a_new_photo_that_fails_shows_nothing_of_the_last_one(page, tmp_path):
     """A photo whose first solve fails (all black: no object) leaves no model of the photo before
     it on screen, nor its mask's description; the message says what failed."""

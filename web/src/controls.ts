@@ -49,6 +49,8 @@ function capitalised(text: string): string {
 
 export class Panel {
   private params: Params;
+  /** The last result's light estimate in whole degrees, where it was estimated: Slant / tilt starts there. */
+  private estimated: { slant: number; tilt: number } | null = null;
   private readonly channel = $<HTMLSelectElement>('channel');
   private readonly filterKind = $<HTMLSelectElement>('filter-kind');
   private readonly filterSize = $<HTMLInputElement>('filter-size');
@@ -88,9 +90,12 @@ export class Panel {
     this.slider(this.step, (v) => ({ step: v }));
 
     for (const button of document.querySelectorAll<HTMLButtonElement>('#light-mode button')) {
-      button.addEventListener('click', () =>
-        this.emit({ light: { ...this.params.light, mode: button.dataset.mode as Params['light']['mode'] } }),
-      );
+      button.addEventListener('click', () => {
+        const mode = button.dataset.mode as Params['light']['mode'];
+        // from an estimate to Slant / tilt: the sliders start at the estimate, to be corrected
+        const start = mode === 'slant_tilt' && this.params.light.mode === 'estimate' ? this.estimated : null;
+        this.emit({ light: { ...this.params.light, ...(start ?? {}), mode } });
+      });
     }
     for (const button of document.querySelectorAll<HTMLButtonElement>('#axis button')) {
       button.addEventListener('click', () => events.axis(button.dataset.axis as Axis));
@@ -158,7 +163,10 @@ export class Panel {
     const out = $('light-readout');
     const unsure = $('light-unsure');
     // the estimate's own confidence: the chance that the true light is within 10 degrees of it
-    const estimate = result?.info.light_estimate as { confidence: number; unsure: boolean } | undefined;
+    const estimate = result?.info.light_estimate as { slant: number; tilt: number; confidence: number; unsure: boolean } | undefined;
+    this.estimated = estimate
+      ? { slant: Math.min(Number(this.slant.max), Math.round(estimate.slant)), tilt: Math.round(estimate.tilt) }
+      : null;
     unsure.hidden = !estimate?.unsure;
     unsure.textContent = estimate?.unsure
       ? `The light read from the photo is unsure (a ${Math.round(100 * estimate.confidence)}\u00a0% chance of being within 10°): if you know where the light was, choose Slant / tilt and set it.`

@@ -1129,7 +1129,7 @@ class App {
     const cached = result.info.cached ? ' (cached solve)' : '';
     if (result.preview && result.info.level) return `quick look (photo ÷ ${result.info.level}) in ${total.toFixed(0)} ms`;
     if (result.preview) return `quick look in ${total.toFixed(0)} ms · refining…`;
-    return `server ${server.toFixed(0)} ms${cached} · view updated in ${total.toFixed(0)} ms`;
+    return `server ${server.toFixed(0)} ms${cached} · shown in ${total.toFixed(0)} ms`;
   }
 
   // --------------------------------------------------------------------------- files
