@@ -69,7 +69,7 @@ export class Panel {
     fillSelect(this.filterKind, options.filters.map((f) => [f, FILTER_NAMES[f] ?? capitalised(f)]));
     // names, help lines and order come from the library's registries: a new solver shows up here
     this.methodHelp = descriptions(options.methods);
-    fillSelect(this.method, options.methods.map((m): [string, string] => [m.name, m.name === 'auto' ? 'Auto (best for the light)' : capitalised(m.name)]), this.methodHelp);
+    fillSelect(this.method, options.methods.map((m): [string, string] => [m.name, m.name === 'auto' ? 'Auto (best measured)' : capitalised(m.name)]), this.methodHelp);
     fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i.name, capitalised(i.name)])],
       descriptions(options.integrators));
 
