@@ -343,6 +343,14 @@ class TestUsage:
             assert "Traceback" not in result.output
         assert list(out.iterdir()) == []
 
+    @pytest.mark.parametrize("tiles", ["auto", "512"])
+    def test_a_damaged_tiff_is_one_line_whatever_the_tiling(self, inputs, out, tiles):
+        """``--tiles auto`` reads a TIFF's header to choose; a damaged one is the loader's to
+        refuse (it was a traceback and exit 1 from the tile check)."""
+        (inputs / "bad.tif").write_bytes(b"II*\x00")
+        result = invoke("reconstruct", inputs / "bad.tif", "-o", out / "m.glb", "--tiles", tiles)
+        assert_fails(result, out, "truncated or damaged TIFF", "bad.tif")
+
     def test_bare_command_shows_the_commands_main_job_first(self):
         result = invoke()
         assert "error:" not in result.output and "Traceback" not in result.output

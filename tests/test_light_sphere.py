@@ -88,6 +88,13 @@ def test_errors(rig):
         calibrate_lights(dark, sphere=(200, 140, 80))
     with pytest.raises(InputError, match="numeric images"):
         calibrate_lights([["a"]])
+    # a circle that is not the sphere (a small one beside the true sphere's highlight): the
+    # highlights put the light behind the object; said, not returned as lights below the horizon
+    photo, _ = synth.chrome_sphere((0, 0, 1), size=200, radius=80)  # highlight at (100, 100)
+    with pytest.raises(
+        InputError, match=r"behind the object in photo\(s\) 1: it is likely not a shiny sphere"
+    ):
+        calibrate_lights([photo], sphere=(100 - 16, 100, 20))
 
 
 @pytest.mark.skipif(not BALL.is_dir(), reason=f"DiLiGenT ball photos not found at {BALL}")

@@ -63,6 +63,7 @@ import json
 import math
 import os
 import shutil
+import struct
 import tempfile
 import time
 from collections.abc import Callable
@@ -165,9 +166,10 @@ class TiffWindows:
                     for code in GEO_TAGS
                     if code in page.tags
                 }
-        except (tifffile.TiffFileError, OSError, ValueError, KeyError, IndexError) as err:
+        except (tifffile.TiffFileError, OSError, ValueError, KeyError, IndexError, struct.error):
             raise InputError(
-                f"cannot read '{self.path}' as a TIFF ({err}); tiled reconstruction reads TIFF and BigTIFF"
+                f"truncated or damaged TIFF: '{self.path}' cannot be read; save or export it again "
+                "(tiled reconstruction reads TIFF and BigTIFF)"
             ) from None
         if len(shape) not in (2, 3) or (len(shape) == 3 and shape[2] not in (1, 3, 4)) or dtype is None:
             raise InputError(

@@ -189,7 +189,10 @@ def tile_size(tiles: str, image: Path, max_pixels: int | None) -> int | None:
             return None
         from shadeform.tiled import DEFAULT_TILE, TiffWindows
 
-        height, width = TiffWindows(image).shape[:2]
+        try:
+            height, width = TiffWindows(image).shape[:2]
+        except InputError:  # not a readable TIFF: the whole-image loader says what is wrong with it
+            return None
         return DEFAULT_TILE if height * width > max_pixels else None
     try:
         return int(text)

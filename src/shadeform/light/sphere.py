@@ -89,7 +89,8 @@ def calibrate_lights(photos, *, sphere=None) -> LightCalibration:
     ------
     InputError
         Fewer than one photo, photos that are not numeric images, a circle off the photos, no
-        sphere found, or a photo whose highlight is not on the sphere (the light behind it).
+        sphere found, or a photo whose highlight is not on the sphere or puts its light behind the
+        object (more than 45 degrees from the sphere's centre: usually a circle that is no sphere).
 
     Examples
     --------
@@ -151,6 +152,16 @@ def calibrate_lights(photos, *, sphere=None) -> LightCalibration:
         energy[i] = total
         light = 2.0 * normal[2] * normal - np.array([0.0, 0.0, 1.0])
         directions[i] = light / np.linalg.norm(light)
+    behind = np.flatnonzero(directions[:, 2] <= 0)
+    if behind.size:
+        # a highlight more than 45 degrees from the centre puts the light behind the object: not
+        # a light that photometric stereo can use, and most often a circle that is not the sphere
+        listed = ", ".join(str(i + 1) for i in behind[:8]) + (", ..." if behind.size > 8 else "")
+        raise InputError(
+            f"the highlights in the circle at column {column:.0f}, row {row:.0f} (radius {radius:.1f} px) put "
+            f"the light behind the object in photo(s) {listed}: it is likely not a shiny sphere; give the "
+            "sphere's circle as X,Y,R, or leave those photos out"
+        )
     return LightCalibration(
         directions=directions,
         strengths=energy / np.median(energy),
