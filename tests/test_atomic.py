@@ -112,3 +112,25 @@ class TestAtomicWrite:
         with atomic_write(target) as f:
             f.write(b"x")
         assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~umask
+
+
+def test_a_temporary_is_named_as_the_file_it_stands_for(tmp_path):
+    from shadeform.io.atomic import OutputSet, target_name
+
+    with OutputSet() as outputs:
+        partial = outputs.temp(tmp_path / "model.glb")
+        with atomic_write(partial) as handle:  # a temporary's temporary, as the exporters make
+            inner = handle.name
+            handle.write(b"x")
+        assert target_name(partial) == target_name(inner) == "model.glb" != partial.name
+    assert target_name(tmp_path / "photo.png") == "photo.png"
+
+
+@pytest.mark.skipif(
+    not os.path.isdir("/proc/self"), reason="needs Linux's /proc, a folder no file can be made in"
+)
+def test_a_folder_that_cannot_be_written_is_said_before_any_work():
+    from shadeform.io.atomic import OutputSet
+
+    with OutputSet() as outputs, pytest.raises(InputError, match=r"cannot write 'x.glb' in folder '/proc'"):
+        outputs.temp("/proc/x.glb")

@@ -21,7 +21,7 @@ from typer.core import TyperGroup
 
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
-from shadeform.io.atomic import OutputSet
+from shadeform.io.atomic import OutputSet, target_name
 from shadeform.solvers import available_methods
 
 #: Exit code of every user error (the same as a command-line usage error).
@@ -92,7 +92,8 @@ class _Group(TyperGroup):
 
 
 def _os_error_message(err: OSError) -> str:
-    where = f" '{err.filename}'" if err.filename else ""
+    # an output's hidden temporary is named as the file the user asked for, in its folder
+    where = f" '{Path(err.filename).with_name(target_name(err.filename))}'" if err.filename else ""
     if isinstance(err, FileNotFoundError):
         return f"no such file or folder{where}; check the path"
     if isinstance(err, PermissionError):

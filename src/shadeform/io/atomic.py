@@ -27,10 +27,12 @@ from typing import IO
 
 from shadeform.errors import InputError
 
-__all__ = ["OutputSet", "atomic_write", "exit_on_signals", "remove_temporaries", "sweep"]
+__all__ = ["OutputSet", "atomic_write", "exit_on_signals", "remove_temporaries", "sweep", "target_name"]
 
 #: A temporary's name: the target's name, the writing process, a random part, the kind.
 _TEMPORARY = re.compile(r"^\..+\.shadeform-(\d+)-[0-9a-z_]+\.(?:partial.*|tmp)$")
+#: The same, with the name of the file it stands for (the last ".shadeform-" is its own).
+_TEMPORARY_OF = re.compile(r"^\.(.+)\.shadeform-\d+-[0-9a-z_]+\.(?:partial.*|tmp)$")
 #: This process's temporaries not yet renamed or deleted (for :func:`remove_temporaries`).
 _LIVE: set[Path] = set()
 #: Folders this process has swept already (once each is enough: later leftovers are its own).
@@ -123,6 +125,15 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
     finally:
         _LIVE.discard(tmp_path)
     _fsync_folder(parent)
+
+
+def target_name(path: str | os.PathLike[str]) -> str:
+    """The name of the file a temporary of this module's (or a temporary's temporary) stands for,
+    for messages; any other path's own name."""
+    name = Path(path).name
+    while found := _TEMPORARY_OF.match(name):
+        name = found[1]
+    return name
 
 
 def sweep(folder: str | os.PathLike[str], *, again: bool = False) -> list[Path]:
@@ -258,6 +269,14 @@ class OutputSet:
         tmp = target.with_name(
             f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial{target.suffix}"
         )
+        try:  # a folder that cannot be written to is said now, not after the command's work
+            tmp.open("x").close()
+            tmp.unlink()
+        except OSError as err:
+            reason = (err.strerror or type(err).__name__).lower()
+            raise InputError(
+                f"cannot write '{target.name}' in folder '{target.parent}' ({reason}); choose another output folder"
+            ) from None
         self._pending.append((tmp, target))
         _LIVE.add(tmp)
         return tmp
