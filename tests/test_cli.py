@@ -351,6 +351,11 @@ class TestUsage:
         result = invoke("reconstruct", inputs / "bad.tif", "-o", out / "m.glb", "--tiles", tiles)
         assert_fails(result, out, "truncated or damaged TIFF", "bad.tif")
 
+    def test_help_names_the_extras_to_install(self):
+        # rich reads "[fusion]" as markup and drops it unless escaped
+        assert "'shadeform[fusion]'" in invoke("fuse", "--help").output
+        assert "'shadeform[print]'" in invoke("relief", "--help").output
+
     def test_bare_command_shows_the_commands_main_job_first(self):
         result = invoke()
         assert "error:" not in result.output and "Traceback" not in result.output

@@ -103,7 +103,7 @@ def fuse(
         typer.Option(
             metavar="volume|poisson",
             help="The surface: volume (signed distance in the visual hull, marching cubes) or poisson "
-            "(screened Poisson reconstruction; needs pip install 'shadeform[fusion]').",
+            "(screened Poisson reconstruction; needs pip install 'shadeform\\[fusion]').",
         ),
     ] = "volume",
     settle: Annotated[

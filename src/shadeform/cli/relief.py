@@ -111,7 +111,7 @@ def relief_command(
         typer.Option(
             "--max-triangles",
             metavar="N",
-            help="Triangle budget (quadric simplification; needs pip install 'shadeform[print]'). "
+            help="Triangle budget (quadric simplification; needs pip install 'shadeform\\[print]'). "
             "Default: two triangles per pixel on top and on the base.",
             show_default=False,
         ),
