@@ -455,6 +455,21 @@ class TestReconstruct:
             else:
                 assert info["method"] == "eikonal" and info["singular_points"]
 
+    def test_the_summary_says_what_ran(self, sphere, out):
+        """The refinement is named only where it ran, and a light of slant 30 and tilt 90 reads
+        (0, 0.5, 0.866), not with cos(90 degrees)'s rounding noise."""
+        lines = {}
+        for method in ("eikonal", "propagation"):
+            extra = ["--slant", "30", "--tilt", "90"] if method == "propagation" else []
+            result = invoke(
+                "reconstruct", sphere["image"], "-o", out / f"{method}.glb", "--method", method, *extra
+            )
+            assert result.exit_code == 0, result.output
+            lines[method] = result.stdout.splitlines()[1]
+        assert lines["eikonal"].startswith("  solver eikonal, depth by ") and "refine" not in lines["eikonal"]
+        assert lines["propagation"].startswith("  solver propagation, refined 3 times, depth by ")
+        assert "light (0, 0.5, 0.866)" in lines["propagation"]
+
     def test_an_unsure_light_estimate_is_said_and_a_sure_one_is_not(self, sphere, out, tmp_path):
         """A cylinder seen side-on shows only the light's component across its axis (every light
         in the plane of the axis and the viewer gives the same image): its estimate is unsure."""

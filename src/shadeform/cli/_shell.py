@@ -269,7 +269,8 @@ def format_seconds(value: float) -> str:
 
 
 def format_vector(values) -> str:
-    return "(" + ", ".join(f"{float(v):.3g}" for v in values) + ")"
+    """``(x, y, z)`` to three digits; rounding noise (cos 90 degrees = 6e-17) reads as 0."""
+    return "(" + ", ".join(f"{float(v) if abs(v) >= 5e-4 else 0.0:.3g}" for v in values) + ")"
 
 
 def describe_photo(info: dict) -> str:

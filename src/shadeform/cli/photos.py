@@ -160,8 +160,10 @@ def reconstruct(
     refs = ", ".join(f"({r}, {c})" for r, c in info["references"])
     stages = ", ".join(f"{name} {format_seconds(t)}" for name, t in info["timings"].items())
     out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {describe_photo(photo.info)})")
+    # the refinement iterations that ran (the marching and photo solvers take none)
+    refined = f", refined {info['refine']} times" if info["refine"] else ""
     out.print(
-        f"  {info['method']} (refine {info['refine']}), {info['integrator']} integration, "
+        f"  solver {info['method']}{refined}, depth by {info['integrator']}, "
         f"filter {info['filter']}, light {format_vector(rec.light)}{read_light(info)}"
     )
     out.print(
