@@ -45,7 +45,7 @@ def assert_fails(result, out_dir: Path, *fragments: str) -> str:
     assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
     assert "Traceback" not in result.output
     assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
+    lines = result.stderr.splitlines()  # exactly one line: no blank line before it either
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
     for fragment in fragments:
         assert fragment.lower() in lines[0].lower(), lines[0]
@@ -350,6 +350,14 @@ class TestUsage:
         (inputs / "bad.tif").write_bytes(b"II*\x00")
         result = invoke("reconstruct", inputs / "bad.tif", "-o", out / "m.glb", "--tiles", tiles)
         assert_fails(result, out, "truncated or damaged TIFF", "bad.tif")
+
+    def test_a_command_with_a_progress_bar_fails_in_one_line(self, inputs, out):
+        """Off a terminal the progress bar is not drawn: its blank line came before the error."""
+        views = inputs / "views.json"
+        views.write_text(
+            json.dumps({"views": [{"photo": "gone.png", "angle": 0}, {"photo": "gone2.png", "angle": 90}]})
+        )
+        assert_fails(invoke("fuse", "--views", views, "-o", out / "f.glb"), out, "not found", "gone.png")
 
     def test_help_names_the_extras_to_install(self):
         # rich reads "[fusion]" as markup and drops it unless escaped

@@ -169,7 +169,8 @@ def stderr_console() -> Console:
 
 def progress_bar(console: Console, label: str = "{task.description}"):
     """The commands' progress bar on ``console``: the label, the bar, how many of how many, the
-    time taken; gone once done (rich's Progress, imported only when a command shows one)."""
+    time taken; gone once done, shown on a terminal only (rich's Progress, imported only when a
+    command shows one)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(
@@ -179,6 +180,8 @@ def progress_bar(console: Console, label: str = "{task.description}"):
         TimeElapsedColumn(),
         console=console,
         transient=True,
+        # not on a terminal (a pipe, a log) there is nothing to redraw: no bar, and no blank line
+        disable=not console.is_terminal,
     )
 
 
