@@ -175,3 +175,22 @@ def test_the_open_photo_is_added_as_a_view_with_its_settings(page):
     assert views(page, "open()") and "at least two views" in views(page, "note()")
     assert views(page, "applied()") == 0 and views(page, "error()") is None
     assert "light estimated" in page.inner_text('#views-list [data-index="0"] .settings')
+
+
+def test_views_from_opposite_sides_only_say_the_depth_is_a_guess(page, tmp_path):
+    """Two photos, front and back (evenly spaced: 0 and 180 degrees): the panel says the views
+    cannot tell the object's depth; turning one to the side fixes it and the note goes."""
+    files = []
+    for view in synth.render_views("lumpy", (0, 180), size=96):
+        files.append(tmp_path / f"lumpy-{view.angle:03.0f}.png")
+        Image.fromarray(np.rint(view.image * 65535).astype(np.uint16)).save(files[-1])
+    page.set_input_files("#file-views", [str(p) for p in files])
+    wait_for_views(page, 0)
+    assert [view["angle"] for view in views(page, "views()")] == [0, 180]
+    assert views(page, "lastResult().depth_fixed") is False
+    assert "cannot tell how deep the object is" in views(page, "rival()")
+    applied = views(page, "applied()")
+    page.fill('#views-list [data-index="1"] input', "90")
+    page.press('#views-list [data-index="1"] input', "Enter")
+    page.wait_for_function(f"window.shadeform.views.applied() > {applied}", timeout=RESULT_MS)
+    assert views(page, "lastResult().depth_fixed") is True and views(page, "rival()") is None

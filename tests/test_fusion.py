@@ -554,3 +554,13 @@ def test_cli_settles_the_waist_and_takes_regions_per_view(tmp_path):
     drawn = run("--views", str(tmp_path / "views.json"), "-o", str(tmp_path / "c.ply"), *common[2:])
     assert all(not view["settled_concave"] for view in drawn["views"])
     assert abs(drawn["mesh"]["volume"] / truth - 1) < 0.05
+
+
+def test_views_from_opposite_sides_only_do_not_fix_the_depth():
+    """Front and back views see the width and height twice and the depth never: the placement
+    says so (the CLI warns), and a view from the side, or one off the line by more than a pose's
+    correction, fixes it."""
+    assert not place(list(zip(true_views("waisted", (0, 180)), (0, 180))), refine=False).depth_fixed
+    assert not place(list(zip(true_views("waisted", (0, 185)), (0, 185))), refine=False).depth_fixed
+    assert place(list(zip(true_views("waisted", (0, 90)), (0, 90))), refine=False).depth_fixed
+    assert place(list(zip(true_views("waisted", (0, 180, 270)), (0, 180, 270))), refine=False).depth_fixed

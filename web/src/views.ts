@@ -356,12 +356,22 @@ export class ViewsSession {
     const rivals = result.rivals.map((turns) =>
       turns.flatMap((turn, i) => (turn > 0 ? [`view ${i + 1} turned ${Math.round(turn)}°`] : [])).join(', '),
     );
+    const warnings = [];
+    if (!result.depth_fixed) {
+      warnings.push(
+        'The views look along one line only (from opposite sides), so they cannot tell how deep the object is: ' +
+          'its depth in the model is a guess; add a photo from the side (e.g. at 90°).',
+      );
+    }
+    if (rivals.length) {
+      warnings.push(
+        `The photos fit another placement about as well (${rivals.join('; or ')}), so the model may be wrong there: ` +
+          'add a photo between two views (e.g. at 45°), or give the angles exactly and untick Refine the poses.',
+      );
+    }
     const rival = $('views-rival');
-    rival.hidden = rivals.length === 0;
-    rival.textContent = rivals.length
-      ? `The photos fit another placement about as well (${rivals.join('; or ')}), so the model may be wrong there: ` +
-        'add a photo between two views (e.g. at 45°), or give the angles exactly and untick Refine the poses.'
-      : '';
+    rival.hidden = warnings.length === 0;
+    rival.textContent = warnings.join(' ');
   }
 
   /** A message that stays until the next result (or the next error). */
@@ -548,6 +558,7 @@ export class ViewsSession {
           axis: r.axis,
           volume: r.volume,
           watertight: r.watertight,
+          depth_fixed: r.depth_fixed,
           timings: r.timings,
           info: r.info,
         };

@@ -63,6 +63,7 @@ class _Fused:
     volume: float
     watertight: bool
     rivals: tuple[tuple[float, ...], ...]
+    depth_fixed: bool
     timings: dict[str, float]
 
 
@@ -208,6 +209,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
         measures["volume"],
         measures["watertight"],
         tuple(rival.turns for rival in placement.rivals),
+        placement.depth_fixed,
         {"place": placed - lap, "solid": time.perf_counter() - placed},
     )
     state.results.put(key, fused, mesh.vertices.nbytes + mesh.faces.nbytes + mesh.normals.nbytes)
@@ -251,6 +253,7 @@ def _result(state, entries: list, body: FuseRequest) -> FuseResult:
         volume=fused.volume,
         watertight=fused.watertight,
         rivals=[list(turns) for turns in fused.rivals],
+        depth_fixed=fused.depth_fixed,
         timings=timings,
         info={"resolution": fused.spacing, "refine": body.refine, "settle": body.settle, "cached": cached},
     )

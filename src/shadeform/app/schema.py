@@ -485,6 +485,11 @@ class FuseResult(_Model):
         "(``shadeform.fusion.Rival``): per placement, per view the degrees it is turned from where the "
         "model has it (0: not turned). Not empty: the photos do not decide, and the model may be wrong.",
     )
+    depth_fixed: bool = Field(
+        default=True,
+        description="Whether the views fix the object's depth (``shadeform.fusion.Placement.depth_fixed``): "
+        "false when they all look along one line (from opposite sides only), and the model's thickness is a guess.",
+    )
     timings: dict[str, float] = Field(
         description="Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, "
         "total.",

@@ -198,6 +198,7 @@ def fuse(
                 ],
                 "surface": surface,
                 "rivals": [{"turns": list(rival.turns), "ratio": rival.ratio} for rival in placement.rivals],
+                "depth_fixed": placement.depth_fixed,
                 "files": {"mesh": output},
                 "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **measures},
                 "timings": timings,
@@ -221,6 +222,14 @@ def fuse(
                 f"(along {area['axis']}), as the other views' silhouettes show",
                 highlight=False,
             )
+    if not placement.depth_fixed:
+        err.print(
+            "warning: the views look along one line only (from opposite sides), so they cannot tell "
+            "how deep the object is: its depth in the model is a guess; add a photo from the side "
+            "(e.g. at 90 degrees)",
+            soft_wrap=True,
+            highlight=False,
+        )
     for rival in placement.rivals:
         turned = [f"view {i + 1} turned {turn:.0f} degrees" for i, turn in enumerate(rival.turns) if turn > 0]
         err.print(

@@ -184,6 +184,19 @@ class Placement:
     concave: tuple[tuple[dict, ...], ...]
     rivals: tuple[Rival, ...] = ()
 
+    @property
+    def depth_fixed(self) -> bool:
+        """Whether the views fix the object's depth: two of them look along directions more than
+        :data:`CORRECTED` degrees from parallel (poses may be that far off). Views from opposite
+        sides only (0 and 180 degrees) see its width and height twice and its depth never: each
+        view's depth offset is free, and the fused model's thickness is a guess."""
+        axes = [view.rotation.T @ np.array([0.0, 0.0, 1.0]) for view in self.views]  # object frame
+        return any(
+            np.linalg.norm(np.cross(a, b)) > np.sin(np.radians(CORRECTED))
+            for i, a in enumerate(axes)
+            for b in axes[i + 1 :]
+        )
+
     def transforms(self) -> list[np.ndarray]:
         """Per view, the 4x4 matrix taking its partial model's vertices (the mesh frame of
         ``docs/conventions.md``: ``(c, -r, depth[r, c])`` of its reading,
