@@ -75,6 +75,13 @@ def test_material_mode_writes_an_albedo_too_and_says_where_the_light_was_read(tm
     )
     given = cli("maps", photo, "--out", tmp_path / "given", "--material", "--slant", "45", "--tilt", "120")
     assert given.exit_code == 0 and "read from the photo" not in given.output
+    # the note's advice, as given, is a command line the tool takes
+    (note,) = [line for line in result.stderr.splitlines() if "looks inverted" in line]
+    assert note.startswith("note: ")
+    advice = note.split("give ", 1)[1].split(" (", 1)[0].split()
+    assert advice[0] == "--slant" and advice[2] == "--tilt"
+    followed = cli("maps", photo, "--out", tmp_path / "followed", "--material", *advice)
+    assert followed.exit_code == 0, followed.output
 
 
 def test_tile_needs_material(photo, tmp_path, cli):

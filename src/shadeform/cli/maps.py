@@ -215,10 +215,13 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
     height = result.maps["height"]
     tilt_read = float(np.degrees(np.arctan2(result.light[1], result.light[0])) % 360)
     if result.light_estimated:
+        slant_read = float(np.degrees(np.arccos(np.clip(result.light[2], -1.0, 1.0))))
         err.print(
-            f"the light's tilt was read from the photo as {tilt_read:.0f} degrees, on the side nearer "
-            f"above; if the relief looks inverted, give --tilt {(tilt_read + 180) % 360:.0f} "
-            "(and --slant to set its strength)"
+            f"note: the light's tilt was read from the photo as {tilt_read:.0f} degrees, on the side nearer "
+            f"above; if the relief looks inverted, give --slant {slant_read:.0f} --tilt "
+            f"{(tilt_read + 180) % 360:.0f} (--slant sets the shading's strength)",
+            soft_wrap=True,
+            highlight=False,
         )
     if as_json:
         print_json(
