@@ -12,7 +12,7 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.markup import escape
-from rich.table import Table
+from rich.table import Column, Table
 
 from shadeform.cli._shell import (
     MAX_PIXELS,
@@ -744,7 +744,10 @@ def batch(
             }
         )
     else:
-        table = Table("photo", "read as", "vertices", "triangles", "seconds", "written")
+        # a path is folded onto more lines, never cut: its end names the photo
+        table = Table(
+            Column("photo", overflow="fold"), "read as", "vertices", "triangles", "seconds", "written"
+        )
         for r in results:
             table.add_row(
                 escape(str(r.photo)),
