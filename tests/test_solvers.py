@@ -61,6 +61,9 @@ class TestRegistry:
     def test_unknown_method_lists_the_registered(self):
         with pytest.raises(InputError, match="unknown method 'magic'; choose one of: propagation, eikonal"):
             get_solver("magic")
+        # reconstruct takes "auto" too, its default, and says so
+        with pytest.raises(InputError, match="unknown method 'magic'; choose one of: auto, propagation"):
+            shadeform.reconstruct(np.ones((8, 8)), method="magic")
 
     def test_auto_rule_is_lights_then_noise_then_rank(self):
         frontal, oblique = np.array([0.0, 0.0, 1.0]), np.array([0.5, 0.0, 0.866])

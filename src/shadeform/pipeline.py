@@ -129,7 +129,8 @@ def reconstruct(
     if estimate_wanted and light != "estimate":
         raise InputError(f"light must be a direction (x, y, z) or 'estimate', got {light!r}")
     light = None if estimate_wanted else as_light(light)
-    solver = None if method == AUTO else get_solver(method)
+    # "auto" among the choices an unknown name is told (get_solver knows the solvers alone)
+    solver = None if check_choice(method, (AUTO, *solver_names()), "method") == AUTO else get_solver(method)
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
     refine = whole(refine, "refine")
