@@ -856,6 +856,10 @@ class TestStereo:
             invoke("stereo", *photo_set["photos"][:2], "-o", out / "m.glb"), out, "at least 3 photos"
         )
 
+    def test_photos_and_a_folder_together_are_refused(self, photo_set, out):
+        result = invoke("stereo", photo_set["photos"][0], photo_set["folder"], "-o", out / "m.glb")
+        assert_fails(result, out, "the photos, or one folder holding them, not both")
+
     def test_no_lights_names_every_way_to_give_them(self, photo_set, out):
         message = assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "lights")
         assert all(option in message for option in ("--lights", "--sphere", "--unknown-lights")), message

@@ -48,7 +48,12 @@ def test_every_map_is_written_with_its_legend(photo, tmp_path, cli):
 
 
 @pytest.mark.parametrize(
-    ("args", "fragment"), [(("--reach", "0.5"), "--reach"), (("--light", "1,2"), "light")]
+    ("args", "fragment"),
+    [
+        (("--reach", "0.5"), "--reach"),
+        (("--light", "1,2"), "light"),
+        (("--maps", "height,albedo"), "albedo map is made by --material"),
+    ],
 )
 def test_bad_options_are_one_line_and_nothing_is_written(photo, tmp_path, cli, args, fragment):
     out = tmp_path / "maps"

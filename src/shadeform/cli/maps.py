@@ -181,6 +181,8 @@ def _wanted(only: str | None, names: list[str]) -> list[str]:
 
     asked = [name.strip() for name in only.split(",") if name.strip()]
     unknown = [name for name in asked if name not in names]
+    if unknown == ["albedo"]:
+        raise InputError("the albedo map is made by --material only (a photo of a surface filling the frame)")
     if unknown or not asked:
         what = f"unknown map {unknown[0]!r} in --maps" if unknown else "--maps names no map"
         raise InputError(f"{what}; choose from {', '.join(names)}")

@@ -257,6 +257,8 @@ def photo_files(sources) -> list[Path]:
     ``filenames.txt``'s order when it has one, else sorted by name; masks and normal maps left
     out)."""
     sources = list(map(Path, sources))
+    if len(sources) > 1 and any(source.is_dir() for source in sources):
+        raise InputError("give the photos, or one folder holding them, not both")
     if len(sources) == 1 and sources[0].is_dir():
         folder = sources[0]
         listing = folder / "filenames.txt"
