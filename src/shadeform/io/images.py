@@ -504,13 +504,13 @@ def load_mask(
         If the file cannot be read as an image (see :func:`load_image`), its size differs from
         ``shape``, or it has no non-zero pixel.
     """
-    samples, _ = _decode(path, max_pixels)
+    samples, source = _decode(path, max_pixels)
     mask = (_unit(samples, srgb=False) > 0).any(axis=2)
     if shape is not None:
         height, width = (int(n) for n in tuple(shape)[:2])
         if mask.shape != (height, width):
             raise InputError(
-                f"mask is {mask.shape[1]}x{mask.shape[0]} but the image is {width}x{height} "
+                f"mask '{source}' is {mask.shape[1]}x{mask.shape[0]} but the image is {width}x{height} "
                 "(width x height); give a mask of the image's size"
             )
     if not mask.any():
