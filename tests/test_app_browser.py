@@ -121,6 +121,8 @@ def open_example(page, name: str) -> None:
     page.click(f'#examples-menu [data-example="{name}"]')
     wait_for_result(page, before, timeout=FIRST_RESULT_MS)
     assert page.evaluate("window.shadeform.state().image.name") == name
+    # the mask the result was solved with is decoded in the mask worker, beside the model's frame
+    page.wait_for_function("window.shadeform.mask().pixels > 0", timeout=RESULT_MS)
 
 
 def depth(page, row: int, col: int) -> float:
@@ -649,6 +651,9 @@ def test_mask_brush_polygon_invert_drive_the_solve(page):
     open_example(page, SPHERE)
     _, info = load_example(SPHERE)
     truth = info["mask"]
+    # the mask a result was solved with is decoded in the mask worker beside the model's drawing:
+    # it may show a frame after the model (0 pixels once, in a CI run under load)
+    page.wait_for_function(f"window.shadeform.mask().pixels === {int(truth.sum())}", timeout=RESULT_MS)
     state = mask_state(page)
     assert state["user"] is False and state["pixels"] == truth.sum()
     full = page.evaluate("window.shadeform.lastResult().vertex_count")
@@ -714,6 +719,7 @@ def test_mask_brush_polygon_invert_drive_the_solve(page):
     page.click("#mask-auto")
     wait_for_result(page, before)
     assert page.evaluate("window.shadeform.state().params.mask") is None
+    page.wait_for_function(f"window.shadeform.mask().pixels === {int(truth.sum())}", timeout=RESULT_MS)
     assert mask_state(page)["user"] is False and mask_state(page)["pixels"] == truth.sum()
     assert page.evaluate("window.shadeform.lastResult().vertex_count") == full
 
