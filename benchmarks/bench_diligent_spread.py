@@ -60,8 +60,10 @@ def _sign_test(x: np.ndarray, y: np.ndarray) -> tuple[int, int, int, float]:
     return below, above, ties, float(p)
 
 
-def _load() -> str:
-    return f"{os.getloadavg()[0]:.2f}"
+def _progress(loads: list, line: str) -> None:
+    """Print one case's ``line`` with the 1-minute load average now, and keep that load."""
+    loads.append(os.getloadavg()[0])
+    print(f"{line}  load {loads[-1]:.2f}", flush=True)
 
 
 def run_seeds(objects, seeds, loads: list, on_round=None) -> dict:
@@ -81,12 +83,10 @@ def run_seeds(objects, seeds, loads: list, on_round=None) -> dict:
                 z = fn(nn, mask, K)
                 secs[name][k].append(time.perf_counter() - t)
                 errs[name][k].append(_made(z, gt, mask))
-            loads.append(os.getloadavg()[0])
-            print(
+            _progress(
+                loads,
                 f"{name:8s} seed {seed}  "
-                + "  ".join(f"{k} {errs[name][k][-1]:.3f} ({secs[name][k][-1]:.1f} s)" for k in METHODS)
-                + f"  load {_load()}",
-                flush=True,
+                + "  ".join(f"{k} {errs[name][k][-1]:.3f} ({secs[name][k][-1]:.1f} s)" for k in METHODS),
             )
         out = {o: {k: (np.array(errs[o][k]), np.array(secs[o][k])) for k in METHODS} for o in objects}
         if on_round is not None:
@@ -103,12 +103,10 @@ def run_original(objects, loads: list) -> dict:
         row = {"rule": _made(METHODS["a"][1](normals, mask, K), gt, mask)}
         for tol in ORIGINAL_TOLS:
             row[tol] = _made(bini_rerun(normals, mask, K, cg_tol=tol), gt, mask)
-        loads.append(os.getloadavg()[0])
-        print(
+        _progress(
+            loads,
             f"{name:8s} original  rule {row['rule']:.3f}  "
-            + "  ".join(f"CG {t:g} {row[t]:.3f}" for t in ORIGINAL_TOLS)
-            + f"  load {_load()}",
-            flush=True,
+            + "  ".join(f"CG {t:g} {row[t]:.3f}" for t in ORIGINAL_TOLS),
         )
         out[name] = row
     return out

@@ -22,7 +22,16 @@ from shadeform.light import as_light, estimate_light
 from shadeform.preprocess import Filter, apply_filter, image_detail, noise_level, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, as_regions, concave_masks
-from shadeform.solvers import AUTO, NOISY, Problem, Reference, choose, get_solver, solver_names
+from shadeform.solvers import (
+    AUTO,
+    NOISY,
+    Problem,
+    Reference,
+    available_methods,
+    choose,
+    get_solver,
+    solver_names,
+)
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -129,8 +138,8 @@ def reconstruct(
     if estimate_wanted and light != "estimate":
         raise InputError(f"light must be a direction (x, y, z) or 'estimate', got {light!r}")
     light = None if estimate_wanted else as_light(light)
-    # "auto" among the choices an unknown name is told (get_solver knows the solvers alone)
-    solver = None if check_choice(method, (AUTO, *solver_names()), "method") == AUTO else get_solver(method)
+    check_choice(method, tuple(available_methods()), "method")  # "auto" too, unlike get_solver's list
+    solver = None if method == AUTO else get_solver(method)
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
     refine = whole(refine, "refine")

@@ -492,9 +492,9 @@ def stereo(
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
     )
-    name = [Path(path).name for path in photos.paths]  # the user's names for the photos, not indices
+    names = [Path(path).name for path in photos.paths]  # the user's names for the photos, not indices
     if rec.info["photos_rescaled"]:
-        listed = ", ".join(f"{escape(name[i])} x{f:.2f}" for i, f in rec.info["photos_rescaled"])
+        listed = ", ".join(f"{escape(names[i])} x{f:.2f}" for i, f in rec.info["photos_rescaled"])
         out.print(f"  photos whose light was brighter or dimmer than its strength said, rescaled: {listed}")
     if rec.info["light_scale"] != 1.0:
         out.print(
@@ -502,7 +502,7 @@ def stereo(
             "(--keep-lights takes them as given)"
         )
     if rec.info["photos_dropped"]:
-        listed = ", ".join(escape(name[i]) for i in rec.info["photos_dropped"])
+        listed = ", ".join(escape(names[i]) for i in rec.info["photos_dropped"])
         out.print(f"  photos left out because they contradict the others: {listed}")
     out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
     out.print(

@@ -29,10 +29,9 @@ from shadeform.errors import InputError
 
 __all__ = ["OutputSet", "atomic_write", "exit_on_signals", "remove_temporaries", "sweep", "target_name"]
 
-#: A temporary's name: the target's name, the writing process, a random part, the kind.
-_TEMPORARY = re.compile(r"^\..+\.shadeform-(\d+)-[0-9a-z_]+\.(?:partial.*|tmp)$")
-#: The same, with the name of the file it stands for (the last ".shadeform-" is its own).
-_TEMPORARY_OF = re.compile(r"^\.(.+)\.shadeform-\d+-[0-9a-z_]+\.(?:partial.*|tmp)$")
+#: A temporary's name: the target's name (a temporary's own, the last ".shadeform-", is its), the
+#: writing process, a random part, the kind.
+_TEMPORARY = re.compile(r"^\.(?P<target>.+)\.shadeform-(?P<pid>\d+)-[0-9a-z_]+\.(?:partial.*|tmp)$")
 #: This process's temporaries not yet renamed or deleted (for :func:`remove_temporaries`).
 _LIVE: set[Path] = set()
 #: Folders this process has swept already (once each is enough: later leftovers are its own).
@@ -131,8 +130,8 @@ def target_name(path: str | os.PathLike[str]) -> str:
     """The name of the file a temporary of this module's (or a temporary's temporary) stands for,
     for messages; any other path's own name."""
     name = Path(path).name
-    while found := _TEMPORARY_OF.match(name):
-        name = found[1]
+    while found := _TEMPORARY.match(name):
+        name = found["target"]
     return name
 
 
@@ -168,7 +167,7 @@ def sweep(folder: str | os.PathLike[str], *, again: bool = False) -> list[Path]:
         return removed
     for entry in entries:
         found = _TEMPORARY.match(entry.name) if ".shadeform-" in entry.name else None
-        if found is None or _running(int(found.group(1))):
+        if found is None or _running(int(found["pid"])):
             continue
         with contextlib.suppress(OSError):
             os.unlink(entry.path)
