@@ -892,7 +892,7 @@ def _render_closed(obj: ClosedObject, pose: np.ndarray, light: np.ndarray, albed
     start = np.stack([x[rows, cols], y[rows, cols], translation[2] + half_chord], axis=-1)
     origin = (start - translation) @ rotation  # R^T (q - t) for each row
     heading = -rotation[2]  # R^T (0, 0, -1)
-    distance = _first_crossing(obj.implicit, origin, heading, 2.0 * half_chord)
+    distance = first_crossing(obj.implicit, origin, heading, 2.0 * half_chord)
     hit = np.isfinite(distance)
     rows, cols, origin, distance = rows[hit], cols[hit], origin[hit], distance[hit]
     points = origin + distance[:, None] * heading
@@ -915,30 +915,47 @@ def _render_closed(obj: ClosedObject, pose: np.ndarray, light: np.ndarray, albed
     return np.clip(image, 0.0, 1.0), mask, depth, normals
 
 
-def _first_crossing(implicit, origin, heading, length, *, refine: bool = True) -> np.ndarray:
+def first_crossing(
+    implicit, origin, heading, length, *, refine: bool = True, step: float = _MARCH_STEP
+) -> np.ndarray:
     """Distance along ``heading`` from each origin to the first point with F < 0, NaN if none.
 
-    Samples every ``_MARCH_STEP`` up to ``length`` (per ray), in blocks of ``_BLOCK`` samples,
+    Samples every ``step`` (pixels) up to ``length`` (per ray), in blocks of ``_BLOCK`` samples,
     then (with ``refine``) bisects the bracketing step to rounding. ``F(origin)`` must be > 0.
+    A part of the object thinner than ``step`` along the ray may be missed.
+
+    Parameters
+    ----------
+    implicit : callable
+        ``F(points)`` for points ``(..., 3)``, negative inside.
+    origin : (N, 3) float64
+    heading : (3,) float64
+        Unit direction of every ray.
+    length : (N,) float64
+        How far to look along each ray.
+
+    Returns
+    -------
+    (N,) float64
     """
     count = origin.shape[0]
     found = np.full(count, np.nan)
     alive = np.arange(count)
-    offsets = _MARCH_STEP * np.arange(1, _BLOCK + 1)
+    offsets = step * np.arange(1, _BLOCK + 1)
     base = 0.0
     while alive.size:
         steps = base + offsets  # (B,)
         samples = origin[alive, None, :] + steps[None, :, None] * heading
-        inside = (implicit(samples) < 0) & (steps[None, :] <= length[alive, None] + _MARCH_STEP)
+        inside = (implicit(samples) < 0) & (steps[None, :] <= length[alive, None] + step)
         any_inside = inside.any(axis=1)
         first = np.argmax(inside, axis=1)
         found[alive[any_inside]] = steps[first[any_inside]]
-        base += _BLOCK * _MARCH_STEP
-        alive = alive[~any_inside & (base < length[alive] + _MARCH_STEP)]
+        base += _BLOCK * step
+        alive = alive[~any_inside & (base < length[alive] + step)]
     if not refine:
         return found
     hit = np.nonzero(np.isfinite(found))[0]
-    lo, hi = found[hit] - _MARCH_STEP, found[hit]
+    lo, hi = found[hit] - step, found[hit]
     for _ in range(_BISECTIONS):
         mid = 0.5 * (lo + hi)
         inside = implicit(origin[hit] + mid[:, None] * heading) < 0
@@ -953,7 +970,7 @@ def _blocked(implicit, origin, heading, bound) -> np.ndarray:
     exit_distance = -along + np.sqrt(
         np.maximum(along**2 - np.einsum("ij,ij->i", origin, origin) + bound**2, 0)
     )
-    return np.isfinite(_first_crossing(implicit, origin, heading, exit_distance, refine=False))
+    return np.isfinite(first_crossing(implicit, origin, heading, exit_distance, refine=False))
 
 
 def _radial(implicit, directions, reach: float) -> np.ndarray:

@@ -273,3 +273,24 @@ register(
         "by the shading it can trust",
     )
 )
+register(
+    Solver(
+        "learned",
+        "shadeform.solvers.learned:solve_learned",
+        lights="any",
+        integrator="poisson",
+        description="the learned shape prior alone: the object's shape as a network trained on "
+        "generated photos reads it from the photo and its outline (no light needed)",
+    )
+)
+register(
+    Solver(
+        "guided",
+        "shadeform.solvers.learned:solve_guided",
+        lights="any",
+        depth="guided (the photo energy started from and held to the learned prior)",
+        preview_pixels=20_000,
+        description="for real photographs: the learned prior's shape, refined by the shading it "
+        "can trust",
+    )
+)

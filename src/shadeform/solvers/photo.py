@@ -268,6 +268,7 @@ def photo_depth(
     albedo: float | None = None,
     concave_x: np.ndarray | None = None,
     concave_y: np.ndarray | None = None,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PhotoResult:
     """Depth and normals of one photo by the energy of this module's description.
 
@@ -285,6 +286,10 @@ def photo_depth(
     concave_x, concave_y : (H, W) bool, optional
         Where the user marked the surface concave along x / y: the start is dented there
         (:func:`concave_start`) and the descent goes on from the dent.
+    prior : ((H, W, 3), (H, W)) float, optional
+        Normals the shape is expected to have and each one's weight (the learned prior,
+        :mod:`shadeform.solvers.learned`): the start is their integrated shape instead of the
+        silhouette's, and the energy gains ``sum_p w_p (1 - n_p . prior_p)``.
 
     Returns
     -------
@@ -299,9 +304,12 @@ def photo_depth(
             for m in (concave_x, concave_y)
         )
     ]
+    expected = [None if prior is None else _prior_level(*prior, mask)]
     while np.count_nonzero(pyramid[-1][1]) > 4 * COARSEST and min(pyramid[-1][1].shape) >= 16:
         finer = pyramid[-1][1]
         pyramid.append(_half(*pyramid[-1]))
+        if prior is not None:
+            expected.append(_prior_level(*_half_prior(*expected[-1], finer), pyramid[-1][1]))
         # a coarse pixel is marked when most of its object pixels are
         marked.append(
             tuple((_half(m.astype(np.float64), finer)[0] >= 0.5) & pyramid[-1][1] for m in marked[-1])
@@ -314,10 +322,14 @@ def photo_depth(
     depth = previous = None
     curve = None if albedo is None else _lambert(float(albedo))
     total = 0
-    for level, ((values, level_mask), (level_x, level_y)) in enumerate(zip(pyramid[::-1], marked[::-1])):
-        grid = _Level(values, level_mask, light, spacing=spacing, concave_x=level_x, concave_y=level_y)
+    levels = zip(pyramid[::-1], marked[::-1], expected[::-1])
+    for level, ((values, level_mask), (level_x, level_y), guide) in enumerate(levels):
+        grid = _Level(
+            values, level_mask, light, spacing=spacing, concave_x=level_x, concave_y=level_y, prior=guide
+        )
         if depth is None:
-            depth = concave_start(silhouette_depth(level_mask), level_x, level_y)
+            shape = silhouette_depth(level_mask) if guide is None else _prior_depth(guide[0], level_mask)
+            depth = concave_start(shape, level_x, level_y)
         else:
             depth = _double(depth, previous, level_mask)
         iterations = ITERATIONS[min(level, len(ITERATIONS) - 1)]
@@ -344,8 +356,9 @@ def photo_depth(
     return PhotoResult(depth, normals, float(curve[-1, 1]), curve, len(pyramid), total)
 
 
-def solve(problem: Problem) -> Solution:
-    """The registry's entry (:mod:`shadeform.solvers`): depth with ``z = 0`` at the main reference."""
+def solve(problem: Problem, *, prior: tuple[np.ndarray, np.ndarray] | None = None) -> Solution:
+    """The registry's entry (:mod:`shadeform.solvers`): depth with ``z = 0`` at the main reference.
+    ``prior``: normals and weights the shape is held to (:func:`photo_depth`)."""
     given = problem.references[0].normal is not None
     result = photo_depth(
         problem.image,
@@ -354,6 +367,7 @@ def solve(problem: Problem) -> Solution:
         albedo=problem.albedo if given else None,
         concave_x=problem.concave_x,
         concave_y=problem.concave_y,
+        prior=prior,
     )
     problem.lap("solve")
     depth = result.depth - result.depth[problem.main]
@@ -369,7 +383,7 @@ def solve(problem: Problem) -> Solution:
 class _Level:
     """One pyramid level: the object's pixels, its difference operators and hierarchical basis."""
 
-    def __init__(self, image, mask, light, *, spacing=1.0, concave_x=None, concave_y=None):
+    def __init__(self, image, mask, light, *, spacing=1.0, concave_x=None, concave_y=None, prior=None):
         from shadeform.light.contour import find_boundary
 
         self.mask = mask
@@ -405,6 +419,14 @@ class _Level:
         self.basis = _Basis(mask)
         self.unknowns = self.basis.size
         self.work = np.empty((11, self.n))
+        # the prior's normals and weights on the object's pixels; none where marked concave (the
+        # user's marks overrule what the prior expects)
+        self.prior = None
+        if prior is not None:
+            weight = prior[1][mask]
+            if concave_x is not None:
+                weight = np.where((concave_x | concave_y)[mask], 0.0, weight)
+            self.prior = (np.ascontiguousarray(prior[0][mask]), weight)
 
     def weights(self):
         """``(MU, EPS, NU, SCALE)`` at this level's pixel spacing ``h`` (in units of the reference
@@ -448,7 +470,29 @@ class _Level:
             self.work,
             g_z,
         )
+        if self.prior is not None:
+            energy += self._prior_term(z, g_z)
         return energy, self.basis.reduce(g_z)
+
+    def _prior_term(self, z, g_z):
+        """``sum_p w_p (1 - n_p . m_p)`` for the prior's normals ``m``; its gradient is added to
+        ``g_z``. Vectorised numpy (a few array passes; the kernel's loops need no change)."""
+        (col_ahead, col_behind, col_half), (row_ahead, row_behind, row_half) = (
+            self.col_stencil,
+            self.row_stencil,
+        )
+        a = col_half * (z[col_ahead] - z[col_behind])
+        b = row_half * (z[row_ahead] - z[row_behind])
+        c = 1.0 / np.sqrt(1.0 + a * a + b * b)
+        m, w = self.prior
+        dot = (-a * m[:, 0] + b * m[:, 1] + m[:, 2]) * c  # n = (-a, b, 1) c
+        # d(dot)/da, d(dot)/db of the energy -w dot
+        g_a = -w * (-m[:, 0] * c - dot * a * c * c)
+        g_b = -w * (m[:, 1] * c - dot * b * c * c)
+        n = z.size
+        g_z += np.bincount(col_ahead, col_half * g_a, n) - np.bincount(col_behind, col_half * g_a, n)
+        g_z += np.bincount(row_ahead, row_half * g_b, n) - np.bincount(row_behind, row_half * g_b, n)
+        return float(np.sum(w * (1.0 - dot)))
 
     def energy_reference(self, coefficients, curve):
         """:meth:`energy` in plain numpy and sparse products (slow, obviously correct: the
@@ -487,6 +531,11 @@ class _Level:
         energy += nu * np.sum(miss * miss)
         g_n[0][self.outline] += 2.0 * nu * miss * self.outward[:, 0]  # outline pixels are distinct
         g_n[1][self.outline] += 2.0 * nu * miss * self.outward[:, 1]
+        if self.prior is not None:  # prior: w (1 - n . m)
+            m, w = self.prior
+            energy += np.sum(w * (1.0 - (nx * m[:, 0] + ny * m[:, 1] + nz * m[:, 2])))
+            for axis in range(3):
+                g_n[axis] = g_n[axis] - w * m[:, axis]
         # back through n(gx, gy) to the slopes, the depth and the basis
         cube = inverse**3
         g_x += g_n[0] * (gx * gx * cube - inverse) - g_n[1] * gx * gy * cube - g_n[2] * gx * cube
@@ -917,3 +966,29 @@ def _double(depth, coarse_mask, mask):
     cols = (np.arange(mask.shape[1]) + 0.5) / 2 - 0.5
     grid = np.meshgrid(rows, cols, indexing="ij")
     return 2.0 * ndi.map_coordinates(filled, grid, order=1, mode="nearest")
+
+
+def _prior_level(normals, weight, mask):
+    """The prior's unit normals and weights on a level's grid, 0 off its object."""
+    normals = np.where(mask[..., None], np.nan_to_num(normals), 0.0)
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = np.where(length > 0, normals / np.maximum(length, 1e-12), 0.0)
+    return normals, np.where(mask, np.nan_to_num(weight), 0.0)
+
+
+def _half_prior(normals, weight, mask):
+    """The prior one pyramid level coarser: normals and weights averaged over 2x2 blocks."""
+    parts = [_half(normals[..., axis], mask)[0] for axis in range(3)]
+    return np.stack(parts, axis=-1), _half(weight, mask)[0]
+
+
+def _prior_depth(normals, mask):
+    """The start a prior gives: its normals integrated (least squares), slopes bounded so that the
+    outline's grazing normals do not throw the surface."""
+    from shadeform.integration import integrate
+
+    bounded = normals.copy()
+    bounded[..., 2] = np.maximum(bounded[..., 2], 0.2)  # slopes of at most about 5
+    bounded /= np.linalg.norm(bounded, axis=-1, keepdims=True)
+    depth = integrate(bounded, mask, method="poisson")
+    return np.where(mask, depth - np.nanmin(depth[mask]), 0.0)
