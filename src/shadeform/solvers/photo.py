@@ -322,6 +322,7 @@ def photo_depth(
     depth = previous = None
     curve = None if albedo is None else _lambert(float(albedo))
     total = 0
+    expected += [None] * (len(pyramid) - len(expected))  # no prior: None on every level
     levels = zip(pyramid[::-1], marked[::-1], expected[::-1])
     for level, ((values, level_mask), (level_x, level_y), guide) in enumerate(levels):
         grid = _Level(
