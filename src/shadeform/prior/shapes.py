@@ -8,6 +8,8 @@ finite difference), so the union's depth is the nearest part's and its normal is
 ellipsoid   any size, any 3D orientation: the front root of the quadric along the ray
 superquadric ``(|x/a|^p + |y/b|^p) + |z/c|^q = 1`` turned in the image plane: rounded boxes,
             cushions, coins and pills (p, q from 2 to 10)
+solid       ``(|x/a|^s + |y/b|^s)^(t/s) + |z/c|^t = 1`` turned any way in 3D, ray cast: boxes
+            seen corner-on, cylinders and tins seen from above (s = 2 or 2-12, t 2-12)
 tube        a sphere swept along a straight or bent centre line in the image plane with a
             varying radius and round ends: solids of revolution lying down, legs, handles, stems,
             thin parts (a radius of 2 px)
@@ -37,8 +39,8 @@ __all__ = ["KINDS", "Shape", "random_shape"]
 
 #: The kinds of main body an object is built around (the parts table above), and how often each
 #: is drawn: bodies with round parts most (people photograph figurines, fruit, toys).
-KINDS = ("ellipsoid", "superquadric", "tube", "slab", "blob", "sheet")
-ODDS = (0.2, 0.15, 0.15, 0.1, 0.25, 0.15)
+KINDS = ("ellipsoid", "superquadric", "solid", "tube", "slab", "blob", "sheet")
+ODDS = (0.15, 0.1, 0.15, 0.15, 0.1, 0.2, 0.15)
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ def random_shape(rng: np.random.Generator, size: int, *, kind: str | None = None
         [0, 1, 2, 3], p=[0.35, 0.3, 0.2, 0.15] if kind not in ("sheet", "slab") else [0.7, 0.2, 0.1, 0.0]
     )
     for _ in range(extra):
-        attach = rng.choice(["tube", "ellipsoid", "superquadric", "blob"], p=[0.45, 0.3, 0.15, 0.1])
+        attach = rng.choice(["tube", "ellipsoid", "solid", "blob"], p=[0.45, 0.3, 0.15, 0.1])
         parts.append(_BODIES[attach](rng, grid, r * rng.uniform(0.25, 0.6), near=parts[0]))
     depth, normals, part = _union(parts)
     mask = np.isfinite(depth)
@@ -289,20 +291,19 @@ def _slab(rng, grid, r, near=None):
     d = ndimage.gaussian_filter(ndimage.distance_transform_edt(inside), 0.7)
     g_row, g_col = np.gradient(d)
     gx, gy = g_col, -g_row
-    b = max(d.max() * rng.uniform(0.15, 0.8), 1.0)
-    dome = rng.uniform(0, 0.3) * d.max()
+    deepest = float(d.max()) or 1.0  # an outline shifted off the canvas leaves nothing
+    b = max(deepest * rng.uniform(0.15, 0.8), 1.0)
+    dome = rng.uniform(0, 0.3) * deepest
     u = np.clip(1 - d / b, 0, 1)
-    z = b * np.sqrt(1 - u * u) + dome * (1 - (1 - d / d.max()) ** 2)
+    z = b * np.sqrt(1 - u * u) + dome * (1 - (1 - d / deepest) ** 2)
     slope = np.where(u > 0, u, 0.0)  # dz/dd * sqrt(1 - u^2) of the bevel
     cap = np.sqrt(1 - u * u)
-    dslope = slope + cap * dome * 2 * (1 - d / d.max()) / d.max()
+    dslope = slope + cap * dome * 2 * (1 - d / deepest) / deepest
     return _Part(np.where(inside, cz + z, -np.inf), _unit(-dslope * gx, -dslope * gy, cap))
 
 
 def _blob(rng, grid, r, near=None):
     """``F(p) = T - sum_i w_i exp(-|A_i (p - c_i)|^2)`` ray cast from the front."""
-    from shadeform.synth import first_crossing
-
     (cx, cy), cz = _centre(rng, grid, r, near)
     k = rng.integers(2, 7)
     centres = np.c_[rng.normal(0, 0.45 * r, (k, 2)), rng.normal(0, 0.15 * r, k)] + [cx, cy, cz]
@@ -326,22 +327,70 @@ def _blob(rng, grid, r, near=None):
 
     # rays only where some Gaussian reaches: within 3 of its widest spread of its centre
     reach = 3.0 * np.sqrt(1.0 / np.linalg.eigvalsh(spreads)[:, 0])
+
+    def gradient(p):
+        grad = np.zeros_like(p)
+        for c, a, w in zip(centres, spreads, weights):
+            ad = (p - c) @ a
+            grad += 2 * w * np.exp(-np.sum((p - c) * ad, axis=-1))[..., None] * ad
+        return grad
+
+    return _cast(implicit, gradient, grid, centres, reach)
+
+
+def _cast(implicit, gradient, grid, centres, reach):
+    """The front surface of ``implicit`` < 0 seen along -z: rays from above the highest of the
+    spheres ``(centres, reach)`` that bound it, sampled every 1.5 px, then bisected."""
+    from shadeform.synth import first_crossing
+
     near_any = np.zeros(grid.x.shape, bool)
     for (px, py, _), q in zip(centres, reach):
         near_any |= (grid.x - px) ** 2 + (grid.y - py) ** 2 < q * q
-    top = centres[:, 2].max() + reach.max()
+    top = np.max(centres[:, 2] + reach)
     rows, cols = np.nonzero(near_any)
     origin = np.stack([grid.x[rows, cols], grid.y[rows, cols], np.full(rows.size, top)], axis=-1)
-    depth_range = np.full(rows.size, top - centres[:, 2].min() + reach.max())
+    depth_range = np.full(rows.size, top - np.min(centres[:, 2] - reach))
     hit = first_crossing(implicit, origin, np.array([0.0, 0.0, -1.0]), depth_range, step=1.5)
     z = np.full(grid.x.shape, np.nan)
     z[rows, cols] = top - hit
-    p = np.stack([grid.x, grid.y, np.nan_to_num(z)], axis=-1)
-    grad = np.zeros_like(p)
-    for c, a, w in zip(centres, spreads, weights):
-        ad = (p - c) @ a
-        grad += 2 * w * np.exp(-np.sum((p - c) * ad, axis=-1))[..., None] * ad  # grad F
+    grad = gradient(np.stack([grid.x, grid.y, np.nan_to_num(z)], axis=-1))
     return _Part(np.where(np.isfinite(z), z, -np.inf), _unit(grad[..., 0], grad[..., 1], grad[..., 2]))
+
+
+def _solid(rng, grid, r, near=None):
+    """A superquadric ``(|x/a|^s + |y/b|^s)^(t/s) + |z/c|^t = 1`` turned any way in 3D and ray
+    cast: boxes and dice seen corner-on, cylinders (s = 2) seen from above, tins, pills."""
+    (cx, cy), cz = _centre(rng, grid, r, near)
+    centre = np.array([cx, cy, cz])
+    radii = r * rng.uniform(0.45, 1.0, 3)
+    s = 2.0 if rng.random() < 0.4 else rng.uniform(2.0, 12.0)
+    t = rng.uniform(2.0, 12.0)
+    rot = _rotation(rng)
+
+    def parts(p):
+        q = (p - centre) @ rot / radii  # the object's frame, scaled to the unit shape
+        a = np.abs(q)
+        u = a[..., 0] ** s + a[..., 1] ** s
+        return q, a, u
+
+    def implicit(p):
+        _, a, u = parts(p)
+        return u ** (t / s) + a[..., 2] ** t - 1.0
+
+    def gradient(p):
+        q, a, u = parts(p)
+        common = t * np.maximum(u, 1e-300) ** (t / s - 1.0)
+        g = np.stack(
+            [
+                common * a[..., 0] ** (s - 1) * np.sign(q[..., 0]),
+                common * a[..., 1] ** (s - 1) * np.sign(q[..., 1]),
+                t * a[..., 2] ** (t - 1) * np.sign(q[..., 2]),
+            ],
+            axis=-1,
+        )
+        return (g / radii) @ rot.T  # back to the camera frame
+
+    return _cast(implicit, gradient, grid, centre[None], np.array([1.8 * radii.max()]))
 
 
 def _sheet(rng, grid, r, near=None):
@@ -388,6 +437,7 @@ _BODIES = {
     "superquadric": _superquadric,
     "tube": _tube,
     "slab": _slab,
+    "solid": _solid,
     "blob": _blob,
     "sheet": _sheet,
 }
