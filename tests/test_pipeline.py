@@ -82,13 +82,13 @@ class TestAutoMethod:
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
         assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
 
-    def test_picks_the_photo_solver_for_a_painted_noisy_object(self):
+    def test_picks_the_guided_photo_solver_for_a_painted_noisy_object(self):
         scene = synth.scene("sphere", size=48, light=(1, 0, 3), noise=0.01)
         plain = reconstruct(scene.image, mask=scene.mask, light=scene.light)
         assert plain.info["method"] == "oblique" and plain.info["detail"]["outliers"] < OUTLIERS
         painted = scene.image * np.where(np.random.default_rng(0).random(scene.image.shape) < 0.05, 0.5, 1.0)
         rec = reconstruct(painted, mask=scene.mask, light=scene.light)
-        assert rec.info["method"] == "photo" and rec.info["detail"]["outliers"] >= OUTLIERS
+        assert rec.info["method"] == "guided" and rec.info["detail"]["outliers"] >= OUTLIERS
         assert rec.info["detail"]["noise"] > NOISY
 
 

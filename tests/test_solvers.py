@@ -72,10 +72,10 @@ class TestRegistry:
         assert choose(oblique).name == "oblique"
         assert choose(None).name == "oblique"
 
-    def test_auto_takes_the_photo_solver_for_noisy_images_with_outlying_detail(self):
+    def test_auto_takes_the_guided_photo_solver_for_noisy_images_with_outlying_detail(self):
         frontal, oblique = np.array([0.0, 0.0, 1.0]), np.array([0.5, 0.0, 0.866])
         for light in (frontal, oblique, None):
-            assert choose(light, noise=0.01, outliers=0.02).name == "photo"
+            assert choose(light, noise=0.01, outliers=0.02).name == "guided"
             assert choose(light, noise=0.01, outliers=0.001).name == "oblique"  # render plus noise
         # a clean image's detail is its shading's curvature: its outliers say nothing
         assert choose(frontal, noise=0.001, outliers=0.5).name == "eikonal"

@@ -89,15 +89,30 @@ class Window:
         )
 
     def paste(self, array: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-        """``array`` (size, size, ...) resampled back onto a photo of ``shape`` (bilinear)."""
-        from skimage.transform import resize
-
-        grown = resize(array, (self.side, self.side) + array.shape[2:], order=1, preserve_range=True)
-        out = np.zeros(tuple(shape) + array.shape[2:], dtype=grown.dtype)
+        """``array`` (size, size, ...) resampled back onto a photo of ``shape`` (bilinear between
+        pixel centres, held at the ends): two small matrix products, not a resampling per pixel."""
         r0, c0 = max(self.top, 0), max(self.left, 0)
         r1, c1 = min(self.top + self.side, shape[0]), min(self.left + self.side, shape[1])
-        out[r0:r1, c0:c1] = grown[r0 - self.top : r1 - self.top, c0 - self.left : c1 - self.left]
+        rows = _bilinear(self.size, self.side)[r0 - self.top : r1 - self.top]
+        cols = _bilinear(self.size, self.side)[c0 - self.left : c1 - self.left]
+        flat = array.reshape(self.size, self.size, -1).astype(np.float64)
+        grown = np.einsum("ri,ijc,sj->rsc", rows, flat, cols, optimize=True)
+        out = np.zeros(tuple(shape) + array.shape[2:])
+        out[r0:r1, c0:c1] = grown.reshape(grown.shape[:2] + array.shape[2:])
         return out
+
+
+def _bilinear(size: int, side: int) -> np.ndarray:
+    """(side, size) weights of linear interpolation from ``size`` samples to ``side`` (pixel
+    centres aligned: sample ``i`` sits at ``(i + 0.5) * side / size - 0.5``)."""
+    at = np.clip((np.arange(side) + 0.5) * size / side - 0.5, 0, size - 1)
+    low = np.minimum(np.floor(at).astype(int), size - 2) if size > 1 else np.zeros(side, int)
+    weights = np.zeros((side, size))
+    t = at - low
+    weights[np.arange(side), low] = 1 - t
+    if size > 1:
+        weights[np.arange(side), low + 1] += t
+    return weights
 
 
 @dataclass(frozen=True)
