@@ -574,9 +574,40 @@ class TestUnsure:
         result = invoke(*args, "-o", tmp_path / "m.ply", "--light", "5,5,7", "--json")
         assert result.exit_code == 0, result.output
         lines = result.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("warning: ") and 'axis "y"' in lines[0], result.stderr
+        warnings = [line for line in lines if line.startswith("warning: ")]
+        assert len(warnings) == 1 and 'axis "y"' in warnings[0], result.stderr
         (area,) = json.loads(result.stdout)["info"]["unsure"]
         assert area["axis"] == "y" and area["centre"][1] < 64  # the neck, in the upper half
+        # the mirrored neck was marched 170 pixels behind the body: pulled back, in one note line
+        (note,) = [line for line in lines if not line.startswith("warning: ")]
+        bounded = json.loads(result.stdout)["info"]["depth_bounded"]
+        assert note.startswith("note: the depth strayed") and f"{100 * bounded['pixels']:.1f} %" in note
+        assert bounded["max_over"] > 1 and 0 < bounded["pixels"] < 0.2
+
+    def test_the_lesser_areas_are_counted_and_a_bounded_depth_noted(self):
+        import io
+
+        from rich.console import Console
+
+        from shadeform.cli._shell import print_notes
+
+        area = {"polygon": [[0, 0], [4, 0], [0, 4]], "axis": "both", "share": 0.05, "centre": [10.4, 20.6]}
+        info = {
+            "unsure": [area, {**area, "share": 0.04}, {**area, "share": 0.03}],
+            "unsure_others": {"areas": 10, "share": 0.3},
+            "depth_bounded": {"pixels": 0.066, "max_over": 2.94},
+        }
+        out = io.StringIO()
+        print_notes(Console(file=out, width=80), {"channel_from": "user", "channel": "luma"}, info)
+        note, warning = out.getvalue().strip().splitlines()  # one line each, however narrow
+        assert note == (
+            "note: the depth strayed up to 2.9 times as far as the object's outline allows, on 6.6 % "
+            "of it; that part was pulled back smoothly"
+        )
+        assert (
+            "around x=10, y=21 (5 % of the object) and 2 more area(s) (and 10 lesser one(s)), 42 % in all"
+            in warning
+        )
 
 
 class TestSynth:

@@ -7,7 +7,7 @@ import pytest
 
 import shadeform
 from shadeform import synth
-from shadeform.confidence import MIN_SHARE, TOLERANCE, Confidence, Unsure, _standing_maxima, assess
+from shadeform.confidence import MAX_NAMED, MIN_SHARE, TOLERANCE, Confidence, Unsure, _standing_maxima, assess
 from shadeform.errors import InputError
 from shadeform.pipeline import reconstruct_preview
 from shadeform.regions import Region, as_regions, concave_masks
@@ -202,6 +202,89 @@ def test_the_singular_points_are_skimages_h_maxima(seed):
         assert sum(bool(area[labels == k].any()) for _, area in found) == 1
 
 
+# (sigma, height) in pixels of the bumps of _bumpy_disc: three wide and low, two narrow and tall
+# (four times the relief), each basin 2.3-3.6 % of the disc
+BUMPS = ((22, 18), (17, 60), (21, 17), (17, 54), (20, 16))
+
+
+def _bumpy_disc():
+    """A flat disc (radius 112) facing the light (+z) with the Gaussian :data:`BUMPS` on a ring:
+    each bump's top is a singular point whose basin no outline settles (axis "both"). Returns
+    the image (n_z), mask, normals, depth and the bumps' centres ``(row, col)``."""
+    size, radius = 236, 112
+    rows, cols = np.mgrid[:size, :size].astype(np.float64)
+    middle = (size - 1) / 2
+    mask = (rows - middle) ** 2 + (cols - middle) ** 2 < radius**2
+    depth, zx, zy, centres = np.zeros((size, size)), np.zeros((size, size)), np.zeros((size, size)), []
+    for k, (sigma, height) in enumerate(BUMPS):
+        angle = 2 * np.pi * k / len(BUMPS)
+        r0, c0 = np.round(middle + 66 * np.sin(angle)), np.round(middle + 66 * np.cos(angle))
+        centres.append((r0, c0))
+        bump = height * np.exp(-((rows - r0) ** 2 + (cols - c0) ** 2) / (2 * sigma**2))
+        depth += bump
+        zx -= bump * (cols - c0) / sigma**2
+        zy += bump * (rows - r0) / sigma**2  # y = -row
+    normals = np.dstack([-zx, -zy, np.ones_like(depth)])
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[~mask] = np.nan
+    return np.where(mask, normals[..., 2], 0.0), mask, normals, np.where(mask, depth, np.nan), centres
+
+
+def _bumps_named(unsure, centres):
+    """The bump (index into :data:`BUMPS`) each unsure area's singular point is on."""
+    found = []
+    for area in unsure:
+        x, y = area.centre
+        distances = [np.hypot(y - r0, x - c0) for r0, c0 in centres]
+        assert min(distances) <= 3.0  # on a bump's top
+        found.append(int(np.argmin(distances)))
+    return found
+
+
+@pytest.fixture(scope="module")
+def disc():
+    return _bumpy_disc()
+
+
+class TestRanking:
+    """Of many unsure areas only the few whose flip would move the most depth are named."""
+
+    def test_without_a_depth_the_largest_are_named(self, disc):
+        image, mask, normals, _, centres = disc
+        confidence = assess(image, mask, (0, 0, 1), normals, albedo=1.0)
+        assert len(confidence.unsure) == MAX_NAMED == 3 and confidence.others == 2
+        assert _bumps_named(confidence.unsure, centres) == [0, 2, 4]  # the wide ones, largest first
+        assert all(np.isnan(area.relief) for area in confidence.unsure)
+
+    def test_with_the_depth_those_whose_flip_moves_most_are_named(self, disc):
+        image, mask, normals, depth, centres = disc
+        plain = assess(image, mask, (0, 0, 1), normals, albedo=1.0)
+        confidence = assess(image, mask, (0, 0, 1), normals, albedo=1.0, depth=depth)
+        # the two tall bumps first although they are the smallest, then the largest wide one
+        assert _bumps_named(confidence.unsure, centres) == [1, 3, 0]
+        weights = [area.weight for area in confidence.unsure]
+        assert weights == sorted(weights, reverse=True)
+        tall, wide = confidence.unsure[0], confidence.unsure[2]
+        assert tall.relief > 2.5 * wide.relief and tall.share < wide.share
+        # the rest are counted: the same five areas in all
+        assert confidence.others == 2
+        total = sum(area.share for area in plain.unsure) + plain.others_share
+        assert sum(area.share for area in confidence.unsure) + confidence.others_share == pytest.approx(total)
+        # the map does not depend on which are named
+        np.testing.assert_array_equal(confidence.map, plain.map)
+
+    def test_reconstruct_names_three_and_counts_the_rest(self, disc):
+        image, mask, *_ = disc
+        rec = shadeform.reconstruct(image, mask=mask)
+        assert len(rec.info["unsure"]) == MAX_NAMED
+        assert rec.info["unsure_others"]["areas"] == 2 and 0.04 < rec.info["unsure_others"]["share"] < 0.08
+
+    def test_a_wrongly_shaped_depth_is_refused(self, disc):
+        image, mask, normals, depth, _ = disc
+        with pytest.raises(InputError, match="depth must have shape"):
+            assess(image, mask, (0, 0, 1), normals, albedo=1.0, depth=depth[:-1])
+
+
 class TestInput:
     @pytest.fixture
     def good(self):
@@ -296,7 +379,7 @@ class TestFastParts:
         from scipy import ndimage as ndi
         from skimage.measure import approximate_polygon, find_contours
 
-        from shadeform.confidence import _simplified
+        from shadeform.regions import _simplified
 
         rng = np.random.default_rng(3)
         for _ in range(20):

@@ -43,6 +43,19 @@ def shading_image(image) -> np.ndarray:
     return image
 
 
+def least_absolute(design: np.ndarray, values: np.ndarray, *, iterations: int) -> np.ndarray:
+    """Coefficients ``c`` (k,) of ``design @ c`` nearest to ``values`` (n,) in least absolute
+    deviations: iteratively reweighted least squares (weights ``1 / |residual|``), so that a
+    minority of outlying values does not pull the fit. ``design`` is (n, k)."""
+    scale = max(float(np.ptp(values)), 1e-12)
+    weights = np.ones(values.size)
+    for _ in range(iterations):
+        root = np.sqrt(weights)
+        coefficients = np.linalg.lstsq(design * root[:, None], values * root, rcond=None)[0]
+        weights = 1.0 / np.maximum(np.abs(values - design @ coefficients), 1e-6 * scale)
+    return coefficients
+
+
 class StageTimer:
     """Wall time per named stage: ``lap("stage")`` adds the time since the previous lap."""
 

@@ -17,7 +17,8 @@ vase above its belly). Such a maximum is read as two singular points, one at eac
 bright area; the outline then settles one of them at most.
 
 The confidence map multiplies how well the recovered normals explain the photo (the shading
-residual) by how settled the pixel's basin is.
+residual) by how settled the pixel's basin is. Of the unsure areas (print and texture make many)
+the :data:`MAX_NAMED` whose flip would move the most depth are named, the others counted.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import numba
 import numpy as np
 
 from shadeform.errors import InputError
+from shadeform.regions import outline_polygon
 
 #: Brightness tolerance, a fraction of the albedo. A singular point must reach ``1 - TOLERANCE``
 #: of the albedo (its normal within about 18 degrees of the light) and stand this much above its
@@ -40,6 +42,10 @@ from shadeform.errors import InputError
 TOLERANCE = 0.05
 #: Smallest basin, a fraction of the object's pixels, that is reported as unsure.
 MIN_SHARE = 0.02
+#: Unsure areas named at most (:attr:`Confidence.unsure`, ``info["unsure"]``, the CLI, the app):
+#: what a reader takes in at a glance, as many as :func:`shadeform.fusion.settle` tries; a choice,
+#: not a measurement (a photo with a printed label gave 13).
+MAX_NAMED = 3
 #: Shading residual, a fraction of the albedo, at which the map falls to ``exp(-1)``: what a real
 #: photo's noise and texture leave where the normals are right (with the true normals the smoothed
 #: residual's median is 0.03 to 0.12 on the twelve MIT-Berkeley shading photos of
@@ -64,8 +70,6 @@ _PARABOLIC_BAND = (0.65, 0.9)
 _PARABOLIC_ELONGATION = 2.0
 # Fewest pixels of the bright area at a quarter of the tolerance for that test to be read.
 _MIN_TOP_PIXELS = 12
-# Vertex tolerance (pixels) of an unsure area's outline.
-_POLYGON_TOLERANCE = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,12 +88,23 @@ class Unsure:
         Fraction of the object's pixels in the area.
     centre : tuple of float
         ``(x, y)`` = (column, row) of the area's singular point.
+    relief : float
+        Mean distance (pixels) of the recovered depth over the area from the plane through its
+        edge: reading the area concave mirrors its surface about its edge, moving the depth there
+        by about twice that. NaN when assessed without a depth.
     """
 
     polygon: np.ndarray
     axis: str
     share: float
     centre: tuple[float, float]
+    relief: float = float("nan")
+
+    @property
+    def weight(self) -> float:
+        """How much the area matters: ``share * relief``, the depth a flip would move over the
+        object's pixel count; ``share`` alone without a depth."""
+        return self.share if np.isnan(self.relief) else self.share * self.relief
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,14 +117,21 @@ class Confidence:
         In [0, 1] on the object, NaN off it: how well the normals explain the photo times how
         settled the pixel's convexity is (1, 0.5 with one axis open, 0 with both).
     unsure : tuple of Unsure
-        The areas whose convexity the photo leaves open, largest first.
+        The areas whose convexity the photo leaves open that matter most (:attr:`Unsure.weight`),
+        at most :data:`MAX_NAMED`, the most first.
+    others : int
+        How many more unsure areas there are (each mattering less than every named one).
+    others_share : float
+        Fraction of the object's pixels in those.
     """
 
     map: np.ndarray
     unsure: tuple[Unsure, ...]
+    others: int = 0
+    others_share: float = 0.0
 
 
-def assess(image, mask, light, normals, *, albedo) -> Confidence:
+def assess(image, mask, light, normals, *, albedo, depth=None) -> Confidence:
     """Where a single-photo reconstruction may have a concave part convex, and how well its
     normals explain the photo.
 
@@ -126,11 +148,14 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     albedo : float or (H, W) array_like
         Brightness of a pixel facing the light (``I = albedo * max(0, N . L)``), positive on the
         object.
+    depth : (H, W) array_like, optional
+        The recovered depth (pixels), NaN where unknown: the unsure areas are ranked by the depth
+        their flip would move (:attr:`Unsure.weight`); without it by their share of the object.
 
     Returns
     -------
     Confidence
-        The map and the unsure areas (:class:`Unsure`), largest first.
+        The map and the unsure areas (:class:`Unsure`) that matter most, the most first.
 
     Raises
     ------
@@ -167,6 +192,8 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     ((), 1.0)
     """
     image, mask, light, normals, albedo = _checked(image, mask, light, normals, albedo)
+    if depth is not None and np.shape(depth) != mask.shape:
+        raise InputError(f"depth must have shape {mask.shape} (H, W), got {np.shape(depth)}")
     confidence = np.full(mask.shape, np.nan, dtype=np.float32)
     # the work is done on the object's box: one pixel of margin keeps what find_boundary and the
     # smoothing see unchanged, and where the box meets the image frame so does the object
@@ -174,6 +201,7 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
     box = (slice(top, rows[-1] + 2), slice(left, cols[-1] + 2))
     image, mask, normals = image[box], mask[box], normals[box]
+    depth = None if depth is None else _numbers(depth, "depth")[box]
     if albedo.ndim:
         albedo = albedo[box]
     # Memory: a few box-sized arrays at a time (this runs while the reconstruction's arrays are
@@ -205,12 +233,13 @@ def assess(image, mask, light, normals, *, albedo) -> Confidence:
     np.exp(explained, out=explained)
     del residual
 
-    unsure, openness = _unsure_areas(basins, centres, mask, (top, left))
+    unsure, openness = _unsure_areas(basins, centres, mask, (top, left), depth)
     for label, open_axes in openness.items():
         explained[basins == label] *= 1.0 - 0.5 * open_axes  # how settled the basin is
     explained[~known] = 0.0
     np.copyto(confidence[box], explained, where=mask)
-    return Confidence(map=confidence, unsure=unsure)
+    others = unsure[MAX_NAMED:]
+    return Confidence(confidence, unsure[:MAX_NAMED], len(others), float(sum(area.share for area in others)))
 
 
 def _residual(out, normals, light, mask):
@@ -493,14 +522,15 @@ def _flood(smooth, allowed, labels):
             heapq.heappush(queue, (-smooth[rr, cc], age, rr * width + cc))
 
 
-def _unsure_areas(basins, centres, mask, origin):
+def _unsure_areas(basins, centres, mask, origin, depth):
     """The unsure basins of ``basins`` (H, W) int32 with singular points at ``centres``, on
-    ``mask`` (H, W), a part of the image starting at pixel ``origin`` ``(row, col)``.
+    ``mask`` (H, W), a part of the image starting at pixel ``origin`` ``(row, col)``, with the
+    ``depth`` (H, W) there or None.
 
     Returns
     -------
     unsure : tuple of Unsure
-        Largest first.
+        All of them, the one that matters most (:attr:`Unsure.weight`) first.
     openness : dict of int to int
         Basin number -> how many axes (1 or 2) the outline leaves open, for the unsure ones.
     """
@@ -529,13 +559,14 @@ def _unsure_areas(basins, centres, mask, origin):
         openness[label] = int(open_x) + int(open_y)
         found.append(
             Unsure(
-                polygon=_outline_polygon(inside) + (origin[1], origin[0]),
+                polygon=outline_polygon(inside) + (origin[1], origin[0]),
                 axis=axis,
                 share=float(sizes[label] / total),
                 centre=(float(col + origin[1]), float(row + origin[0])),
+                relief=float("nan") if depth is None else _relief(depth, inside),
             )
         )
-    found.sort(key=lambda area: -area.share)
+    found.sort(key=lambda area: (-area.weight, -area.share))
     return tuple(found), openness
 
 
@@ -549,51 +580,19 @@ def _ends_on_outline(inside, outline, start):
     return bool(outline[first] and outline[last])
 
 
-def _outline_polygon(inside):
-    """The simplified outer outline of ``inside`` (H, W) bool, ``(N, 2)`` in ``(x, y)``."""
+def _relief(depth, inside):
+    """Mean distance of ``depth`` (H, W) over ``inside`` (H, W) bool from the plane fitted to it on
+    the area's edge, about which a flip mirrors it (:func:`shadeform.solvers.photo.concave_start`);
+    0 with fewer than three known there."""
     from scipy import ndimage as ndi
-    from skimage.measure import find_contours
 
-    rows, cols = ndi.find_objects(inside.astype(np.int8))[0]
-    # a pixel of margin closes the contour where the area meets the image frame
-    padded = np.pad(inside[rows, cols], 1).astype(np.float64)
-    contour = max(find_contours(padded, 0.5), key=len)
-    simple = _simplified(contour, _POLYGON_TOLERANCE)[:-1]  # closed: last repeats first
-    if len(simple) < 3:
-        simple = contour[:-1]
-    offset = np.array([rows.start - 1, cols.start - 1], dtype=np.float64)
-    return (simple + offset)[:, ::-1].copy()
-
-
-def _simplified(points, tolerance):
-    """The vertices of the polyline ``points`` (N, 2) that Douglas-Peucker keeps at ``tolerance``.
-
-    Each chord keeps its farthest point (the first of equals) when that lies more than
-    ``tolerance`` from it, and both halves are simplified again. A point that projects strictly
-    inside the chord is measured to the chord's line, any other (a closed chord's, whose ends are
-    one point) to the nearer end. The result is :func:`skimage.measure.approximate_polygon`'s
-    (the tests compare them), without that module's import of scipy.signal: a third of a second
-    at start-up.
-    """
-    keep = np.zeros(len(points), dtype=bool)
-    keep[[0, -1]] = True
-    chords = [(0, len(points) - 1)]
-    while chords:
-        start, end = chords.pop()
-        if end - start < 2:
-            continue
-        (r0, c0), (r1, c1) = points[start], points[end]
-        dr, dc = r1 - r0, c1 - c0
-        angle = -np.arctan2(dr, dc)
-        rows, cols = points[start + 1 : end, 0], points[start + 1 : end, 1]
-        to_start = np.sqrt((cols - c0) ** 2 + (rows - r0) ** 2)
-        to_end = np.sqrt((cols - c1) ** 2 + (rows - r1) ** 2)
-        distance = np.minimum(to_start, to_end)
-        within = ((rows - r0) * dr + (cols - c0) * dc > 0) & (-(rows - r1) * dr - (cols - c1) * dc > 0)
-        line = c0 * np.sin(angle) + r0 * np.cos(angle)
-        distance[within] = np.abs(rows[within] * np.cos(angle) + cols[within] * np.sin(angle) - line)
-        if (distance > tolerance).any():
-            split = start + 1 + int(np.argmax(distance))
-            keep[split] = True
-            chords += [(split, end), (start, split)]
-    return points[keep]
+    box = ndi.find_objects(inside.astype(np.int8))[0]
+    area, z = inside[box], depth[box]
+    known = area & np.isfinite(z)
+    rows, cols = np.nonzero(known & ~ndi.binary_erosion(area))
+    if rows.size < 3:
+        return 0.0
+    terms = np.column_stack([np.ones(rows.size), rows, cols])
+    plane = np.linalg.lstsq(terms, z[rows, cols], rcond=None)[0]
+    rows, cols = np.nonzero(known)
+    return float(np.mean(np.abs(z[rows, cols] - plane[0] - plane[1] * rows - plane[2] * cols)))

@@ -51,7 +51,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from skimage.filters import apply_hysteresis_threshold, threshold_otsu
 
-from shadeform._checks import is_number, whole
+from shadeform._checks import is_number, least_absolute, whole
 from shadeform.errors import InputError
 
 __all__ = ["FoundObject", "find_object", "threshold_object", "segment_from_seeds"]
@@ -391,12 +391,7 @@ def _background_plane(image: np.ndarray, where: np.ndarray) -> np.ndarray:
         [np.ones(rows.size), (cols - (width - 1) / 2) / width, (rows - (height - 1) / 2) / height]
     )
     values = image[where]
-    scale = max(float(np.ptp(values)), 1e-12)
-    weights = np.ones(values.size)
-    for _ in range(_PLANE_ITERATIONS):
-        root = np.sqrt(weights)
-        coefficients = np.linalg.lstsq(design * root[:, None], values * root, rcond=None)[0]
-        weights = 1.0 / np.maximum(np.abs(values - design @ coefficients), 1e-6 * scale)
+    coefficients = least_absolute(design, values, iterations=_PLANE_ITERATIONS)
     # a plane only where it describes the frame better than one level does: a robust scale
     # (median absolute deviation) of the residuals decides, so that a step (a lit wall above a
     # table, an object across one side) is not taken for a slope

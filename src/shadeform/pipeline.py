@@ -32,6 +32,7 @@ from shadeform.solvers import (
     get_solver,
     solver_names,
 )
+from shadeform.solvers.bounds import bound_depth
 
 #: Smallest image side the solvers can work on (a gradient needs neighbours on both sides).
 MIN_SIDE = 3
@@ -115,7 +116,9 @@ def reconstruct(
     -------
     Reconstruction
         ``normals`` (H, W, 3), ``depth`` (H, W) (NaN outside the mask), ``mask``, ``light``,
-        ``albedo`` (``k * albedo`` of the image model) and ``info``.
+        ``albedo`` (``k * albedo`` of the image model) and ``info``. A depth that runs past what
+        the outline allows is pulled back toward it (:func:`shadeform.solvers.bounds.bound_depth`,
+        ``info["depth_bounded"]``).
 
     Raises
     ------
@@ -219,9 +222,11 @@ def reconstruct(
     depth = _taken_over(solution.depth, mask, np.float64)
     solved = solution.info
     del solution
+    bounded = bound_depth(depth, normals, mask)  # no deeper than the outline allows
+    normals, depth = bounded.normals, bounded.depth
     lap("combine")
     albedo = float(solved.get("albedo", albedo))  # a solver that estimates it knows better
-    assessed = assess(shading, mask, light, normals, albedo=albedo)
+    assessed = assess(shading, mask, light, normals, albedo=albedo, depth=depth)
     lap("confidence")
     info = {
         "method": solver.name,
@@ -245,6 +250,10 @@ def reconstruct(
             for area in assessed.unsure
         ],
     }
+    if assessed.others:
+        info["unsure_others"] = {"areas": assessed.others, "share": assessed.others_share}
+    if bounded.applied:
+        info["depth_bounded"] = {"pixels": bounded.pixels, "max_over": bounded.max_over}
     return Reconstruction(
         normals=normals,
         depth=depth,

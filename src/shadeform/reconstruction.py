@@ -30,8 +30,11 @@ class Reconstruction:
         colour photos in photometric stereo.
     info : dict
         What ran: method, integrator, references, iterations, timings in seconds per stage;
-        ``info["unsure"]``: the areas whose convexity the photo cannot settle
-        (:func:`shadeform.confidence.assess`), each ``{"polygon", "axis", "share", "centre"}``.
+        ``info["unsure"]``: the areas whose convexity the photo cannot settle that matter most
+        (:func:`shadeform.confidence.assess`), each ``{"polygon", "axis", "share", "centre"}``;
+        ``info["unsure_others"]``: ``{"areas", "share"}`` of the rest, when there are more;
+        ``info["depth_bounded"]``: ``{"pixels", "max_over"}`` when the solver's depth ran past
+        what the outline allows and was pulled back (:func:`shadeform.solvers.bounds.bound_depth`).
     confidence : (H, W) float32 (from :func:`shadeform.reconstruct`) or float64, or None
         How far each pixel's shape can be trusted, in [0, 1] (NaN off the mask): how well the
         normals explain the photo times how settled its convexity is

@@ -300,11 +300,26 @@ def note_channel(console: Console, info: dict) -> None:
 
 
 def print_notes(console: Console, photo_info: dict, info: dict) -> None:
-    """The notes on stderr of a photo solved: the channel chosen, an unsure light estimate, the
-    areas the shading cannot settle."""
+    """The notes on stderr of a photo solved: the channel chosen, an unsure light estimate, a
+    depth pulled back within its outline's reach, the areas the shading cannot settle."""
     note_channel(console, photo_info)
     note_light(console, info)
+    note_bounded(console, info)
     note_unsure(console, info)
+
+
+def note_bounded(console: Console, info: dict) -> None:
+    """One line on stderr when the solver's depth ran past what the outline allows and was pulled
+    back (``info["depth_bounded"]``, :func:`shadeform.solvers.bounds.bound_depth`)."""
+    bounded = info.get("depth_bounded")
+    if not bounded:
+        return
+    console.print(
+        f"note: the depth strayed up to {bounded['max_over']:.1f} times as far as the object's outline "
+        f"allows, on {100 * bounded['pixels']:.1f} % of it; that part was pulled back smoothly",
+        soft_wrap=True,
+        highlight=False,
+    )
 
 
 def note_light(console: Console, info: dict) -> None:
@@ -336,17 +351,18 @@ def read_light(info: dict) -> str:
 
 def note_unsure(console: Console, info: dict) -> None:
     """One line on stderr when part of the shape rests on a convex/concave guess the photo cannot
-    settle (``info["unsure"]``, largest area first)."""
+    settle (``info["unsure"]``, the area that matters most first; ``info["unsure_others"]``, the
+    lesser ones left unnamed)."""
     areas = info.get("unsure") or []
     if not areas:
         return
     first = areas[0]
     x, y = (round(v) for v in first["centre"])
-    more = (
-        f" and {len(areas) - 1} more area(s), {100 * sum(a['share'] for a in areas):.0f} % in all"
-        if len(areas) > 1
-        else ""
-    )
+    others = info.get("unsure_others") or {"areas": 0, "share": 0.0}
+    named = f" and {len(areas) - 1} more area(s)" if len(areas) > 1 else ""
+    lesser = f" (and {others['areas']} lesser one(s))" if others["areas"] else ""
+    share = sum(a["share"] for a in areas) + others["share"]
+    more = f"{named}{lesser}, {100 * share:.0f} % in all" if named or lesser else ""
     console.print(
         f"warning: the shading cannot tell convex from concave around x={x}, y={y} "
         f"({100 * first['share']:.0f} % of the object){more}; if it is concave there, draw it as a "
