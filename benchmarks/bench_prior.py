@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import shadeform
+from shadeform.metrics import angular_error, normals_of_height
 from shadeform.prior import predict
 from shadeform.prior.dataset import CANVAS, shapes
 from shadeform.prior.photos import random_photo
@@ -37,17 +38,6 @@ from shadeform.solvers.photo import silhouette_depth
 
 RESULTS = Path(__file__).resolve().parent / "results" / "prior.md"
 SEED = 1000  # the training uses seed 0 (docs/prior.md)
-
-
-def _angle(normals, truth, valid):
-    a = normals[valid] / np.linalg.norm(normals[valid], axis=-1, keepdims=True)
-    return float(np.degrees(np.arccos(np.clip(np.sum(a * truth[valid], axis=-1), -1, 1))).mean())
-
-
-def _height_normals(z):
-    d_row, d_col = np.gradient(z)
-    n = np.dstack([-d_col, d_row, np.ones_like(z)])
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
 def generated(count: int, weights) -> tuple[list[str], list[dict]]:
@@ -62,16 +52,16 @@ def generated(count: int, weights) -> tuple[list[str], list[dict]]:
         truth = np.nan_to_num(photo.normals).astype(np.float64)
         row = {
             "kind": shape.kind,
-            "silhouette": _angle(_height_normals(silhouette_depth(photo.mask)), truth, valid),
+            "silhouette": angular_error(normals_of_height(silhouette_depth(photo.mask)), truth, valid),
         }
-        row["learned"] = _angle(predict(photo.image, photo.mask).normals, truth, valid)
+        row["learned"] = angular_error(predict(photo.image, photo.mask).normals, truth, valid)
         for light_name, light in (("known", photo.light), ("estimate", "estimate")):
             rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, method="photo")
-            row[f"photo ({light_name})"] = _angle(rec.normals, truth, valid)
+            row[f"photo ({light_name})"] = angular_error(rec.normals, truth, valid)
             for weight in weights:
                 learned.PRIOR = weight
                 rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, method="guided")
-                row[f"guided {weight:g} ({light_name})"] = _angle(rec.normals, truth, valid)
+                row[f"guided {weight:g} ({light_name})"] = angular_error(rec.normals, truth, valid)
         rows.append(row)
         print(
             index,

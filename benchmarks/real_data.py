@@ -29,6 +29,7 @@ import scipy.io
 
 from shadeform.io.images import load_mask, load_pixels
 from shadeform.metrics import angular_error as _angles
+from shadeform.metrics import normals_of_height
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "real"
@@ -158,13 +159,6 @@ def _mit_case(name: str, folder: Path, image: np.ndarray, mask: np.ndarray, ligh
     valid = _valid(normals, mask)
     normals[~valid] = np.nan
     return Case(name, "mit", image, mask, light, normals, valid, np.where(valid, depth, np.nan))
-
-
-def normals_of_height(z: np.ndarray) -> np.ndarray:
-    """Unit normals ``(-dz/dcol, +dz/drow, 1)`` of a height map in pixels (``np.gradient``)."""
-    d_row, d_col = np.gradient(z)
-    normals = np.dstack([-d_col, d_row, np.ones_like(z)])
-    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
 
 
 def cases(*, raw_mit: bool = False, slant: float = 0.0) -> list[Case]:

@@ -8,11 +8,10 @@ import scipy.sparse as sp
 from scipy.optimize import minimize, rosen, rosen_der
 
 from shadeform import available_methods, metrics, reconstruct, synth
+from shadeform.solvers.lbfgs import descend, two_loop
 from shadeform.solvers.photo import (
     _Basis,
-    _descend,
     _Level,
-    _two_loop,
     concave_start,
     photo_depth,
     response_curve,
@@ -130,14 +129,14 @@ def test_two_loop_is_the_textbook_recursion():
         for i in order:
             q = q + (alphas[i] - rho[i] * (steps_y[i] @ q)) * steps_s[i]
         out = np.empty(n)
-        _two_loop(gradient, steps_s, steps_y, rho, np.array(order, dtype=np.int64), out)
+        two_loop(gradient, steps_s, steps_y, rho, np.array(order, dtype=np.int64), out)
         np.testing.assert_allclose(out, q, rtol=1e-12, atol=1e-12 * np.abs(q).max())
 
 
 def test_descent_finds_a_minimum():
     # Rosenbrock's curved valley from its classic start: the minimum is (1, 1)
     start = np.array([-1.2, 1.0])
-    x, steps = _descend(lambda x: (rosen(x), rosen_der(x)), start, iterations=400)
+    x, steps = descend(lambda x: (rosen(x), rosen_der(x)), start, iterations=400)
     np.testing.assert_allclose(x, 1.0, atol=1e-6)
     assert steps <= 400
     # a quadratic in 2000 unknowns: within the iterations SciPy's L-BFGS-B needs, as close
@@ -148,7 +147,7 @@ def test_descent_finds_a_minimum():
     def bowl(x):
         return 0.5 * np.sum(scales * (x - target) ** 2), scales * (x - target)
 
-    x, _ = _descend(bowl, np.zeros(2000), iterations=150)
+    x, _ = descend(bowl, np.zeros(2000), iterations=150)
     reference = minimize(bowl, np.zeros(2000), jac=True, method="L-BFGS-B", options={"maxiter": 150})
     assert bowl(x)[0] <= max(10 * reference.fun, 1e-10)
 

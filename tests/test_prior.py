@@ -7,22 +7,12 @@ import pytest
 from scipy import ndimage
 
 from shadeform import reconstruct, synth
+from shadeform.metrics import angular_error, normals_of_height
 from shadeform.prior import Window, model_path, predict
 from shadeform.prior.dataset import example, shapes, turned
 from shadeform.prior.photos import random_photo
 from shadeform.prior.shapes import KINDS, random_shape
 from shadeform.solvers.photo import _Level, response_curve, silhouette_depth
-
-
-def _angles(a, b):
-    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)))
-
-
-def _depth_normals(depth):
-    """Normals of a depth map by central differences (x = column, y = -row)."""
-    d_row, d_col = np.gradient(depth)
-    n = np.dstack([-d_col, d_row, np.ones_like(depth)])
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
 def _smooth_inside(shape):
@@ -42,7 +32,9 @@ class TestShapes:
             shape = random_shape(rng, 160, kind=kind)
             inside = _smooth_inside(shape)
             assert inside.sum() > 100
-            error = _angles(_depth_normals(shape.depth), shape.normals)[inside]
+            error = angular_error(normals_of_height(shape.depth), shape.normals, inside, reduce="none")[
+                inside
+            ]
             assert np.median(error) < 2.0, kind
             assert np.percentile(error, 90) < 6.0, kind
 
@@ -64,7 +56,7 @@ class TestShapes:
     def test_turned_normals_turn_with_the_depth(self, k):
         shape = turned(random_shape(np.random.default_rng(3), 128, kind="ellipsoid"), k)
         inside = _smooth_inside(shape)
-        assert np.median(_angles(_depth_normals(shape.depth), shape.normals)[inside]) < 2.0
+        assert angular_error(normals_of_height(shape.depth), shape.normals, inside, reduce="median") < 2.0
 
 
 class TestPhotos:
@@ -178,16 +170,16 @@ class TestShippedModel:
             shape = random_shape(np.random.default_rng([990, 0, index]), 144, kind="blob")
             photo = random_photo(rng, shape)
             valid = photo.mask & shape.mask
-            errors.append(_angles(predict(photo.image, photo.mask).normals, shape.normals)[valid].mean())
-            sil = _depth_normals(silhouette_depth(photo.mask))
-            outline.append(_angles(sil, shape.normals)[valid].mean())
+            errors.append(angular_error(predict(photo.image, photo.mask).normals, shape.normals, valid))
+            sil = normals_of_height(silhouette_depth(photo.mask))
+            outline.append(angular_error(sil, shape.normals, valid))
         assert np.median(errors) < np.median(outline)
 
     @pytest.mark.parametrize("method", ["learned", "guided"])
     def test_solvers_run_through_reconstruct(self, method):
         scene = synth.scene("sphere", size=64, light=(0.3, 0.3, 0.9), noise=0.01)
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, method=method)
-        error = _angles(rec.normals, scene.normals)[scene.mask].mean()
+        error = angular_error(rec.normals, scene.normals, scene.mask)
         assert error < 15.0
         assert np.isfinite(rec.depth[scene.mask]).all()
 

@@ -31,6 +31,26 @@ _REDUCTIONS = ("mean", "median", "none")
 _FITS = ("none", "offset", "scale", "scale_offset", "median_scale")
 
 
+def normals_of_height(depth: np.ndarray) -> np.ndarray:
+    """Unit normals of a height map by central differences (one-sided at the frame, ``np.gradient``).
+
+    ``n ~ (-dz/dcol, +dz/drow, 1)`` (``docs/conventions.md``: x = column, y = -row): how ground
+    truths given as depth (MIT-Berkeley's ``Z.mat``, generated objects) are compared as normals.
+
+    Parameters
+    ----------
+    depth : (H, W) float
+        Height in pixels; NaN where unknown (its neighbours' normals are NaN too).
+
+    Returns
+    -------
+    (H, W, 3) float64
+    """
+    d_row, d_col = np.gradient(np.asarray(depth, dtype=np.float64))
+    normals = np.dstack([-d_col, d_row, np.ones_like(d_row)])
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
 def angular_error(normals, normals_true, mask=None, *, reduce: str = "mean"):
     """Angle between estimated and true normals, in degrees.
 

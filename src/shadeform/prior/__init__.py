@@ -32,10 +32,12 @@ from shadeform.errors import InputError
 
 __all__ = ["MARGIN", "Prior", "Window", "model_path", "predict", "scale_photo"]
 
-#: Margin around the object's mask, a fraction of its larger side on each side, when framed.
+#: Margin around the object's mask, a fraction of its larger side on each side, when framed (set
+#: once, not tuned: room for a blurred outline and a mask off by a few pixels).
 MARGIN = 0.06
 #: The photo's brightness that reads as 1 to the network: this percentile inside the mask (a few
-#: highlight pixels above it do not set the scale).
+#: highlight pixels above it do not set the scale). SIRFS's protocol scales MIT-Berkeley's photos
+#: the same way; the network divides by it anyway, so how a photo was exposed does not matter.
 PERCENTILE = 99.9
 
 

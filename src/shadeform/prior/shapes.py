@@ -38,7 +38,10 @@ from scipy import ndimage
 __all__ = ["KINDS", "Shape", "random_shape"]
 
 #: The kinds of main body an object is built around (the parts table above), and how often each
-#: is drawn: bodies with round parts most (people photograph figurines, fruit, toys).
+#: is drawn: bodies with round parts most (people photograph figurines, fruit, toys). Set by
+#: judgement, not swept. The "solid" kind was added after a first network, trained without it,
+#: read MIT-Berkeley's box (a benchmark object) as a dome: that test object shaped the generator
+#: (docs/prior.md), though no number of it was tuned.
 KINDS = ("ellipsoid", "superquadric", "solid", "tube", "slab", "blob", "sheet")
 ODDS = (0.15, 0.1, 0.15, 0.15, 0.1, 0.2, 0.15)
 

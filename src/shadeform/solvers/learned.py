@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from shadeform.metrics import normals_of_height
 from shadeform.solvers import photo
 from shadeform.solvers.photo import concave_start
 from shadeform.solvers.problem import Problem, Solution
@@ -67,8 +68,6 @@ def solve_guided(problem: Problem) -> Solution:
 
 
 def _normals_of(depth, mask, fallback):
-    """Unit normals of a depth map (central differences), ``fallback`` where a neighbour is off."""
-    d_row, d_col = np.gradient(np.where(mask, depth, np.nan))
-    normals = np.dstack([-d_col, d_row, np.ones_like(depth)])
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    """Unit normals of a depth map, ``fallback`` where a neighbour is off the object."""
+    normals = normals_of_height(np.where(mask, depth, np.nan))
     return np.where(np.isfinite(normals).all(axis=-1, keepdims=True), normals, fallback)
