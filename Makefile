@@ -12,7 +12,7 @@ STATIC   := src/shadeform/app/static
 WEBSTAMP := $(STATIC)/.built-stamp
 WEBSRC   := $(WEB)/index.html $(WEB)/vite.config.ts $(WEB)/tsconfig.json $(wildcard $(WEB)/src/*.ts $(WEB)/src/*.css)
 
-.PHONY: venv demo test lint format bench clean web app
+.PHONY: venv demo test lint format bench clean web app system
 
 venv: $(STAMP)
 
@@ -48,9 +48,14 @@ app: $(STAMP) $(WEBSTAMP)
 demo: $(STAMP)
 	$(VENV)/bin/shadeform demo --out out/demo
 
+# the system packages the tests need (chromium, Open3D's libraries, ivinfo): installed as root or
+# through password-less sudo, else make stops here with the one command to run
+system:
+	@bash .ci/system-packages
+
 # two test workers share the two cores: one BLAS thread each, or OpenBLAS's threads spin against
 # each other (the relief light fit's products ran 10-25x slower that way)
-test: lint $(STAMP) $(JSSTAMP) $(WEBSTAMP)
+test: system lint $(STAMP) $(JSSTAMP) $(WEBSTAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
 
 # ruff: lint and formatting, checked (CI runs this through `make test`); `make format` fixes both
