@@ -90,7 +90,8 @@ def reconstruct(
         typer.Option(
             metavar="auto|N|off",
             help="Solve in overlapping tiles of N pixels (shadeform.tiled): for images too large to "
-            "solve whole; auto: a TIFF over --max-pixels is tiled (tiles of 512). The depth goes to a "
+            "solve whole; auto: a TIFF over --max-pixels is tiled (tiles of 512). The object is found "
+            "on the whole photo (or --mask; --mask whole: every pixel, a relief). The depth goes to a "
             "tiled BigTIFF (--depth, or NAME_depth.tif beside the mesh), the mesh is decimated.",
         ),
     ] = "auto",
@@ -102,6 +103,13 @@ def reconstruct(
             "default worker processes on this machine.",
         ),
     ] = None,
+    keep_tiles: Annotated[
+        bool,
+        typer.Option(
+            help="With tiles: keep the solved tiles (DEPTH.tiles/) even if the run fails or is "
+            "stopped, so that the same command again solves only the missing ones.",
+        ),
+    ] = False,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
 
@@ -110,16 +118,18 @@ def reconstruct(
     tile = tile_size(tiles, image, max_pixels)
     if tile is not None:
         tiled_reconstruct(
-            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json,
-            refused={"--mask": mask, "--reference": reference, "--concave": concave, "--normals": normals},
+            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
+            keep_tiles=keep_tiles,
+            refused={"--reference": reference, "--concave": concave, "--normals": normals},
             light=resolve_light(light, slant, tilt), method=method, filter=filter, integrator=integrator,
             refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
         )  # fmt: skip
         return
-    if scheduler is not None:
+    if scheduler is not None or keep_tiles:
         raise InputError(
-            "--scheduler runs tiles, and this image is solved whole (--tiles off, or within "
-            "--max-pixels); add --tiles N to solve it in tiles of N pixels"
+            f"{'--scheduler' if scheduler is not None else '--keep-tiles'} is for tiles, and this "
+            "image is solved whole (--tiles off, or within --max-pixels); add --tiles N to solve it "
+            "in tiles of N pixels"
         )
     options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
@@ -203,9 +213,13 @@ def tile_size(tiles: str, image: Path, max_pixels: int | None) -> int | None:
 
 
 def _is_tiff(path: Path) -> bool:
+    import stat
+
     from shadeform.io.images import _TIFF_MAGICS
 
     try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            return False  # a pipe or device could block forever: the loader refuses it
         with open(path, "rb") as handle:
             return handle.read(4) in _TIFF_MAGICS
     except OSError:
@@ -221,6 +235,8 @@ def tiled_reconstruct(
     depth,
     as_json,
     refused,
+    mask,
+    keep_tiles,
     channel,
     linear,
     max_pixels,
@@ -231,9 +247,7 @@ def tiled_reconstruct(
 
     given = [name for name, value in refused.items() if value]
     if given:
-        raise InputError(
-            f"{given[0]} is not available with tiles: the whole frame is the object; use --tiles off"
-        )
+        raise InputError(f"{given[0]} is not available with tiles; use --tiles off")
     if isinstance(options["light"], str):
         raise InputError("tiles need the light as --light X,Y,Z or --slant/--tilt, not estimated")
     depth = depth if depth is not None else output.with_name(f"{output.stem}_depth.tif")
@@ -246,7 +260,14 @@ def tiled_reconstruct(
 
         source = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels).image
     err = stderr_console()
-    words = {"tiles": "solving tiles", "join": "joining tiles", "write": "writing depth"}
+    if mask is not None and str(mask) == "whole" and not mask.exists():
+        mask = "whole"  # every pixel is the object: a relief filling the frame
+    words = {
+        "mask": "finding the object",
+        "tiles": "solving tiles",
+        "join": "joining tiles",
+        "write": "writing depth",
+    }
     with progress_bar(err) as bar:
         task = bar.add_task("reading", total=None)
 
@@ -254,8 +275,12 @@ def tiled_reconstruct(
             bar.update(task, description=words[stage], completed=done, total=total)
 
         result = tiled.reconstruct(
-            source, tile=tile, scheduler=scheduler, out=depth, mesh=output, progress=progress, **options
-        )
+            source, tile=tile, scheduler=scheduler, out=depth, mesh=output, progress=progress,
+            mask=mask, keep_work=keep_tiles, **options,
+        )  # fmt: skip
+    for warning in (result.info["seam_warning"], _unsolved(result.info)):
+        if warning:
+            err.print(f"warning: {escape(warning)}", highlight=False, soft_wrap=True)
     height, width = result.shape
     if as_json:
         print_json(
@@ -273,12 +298,23 @@ def tiled_reconstruct(
     out.print(
         f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}) in {result.tiles} tiles of {tile}"
     )
+    out.print(f"  object: {escape(result.info['mask'])}")
     out.print(
         f"  {result.solved} solved, {result.skipped} found finished; largest seam between tiles "
         f"{result.seam:.3g} px; time {format_seconds(result.info['timings']['total'])}"
     )
     out.print("[bold]wrote[/]")
     print_files(out, [(output, "mesh"), (depth, "depth map (tiled BigTIFF)")])
+
+
+def _unsolved(info: dict) -> str | None:
+    """A line for the tiles whose part of the object the pipeline refused, if any."""
+    if not info["unsolved_tiles"]:
+        return None
+    return (
+        f"{info['unsolved_tiles']} tile(s) left without depth, their part of the object refused: "
+        f"{info['unsolved_reason']}"
+    )
 
 
 def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:

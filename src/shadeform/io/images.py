@@ -606,10 +606,16 @@ _JPEG_SOF = set(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 
 @dataclass(frozen=True, eq=False)
 class _Source:
-    """A file's content, read once, and how messages name it (its path, or MEMORY_NAME)."""
+    """A file's content, read once, and how messages name it (its path, or MEMORY_NAME);
+    ``size``, the file's bytes, where only its header is checked (``data`` left empty)."""
 
     data: bytes
     path: Path | None = None
+    size: int | None = None
+
+    @property
+    def length(self) -> int:
+        return len(self.data) if self.size is None else self.size
 
     def __str__(self) -> str:
         return MEMORY_NAME if self.path is None else str(self.path)
@@ -709,10 +715,10 @@ def _check_dimensions(source: _Source, width, height, max_pixels: int) -> None:
 def _check_holds(source: _Source, kind: str, width: int, height: int, needed: int) -> None:
     """Refuse a file whose data is too short to hold the pixels its header declares, before the
     decoder allocates the picture (a truncated file, or a bomb claiming more than it holds)."""
-    if needed > len(source.data):
+    if needed > source.length:
         raise InputError(
             f"truncated or damaged {kind}: '{source}' declares {width}x{height} pixels but its "
-            f"{len(source.data):,} bytes cannot hold them; save or export it again"
+            f"{source.length:,} bytes cannot hold them; save or export it again"
         )
 
 
@@ -912,30 +918,42 @@ def _decode_tiff(source: _Source, max_pixels: int) -> _Samples:
     try:
         with _decoding(source, "TIFF"):
             page = tif.pages.first
-            tag = page.tags.get(274)  # Orientation
-            header = {
-                "axes": page.axes,
-                "shape": page.shape,
-                "dtype": page.dtype,
-                "bits": page.bitspersample,
-                "photometric": page.photometric,
-                "codec": page.compression,
-                "tile": (page.tilelength, page.tilewidth),
-                "colormap": page.colormap,
-                "orientation": tag.value if tag is not None else 1,
-                "offsets": page.dataoffsets,
-                "counts": page.databytecounts,
-            }
-        _check_tiff(source, header, max_pixels)
-        with _decoding(source, "TIFF"):
-            # Not before the checks: tifffile's chunk layout trusts the tile tags.
-            segments = int(np.prod(page.chunked))
-        _check_tiff_segments(source, header, segments)
+        header = _check_tiff_page(source, page, max_pixels)
         with _decoding(source, "TIFF"):
             values = page.asarray(maxworkers=1)  # one thread: decoder pools multiply memory
     finally:
         tif.close()
     return _tiff_samples(source, header, values)
+
+
+def _tiff_header(source: _Source, page) -> dict:
+    """What the checks and the decoding need of a TIFF page's tags."""
+    with _decoding(source, "TIFF"):
+        tag = page.tags.get(274)  # Orientation
+        return {
+            "axes": page.axes,
+            "shape": page.shape,
+            "dtype": page.dtype,
+            "bits": page.bitspersample,
+            "photometric": page.photometric,
+            "codec": page.compression,
+            "tile": (page.tilelength, page.tilewidth),
+            "colormap": page.colormap,
+            "orientation": tag.value if tag is not None else 1,
+            "offsets": page.dataoffsets,
+            "counts": page.databytecounts,
+        }
+
+
+def _check_tiff_page(source: _Source, page, max_pixels: int) -> dict:
+    """Every check of a TIFF page before its pixels are decoded; its checked header."""
+    header = _tiff_header(source, page)
+    _check_tiff(source, header, max_pixels)
+    with _decoding(source, "TIFF"):
+        # Not before the checks: tifffile's chunk layout trusts the tile tags.
+        segments = int(np.prod(page.chunked))
+    _check_tiff_segments(source, header, segments)
+    return header
 
 
 def _whole(source: _Source, value, what: str) -> int:
@@ -1014,7 +1032,7 @@ def _check_tiff_segments(source: _Source, header: dict, segments: int) -> None:
     """Every strip or tile the picture needs must be in the file: tifffile would fill a missing
     one with zeros and return part of a picture."""
     offsets, counts = header["offsets"], header["counts"]
-    size = len(source.data)
+    size = source.length
     whole = all(isinstance(n, (int, np.integer)) for n in (*offsets, *counts))
     if (
         not whole
