@@ -23,9 +23,9 @@ export function thresholdWords(value: number, dark: boolean): string {
  * its own name.
  */
 const STEREO_METHOD_WORDS: Record<string, string> = {
-  bivariate: 'Shiny or matte (models gloss)',
-  robust: 'Matte, skips shadows and glints',
-  least_squares: 'Matte, uses every photo',
+  bivariate: 'Glossy or matte',
+  robust: 'Matte, skip glints',
+  least_squares: 'Matte, every photo',
 };
 
 /** The photo set's Method and Integrator choices, from the server's registries. */
