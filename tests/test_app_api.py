@@ -29,7 +29,7 @@ from shadeform.app.store import LRU
 from shadeform.examples import EXAMPLES, load_example
 from shadeform.integration import available_integrators
 from shadeform.io.exporters import available_formats
-from shadeform.io.images import CHANNELS
+from shadeform.io.images import CHANNELS, srgb_encode
 from shadeform.light import light_from_slant_tilt
 from shadeform.preprocess import FILTER_KINDS, apply_filter
 from shadeform.solvers import available_methods
@@ -205,7 +205,11 @@ class TestUpload:
         photo = np.asarray(
             Image.open(io.BytesIO(client.get(f"/api/images/{info['image_id']}/photo.png").content))
         )
-        np.testing.assert_array_equal(photo, np.rint(values / 65535 * 255).astype(np.uint8))
+        # 16 bits are linear: shown sRGB-encoded, as a viewer shows linear data, not as dark as
+        # their numbers read as 8-bit sRGB (what is solved on stays linear)
+        expected = np.rint(srgb_encode((values / 65535).astype(np.float32)) * 255).astype(np.uint8)
+        np.testing.assert_allclose(photo, expected, atol=1)
+        assert photo.max() > 250 and np.median(photo[values > 0]) > np.median(values[values > 0]) / 257 + 20
 
     def test_folders_dropped_from_the_name(self, client):
         info = upload(client, png_bytes(disk_photo()), name="../../secret/..\\My Photo (1).png").json()

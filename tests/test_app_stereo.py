@@ -235,3 +235,43 @@ def test_the_whole_set_is_limited():
         noisy = png16(np.random.default_rng(0).random((128, 128)))  # about 32 KB each
         detail = one_line_error(post_set(client, [(f"{i}.png", noisy) for i in range(4)]), 413)
         assert "photos together" in detail
+
+
+class TestNamesAndLooks:
+    """What a user sees of an uploaded set: its exports named after the photos they gave, its
+    16-bit (linear) photos shown sRGB-encoded as a viewer shows linear data (issue 34)."""
+
+    @pytest.mark.parametrize(
+        ("names", "stem"),
+        [
+            ([f"{i:03d}.png" for i in range(1, 9)], "001"),  # DiLiGenT: the first photo's
+            ([f"cat_{i:03d}.png" for i in range(1, 9)], "cat"),  # what they share, numbers left out
+            ([f"light{i:02d}_frog.png" for i in range(1, 9)], "light_frog"),
+            ([f"catPNG/{i:03d}.png" for i in range(1, 9)], "catPNG"),  # the folder, where sent
+            ([f"My Set (2)/{i:03d}.png" for i in range(1, 9)], "My_Set_2"),  # sanitised
+        ],
+    )
+    def test_an_export_is_named_after_the_photos(self, client, lit_sphere, names, stem):
+        files, lights, _ = lit_sphere
+        info = post_set(client, list(zip(names, (data for _, data in files))), lights=light_text(lights))
+        assert info.status_code == 201, info.text
+        body = {"photoset_id": info.json()["photoset_id"], "params": {"step": 4}}
+        response = client.post("/api/stereo/export?format=glb", json=body)
+        assert response.status_code == 200, response.text
+        assert response.headers["content-disposition"] == f'attachment; filename="{stem}.glb"'
+
+    def test_a_16_bit_photo_is_shown_srgb_encoded(self, client, lit_sphere):
+        files, lights, _ = lit_sphere
+        info = post_set(client, files, lights=light_text(lights)).json()
+        shown = np.asarray(
+            Image.open(io.BytesIO(client.get(f"/api/photosets/{info['photoset_id']}/photos/0.png").content)),
+            dtype=np.float64,
+        )
+        assert shown.ndim == 3 and (shown == shown[..., :1]).all()  # a grey photo, as RGB
+        shown = shown[..., 0]
+        linear = np.asarray(Image.open(io.BytesIO(files[0][1])), dtype=np.float64) / 65535
+        expected = np.rint(srgb_encode(linear.astype(np.float32)) * 255)
+        assert np.abs(shown - expected).max() <= 1
+        # mid-grey light, 0.2 linear, shows as 124 of 255 (not 51: as dark as raw numbers read as sRGB)
+        lit = (linear > 0.15) & (linear < 0.25)
+        assert lit.any() and np.all(shown[lit] > 105)

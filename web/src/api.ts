@@ -247,7 +247,8 @@ export function uploadPhotoSet(
   extra: { lights: File | null; intensities: File | null; mask: File | null },
 ): Promise<PhotoSetInfo> {
   const form = new FormData();
-  for (const photo of photos) form.append('photos', photo, photo.name);
+  // the photos' folder where the browser knows it (a folder chosen or dropped): the exports' name
+  for (const photo of photos) form.append('photos', photo, photo.webkitRelativePath || photo.name);
   for (const [field, file] of Object.entries(extra)) if (file) form.append(field, file, file.name);
   return json<PhotoSetInfo>(send('/api/photosets', { method: 'POST', body: form }));
 }

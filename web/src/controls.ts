@@ -5,6 +5,7 @@
 import type { Options, ReconstructResult } from './api.gen';
 import { AXIS_COLOURS, UNSURE_COLOUR, unsureQuestion, type Unsure } from './imagePane';
 import type { Axis, Params, Region } from './state';
+import { depthBoundedText, readDepthBounded, readUnsureOthers, unsureOthersText, type UnsureOthers } from './words';
 
 export type Urgency = 'now' | 'drag';
 
@@ -51,6 +52,8 @@ export class Panel {
   private params: Params;
   /** The last result's light estimate in whole degrees, where it was estimated: Slant / tilt starts there. */
   private estimated: { slant: number; tilt: number } | null = null;
+  /** The last result's lesser unsure areas, counted but not listed (``info["unsure_others"]``). */
+  private unsureOthers: UnsureOthers = { areas: 0, share: 0 };
   private readonly channel = $<HTMLSelectElement>('channel');
   private readonly filterKind = $<HTMLSelectElement>('filter-kind');
   private readonly filterSize = $<HTMLInputElement>('filter-size');
@@ -81,9 +84,13 @@ export class Panel {
       this.emit({ filter: { kind, size } });
     });
     this.slider(this.filterSize, (v) => ({ filter: { ...this.params.filter, size: v } }));
-    // touching slant or tilt means "this direction": switch to that mode
-    this.slider(this.slant, (v) => ({ light: { ...this.params.light, mode: 'slant_tilt', slant: v } }));
-    this.slider(this.tilt, (v) => ({ light: { ...this.params.light, mode: 'slant_tilt', tilt: v } }));
+    // touching slant or tilt means "this direction": switch to that mode, from the direction the
+    // sliders show (frontal's slant 0, the estimate), not from hidden earlier values
+    const touched = (): Partial<Params> => ({
+      light: { ...this.params.light, mode: 'slant_tilt', slant: Number(this.slant.value), tilt: Number(this.tilt.value) },
+    });
+    this.slider(this.slant, touched);
+    this.slider(this.tilt, touched);
     this.method.addEventListener('change', () => this.emit({ method: this.method.value }));
     this.integrator.addEventListener('change', () => this.emit({ integrator: this.integrator.value || null }));
     this.slider(this.refine, (v) => ({ refine: v }));
@@ -130,19 +137,44 @@ export class Panel {
     }
   }
 
+  /**
+   * The slant and tilt sliders show the light that is used: the user's angles in Slant / tilt;
+   * in Frontal slant 0 (tilt then means nothing: "—"); in Estimate the estimate once a result
+   * has one. Outside Slant / tilt both are greyed (class ``dimmed``), and touching one switches
+   * to Slant / tilt from what it shows.
+   */
+  private showLight(): void {
+    const light = this.params.light;
+    const shown = shownLight(light, this.estimated);
+    this.slant.value = String(shown.slant ?? light.slant);
+    this.tilt.value = String(shown.tilt ?? light.tilt);
+    this.showOutputs(this.slant, this.tilt);
+    if (shown.slant === null) $('slant-out').textContent = '—';
+    if (shown.tilt === null) $('tilt-out').textContent = '—';
+    const why = light.mode === 'z'
+      ? 'Frontal: the light comes from the camera (slant 0°; tilt does not apply). Drag to set a direction instead.'
+      : 'Estimated from the photo. Drag to correct it (switches to Slant / tilt).';
+    for (const input of [this.slant, this.tilt]) {
+      const row = input.closest<HTMLElement>('.row')!;
+      const manual = light.mode === 'slant_tilt';
+      row.classList.toggle('dimmed', !manual);
+      row.dataset.tip ??= row.title;
+      row.title = manual ? row.dataset.tip : why;
+    }
+  }
+
   /** Show ``params`` in every control. */
   show(params: Params): void {
     this.params = structuredClone(params);
     this.channel.value = params.channel;
     this.filterKind.value = params.filter.kind;
-    this.slant.value = String(params.light.slant);
-    this.tilt.value = String(params.light.tilt);
     this.method.value = params.method;
     this.methodNote.textContent = this.methodHelp[params.method] ?? '';
     this.integrator.value = params.integrator ?? '';
     this.refine.value = String(params.refine);
     this.step.value = String(params.step);
-    this.showOutputs(this.filterSize, this.slant, this.tilt, this.refine, this.step);
+    this.showOutputs(this.filterSize, this.refine, this.step);
+    this.showLight();
     $('filter-size-row').classList.toggle('disabled', params.filter.kind === 'none');
     const gaussian = params.filter.kind === 'gaussian';
     this.filterSize.step = gaussian ? '0.5' : '1';
@@ -152,9 +184,6 @@ export class Panel {
     this.showOutputs(this.filterSize);
     for (const button of document.querySelectorAll<HTMLButtonElement>('#light-mode button')) {
       button.classList.toggle('on', button.dataset.mode === params.light.mode);
-    }
-    for (const id of ['slant', 'tilt']) {
-      $(id).closest('.row')!.classList.toggle('dimmed', params.light.mode !== 'slant_tilt');
     }
   }
 
@@ -167,6 +196,11 @@ export class Panel {
     this.estimated = estimate
       ? { slant: Math.min(Number(this.slant.max), Math.round(estimate.slant)), tilt: Math.round(estimate.tilt) }
       : null;
+    if (this.params.light.mode === 'estimate') this.showLight();
+    showDepthNote(result);
+    // a quick look may leave the areas out: the last ones are kept until a result says
+    if (!result) this.unsureOthers = { areas: 0, share: 0 };
+    else if (!result.preview || 'unsure' in result.info) this.unsureOthers = readUnsureOthers(result.info);
     unsure.hidden = !estimate?.unsure;
     unsure.textContent = estimate?.unsure
       ? `The light read from the photo is unsure (a ${Math.round(100 * estimate.confidence)}\u00a0% chance of being within 10°): if you know where the light was, choose Slant / tilt and set it.`
@@ -200,14 +234,14 @@ export class Panel {
     for (const [r, c] of used) {
       if (isUser(r, c)) continue;
       const li = document.createElement('li');
-      li.title = 'Chosen automatically: the brightest pixel of a part of the object without a reference';
+      li.title = 'Chosen automatically: the brightest point of a part of the object that has no reference point';
       li.innerHTML = `<span class="swatch" style="border:1.5px solid #fde047;transform:rotate(45deg);width:8px;height:8px"></span><span class="what">Automatic</span><span class="meta">row ${r}, col ${c}</span>`;
       items.push(li);
     }
     list.replaceChildren(...items);
     $('refs-note').textContent = user.length
-      ? 'The first is the main one: depth 0 there, its normal along the light.'
-      : 'None set: the brightest pixel is used, its normal along the light.';
+      ? 'Depth is measured from the first (depth 0 there); each is taken to face the light straight on.'
+      : 'None set: depth is measured from the brightest point, taken to face the light straight on.';
     ($('refs-clear') as HTMLButtonElement).disabled = user.length === 0;
   }
 
@@ -231,8 +265,10 @@ export class Panel {
     }
     const note = document.createElement('div');
     note.className = 'hint-text unsure-note';
-    note.textContent = `Unsure: ${areas.length} area${areas.length === 1 ? '' : 's'} the shading cannot settle`;
-    note.title = 'The photo fits a bump and a dent equally well here; it is solved as convex unless you mark it concave';
+    note.textContent = `Unsure: ${areas.length} area${areas.length === 1 ? '' : 's'} the shading cannot settle` +
+      unsureOthersText(this.unsureOthers);
+    note.title = 'The photo fits a bump and a dent equally well here; it is solved as convex unless you mark it concave.' +
+      (this.unsureOthers.areas ? ' The smaller ones matter less to the shape; only those that matter most are listed.' : '');
     const same = (a: Array<[number, number]>, b: Array<[number, number]>) => JSON.stringify(a) === JSON.stringify(b);
     const items = areas.map((area, i) => {
       const li = document.createElement('li');
@@ -293,4 +329,38 @@ export class Panel {
     ($('regions-save') as HTMLButtonElement).disabled = regions.length === 0;
     ($('regions-clear') as HTMLButtonElement).disabled = regions.length === 0;
   }
+}
+
+/**
+ * The slant and tilt the sliders show for ``light``; null where there is none to show (a frontal
+ * light's tilt, an estimate not made yet).
+ */
+export function shownLight(
+  light: Params['light'],
+  estimated: { slant: number; tilt: number } | null,
+): { slant: number | null; tilt: number | null } {
+  if (light.mode === 'z') return { slant: 0, tilt: null };
+  if (light.mode === 'estimate') return estimated ?? { slant: null, tilt: null };
+  return { slant: light.slant, tilt: light.tilt };
+}
+
+/**
+ * Under the model's badge, while the result on screen says so: its depth ran past what the
+ * object's outline allows and was pulled back (``info["depth_bounded"]``), in words, with why in
+ * its tooltip.
+ */
+function showDepthNote(result: ReconstructResult | null): void {
+  let note = document.getElementById('depth-note');
+  if (!note) {
+    note = document.createElement('div');
+    note.id = 'depth-note';
+    note.className = 'depth-note single-only';
+    note.setAttribute('role', 'status');
+    $('view-host').append(note);
+  }
+  const said = readDepthBounded(result?.info);
+  note.hidden = said === null;
+  const { text, tip } = said ? depthBoundedText(said) : { text: '', tip: '' };
+  note.textContent = text;
+  note.title = tip;
 }

@@ -482,7 +482,7 @@ export class ImagePane {
       if (this.draft.length < 3) return 'Click to add corners · Esc cancels';
       return 'Click the first corner or press Enter to close · Backspace removes a corner · Esc cancels';
     }
-    if (this.tool === 'reference') return 'Click to add a reference pixel · click one to remove it';
+    if (this.tool === 'reference') return 'Click a point facing the light to measure depth from it · click one to remove it';
     if (this.tool === 'mask' && this.maskEditor) return this.maskEditor.hint();
     return 'Click a region to select it · drag to move · drag empty space to pan · wheel zooms';
   }

@@ -11,6 +11,7 @@ import type { Channel, MaskResult } from './api.gen';
 import { segmentDistance, type Point } from './geometry';
 import { MASK_EDGE, MASK_FILL } from './maskColours';
 import type { MaskDecodeReply } from './maskWorker';
+import { percentOfWhite, thresholdWords } from './words';
 
 export type MaskMode = 'brush' | 'polygon' | 'object';
 export type MaskOp = 'add' | 'erase';
@@ -455,9 +456,7 @@ export class MaskTool {
     if (value !== null && Number.isFinite(value)) {
       this.thresholdInput.value = String(Math.round(Math.sqrt(Math.min(1, Math.max(0, value))) * THRESHOLD_STEPS));
     }
-    // three digits, in the output's width: 0.310, 5.6e-3 (a dark photo's 0.00562 ran past the panel)
-    const shown = this.thresholdValue();
-    $('mask-threshold-out').textContent = shown >= 0.01 || shown === 0 ? shown.toFixed(3) : shown.toExponential(1);
+    $('mask-threshold-out').textContent = percentOfWhite(this.thresholdValue()); // 31%, 0.56%: in its width
   }
 
   private showNote(): void {
@@ -565,10 +564,10 @@ export class MaskTool {
       const result = await api.autoMask(image.id, { channel: image.channel, threshold: value, dark });
       if (id !== this.thresholdSent) return; // a newer value is on its way
       this.clearClicks();
-      await this.apply(result, final, `${dark ? 'below' : 'above'} ${value.toPrecision(3)}`);
+      await this.apply(result, final, `pixels ${thresholdWords(value, dark)}`);
       if (!final) {
         this.clearError();
-        $('mask-note').textContent = `Threshold ${value.toPrecision(3)}: ${result.pixels.toLocaleString()} pixels · release to use it`;
+        $('mask-note').textContent = `Pixels ${thresholdWords(value, dark)}: ${result.pixels.toLocaleString()} of them · release to use it`;
       }
     } catch (err) {
       if (id === this.thresholdSent) this.error((err as Error).message);

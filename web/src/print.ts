@@ -35,7 +35,8 @@ const FRAME = 'solid';
 // (the solid's x = columns, y = up the photo, z = toward the camera as for the model)
 const VIEW_YAW = 30;
 const VIEW_PITCH = -25;
-const VIEW_ZOOM = 0.72; // out a little: the box's corners and their labels stay in sight
+// the share of the view's width and height the solid's box may take: room for the labels beside it
+const VIEW_FILL = 0.75;
 
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
@@ -266,8 +267,7 @@ export class PrintPanel {
     const result = this.result;
     if (!mesh || !result) return;
     this.viewer.setMesh(mesh, { refit: true, frame: FRAME });
-    this.viewer.rotate(VIEW_YAW, VIEW_PITCH);
-    this.viewer.zoom(VIEW_ZOOM);
+    this.viewer.fitView(VIEW_YAW, VIEW_PITCH, VIEW_FILL);
     this.viewer.setGuides(measureLines(mesh));
     this.host.shown();
     const [w, d, h] = result.size_mm;

@@ -1,8 +1,8 @@
 // Photo sets: several photos of one still object under moving lights, solved by photometric
 // stereo on the server. This module owns the pane that shows what it found (the object relit
 // under a light the user drags, its normals, albedo, confidence, and the photos themselves),
-// the panel group of its settings, and its requests; the App gives it the 3D view and the
-// busy/toast helpers.
+// the panel group of its settings (their words: words.ts), and its requests; the App gives it the
+// 3D view and the busy/toast helpers.
 //
 // Relighting is done here, per pixel, from the normals and albedo the server sends as PNGs:
 // shown = encode(albedo * max(0, n . l) * brightness), linear albedo, sRGB on screen. A drag
@@ -11,6 +11,7 @@ import * as api from './api';
 import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
 import { NetworkError, send, UNREACHABLE } from './connection';
 import { ModelState } from './modelState';
+import { fillStereoChoices } from './words';
 
 export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
 
@@ -315,9 +316,8 @@ export class StereoSession {
 
   private buildPanel(): void {
     const method = $<HTMLSelectElement>('stereo-method');
-    for (const entry of this.options.stereo_methods) method.add(new Option(entry.name.replace('_', ' '), entry.name));
     const integrator = $<HTMLSelectElement>('stereo-integrator');
-    for (const entry of this.options.integrators) integrator.add(new Option(entry.name, entry.name));
+    fillStereoChoices(method, integrator, this.options);
     method.addEventListener('change', () => this.change({ method: method.value }));
     integrator.addEventListener('change', () => this.change({ integrator: integrator.value }));
     for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-lights button')) {

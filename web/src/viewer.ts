@@ -16,6 +16,7 @@ export class Viewer {
   private readonly camera = new THREE.PerspectiveCamera(32, 1, 0.1, 1e5);
   private readonly controls: OrbitControls;
   private readonly modelPosition = new THREE.Vector3(); // the mesh's centre at the origin
+  private readonly halfBox = new THREE.Vector3(0.5, 0.5, 0.5); // the mesh's half extents about its centre
   private centred = false;
   private positions: Float32Array | null = null;
   private size = 1;
@@ -189,6 +190,39 @@ export class Viewer {
     this.requestRender();
   }
 
+  /**
+   * Look at the mesh's centre from ``yawDegrees`` right of and ``pitchDegrees`` above its front
+   * (negative: below), as near as lets every corner of its bounding box show within ``fill`` of
+   * the view's width and height: the whole of what is shown, as large as it goes, at any aspect.
+   */
+  fitView(yawDegrees: number, pitchDegrees: number, fill = 0.8): void {
+    const yaw = THREE.MathUtils.degToRad(yawDegrees);
+    const pitch = THREE.MathUtils.degToRad(pitchDegrees);
+    // from the centre toward the camera, and the screen's axes
+    const back = new THREE.Vector3(Math.sin(yaw) * Math.cos(pitch), Math.sin(pitch), Math.cos(yaw) * Math.cos(pitch));
+    const right = new THREE.Vector3().crossVectors(this.camera.up, back).normalize();
+    const up = new THREE.Vector3().crossVectors(back, right);
+    const tanY = Math.tan(THREE.MathUtils.degToRad(this.camera.fov) / 2) * fill;
+    const tanX = tanY * this.camera.aspect;
+    // a corner at distance ``along`` toward the camera, ``x`` and ``y`` off the axis, is in sight
+    // from distance d when |x| <= (d - along) tanX and |y| <= (d - along) tanY
+    let distance = 0;
+    const h = this.halfBox;
+    for (const corner of [-1, 1].flatMap((i) => [-1, 1].flatMap((j) => [-1, 1].map((k) => new THREE.Vector3(i * h.x, j * h.y, k * h.z))))) {
+      const along = corner.dot(back);
+      distance = Math.max(distance, along + Math.abs(corner.dot(right)) / tanX, along + Math.abs(corner.dot(up)) / tanY);
+    }
+    distance = Math.max(distance, 1e-3);
+    this.controls.target.set(0, 0, 0);
+    this.camera.position.copy(back).multiplyScalar(distance);
+    this.camera.near = distance / 200;
+    this.camera.far = distance * 50;
+    this.camera.updateProjectionMatrix();
+    this.camera.lookAt(0, 0, 0);
+    this.controls.update();
+    this.requestRender();
+  }
+
   /** Where the camera is, relative to the point it orbits (model units). */
   cameraOffset(): [number, number, number] {
     const offset = this.camera.position.clone().sub(this.controls.target);
@@ -248,6 +282,7 @@ export class Viewer {
   private centre({ box }: MeshBounds): void {
     const [x0, y0, z0, x1, y1, z1] = box;
     this.size = Math.max(x1 - x0, y1 - y0, z1 - z0, 1);
+    this.halfBox.set((x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2);
     this.modelPosition.set(-(x0 + x1) / 2, -(y0 + y1) / 2, -(z0 + z1) / 2);
     this.centred = true;
   }

@@ -24,6 +24,7 @@ __all__ = [
     "base64_array",
     "png",
     "png_base64",
+    "shown_photo",
     "plain",
     "mesh_data",
     "mesh_file",
@@ -32,6 +33,7 @@ __all__ = [
     "format_suffix",
     "display_name",
     "safe_stem",
+    "set_stem",
 ]
 
 #: Media types of the exported formats; anything else is sent as bytes.
@@ -73,6 +75,32 @@ def png(image: np.ndarray) -> bytes:
     buffer = io.BytesIO()
     Image.fromarray(samples).save(buffer, format="PNG", compress_level=1)
     return buffer.getvalue()
+
+
+def shown_photo(image: np.ndarray, encoding: str | None) -> np.ndarray:
+    """The values to show of a photo read as linear ``image``, as a picture viewer shows it.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) float array
+        Linear values in [0, 1], as solved on (left unchanged).
+    encoding : {"srgb", "linear"} or None
+        How the file held its values (``Photo.info["encoding"]``). ``"srgb"`` (8-bit files):
+        encoded again, so it looks as the file did (8-bit values come back exactly);
+        ``"linear"`` (16-bit and float files, calibrated sets): sRGB-encoded for the screen as
+        a raw or HDR viewer shows linear data, not as dark as its numbers read as sRGB would be;
+        None (a synthetic example, no file): as is.
+
+    Returns
+    -------
+    ndarray
+        Display values in [0, 1] (:func:`png` makes them 8 bits).
+    """
+    if encoding not in ("srgb", "linear"):
+        return image
+    from shadeform.io.images import srgb_encode
+
+    return srgb_encode(np.clip(image, 0.0, 1.0).astype(np.float32))
 
 
 def png_base64(image: np.ndarray) -> str:
@@ -150,5 +178,37 @@ def display_name(filename: str | None) -> str:
 def safe_stem(name: str) -> str:
     """A download's file stem: letters, digits, ``-`` and ``_`` only, never empty."""
     stem = name.rsplit(".", 1)[0] if "." in name.lstrip(".") else name
-    stem = re.sub(r"[^A-Za-z0-9_-]+", "_", stem).strip("_")
-    return stem[:60] or "model"
+    return _sanitised(stem) or "model"
+
+
+def _sanitised(text: str) -> str:
+    """``text`` with every run of other characters than letters, digits, ``-`` and ``_`` made one
+    ``_``, none at the ends, at most 60 characters (may be empty)."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_")[:60].strip("_")
+
+
+def set_stem(filenames: list[str | None]) -> str:
+    """A photo set's download stem, from its photos' file names as uploaded.
+
+    The folder they came from where the names carry one (``catPNG/001.png`` -> ``catPNG``),
+    else the part of their names they share, its running numbers left out (``cat_001.png``,
+    ``cat_002.png`` -> ``cat``; ``light01_x.png``, ``light02_x.png`` -> ``light_x``), else
+    the first photo's stem (DiLiGenT's ``001.png`` ... ``096.png`` -> ``001``); sanitised as
+    :func:`safe_stem`, never empty.
+    """
+    import os.path
+
+    parts = [re.split(r"[/\\]", name or "") for name in filenames]
+    folders = {tuple(part[:-1]) for part in parts}
+    if len(folders) == 1:
+        folder = next(iter(folders))
+        if folder and (named := _sanitised(folder[-1])):
+            return named
+    stems = [name.rsplit(".", 1)[0] if "." in name.lstrip(".") else name for *_, name in parts]
+    head = os.path.commonprefix(stems)
+    tail = os.path.commonprefix([stem[len(head) :][::-1] for stem in stems])[::-1]
+    # the running number's leading digits are in the shared head ("cat_00" of cat_001, cat_002)
+    shared = _sanitised(re.sub(r"[\d\W_]+$", "", head) + re.sub(r"^[\d]+", "", tail))
+    if len(stems) > 1 and shared:
+        return shared
+    return safe_stem(stems[0]) if stems else "model"

@@ -74,6 +74,7 @@ from shadeform.app.encoding import (
     plain,
     png,
     png_base64,
+    shown_photo,
 )
 from shadeform.app.fusion import add_fusion_routes
 from shadeform.app.guard import ERROR_RESPONSES, AppLimits, Guard, add_error_handlers, file_too_large
@@ -442,13 +443,8 @@ def _read_as(photo) -> dict[str, Any]:
 
 
 def _shown(entry: StoredImage, image: np.ndarray) -> np.ndarray:
-    """Values to show for a stored photo: one that was sRGB-encoded is encoded again, so that it
-    looks as the file did (what is solved on stays linear)."""
-    if entry.photo is None or entry.photo["encoding"] != "srgb":
-        return image
-    from shadeform.io.images import srgb_encode
-
-    return srgb_encode(np.clip(image, 0.0, 1.0).astype(np.float32))
+    """Values to show for a stored photo, as a viewer shows it (what is solved on stays linear)."""
+    return shown_photo(image, None if entry.photo is None else entry.photo["encoding"])
 
 
 def _store_initial(state: _State, source: str | Path) -> StoredImage:

@@ -43,6 +43,8 @@ from shadeform.app.encoding import (
     plain,
     png,
     png_base64,
+    set_stem,
+    shown_photo,
 )
 from shadeform.app.guard import size_text
 from shadeform.app.masks import mask_from_file
@@ -74,6 +76,8 @@ class StoredPhotoSet:
         The mask that came with them.
     encoding : {"srgb", "linear"}
         How the files held their values.
+    stem : str
+        Its downloads' file stem (:func:`shadeform.app.encoding.set_stem`); ``name`` where empty.
     """
 
     photoset_id: str
@@ -84,6 +88,7 @@ class StoredPhotoSet:
     intensities: np.ndarray | None = None
     mask: np.ndarray | None = None
     encoding: str = "linear"
+    stem: str = ""
 
     @property
     def nbytes(self) -> int:
@@ -158,11 +163,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
             raise HTTPException(
                 404, f"photo {index} is not in this set: it has photos 0 to {len(entry.images) - 1}"
             )
-        photo = entry.images[index]
-        if entry.encoding == "srgb":  # shown as the file looked
-            from shadeform.io.images import srgb_encode
-
-            photo = srgb_encode(np.clip(photo, 0.0, 1.0))
+        photo = shown_photo(entry.images[index], entry.encoding)
         return Response(png(photo), media_type="image/png", headers={"Cache-Control": "no-cache"})
 
     @router.post("/api/stereo", response_model=StereoResult)
@@ -181,7 +182,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         async with state.solve_lock:
             solved, _ = await run_in_threadpool(_solve, state, entry, body.params)
             data = await run_in_threadpool(mesh_file, solved.reconstruction, body.params.step, suffix)
-        return download(data, entry.name, suffix)
+        return download(data, entry.stem or entry.name, suffix)
 
     app.include_router(router)
 
@@ -254,6 +255,7 @@ def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
         strengths,
         object_mask,
         encoding,
+        set_stem([photo.filename for photo in photos]),
     )
 
 

@@ -167,7 +167,12 @@ def reconstruct(
 
     out = stdout_console()
     info = rec.info
-    refs = ", ".join(f"({r}, {c})" for r, c in info["references"])
+    # where depth 0 is, in the x=, y= of the other notes (column, row); the rest by count
+    (main_row, main_col), *more_refs = info["references"]
+    origin = f"depth 0 at x={main_col}, y={main_row}"
+    if more_refs:
+        origin += f" (and {len(more_refs)} more starting point{'s' if len(more_refs) > 1 else ''})"
+    parts = f"{info['parts']} part{'s' if info['parts'] != 1 else ''}"
     stages = ", ".join(f"{name} {format_seconds(t)}" for name, t in info["timings"].items())
     out.print(f"[bold]reconstructed[/] {escape(str(image))} ({width}x{height}, {describe_photo(photo.info)})")
     # the refinement iterations that ran (the marching and photo solvers take none)
@@ -176,9 +181,7 @@ def reconstruct(
         f"  solver {info['method']}{refined}, depth by {info['integrator']}, "
         f"filter {info['filter']}, light {format_vector(rec.light)}{read_light(info)}"
     )
-    out.print(
-        f"  object {int(rec.mask.sum()):,} pixels in {info['parts']} part(s), reference pixel(s) {refs}"
-    )
+    out.print(f"  object {int(rec.mask.sum()):,} pixels in {parts}, {origin}")
     out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
     out.print(
         f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "

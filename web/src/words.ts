@@ -1,0 +1,106 @@
+// Plain words for what the panel shows: a brightness threshold as a share of white, the photo
+// set's methods by what they do (the library's own name kept in the tooltip), and the notes a
+// result's info carries that a newcomer needs explained (a depth pulled back, unsure areas not
+// listed). The numbers come from the server; only their wording lives here.
+
+/** A brightness in [0, 1] (the photo's linear values) as a share of white: "31%", "3.1%", "0.26%". */
+export function percentOfWhite(value: number): string {
+  const percent = 100 * Math.min(1, Math.max(0, value));
+  if (percent === 0) return '0%';
+  if (percent >= 10) return `${percent.toFixed(0)}%`;
+  if (percent >= 1) return `${percent.toFixed(1)}%`;
+  return percent >= 0.01 ? `${percent.toFixed(2)}%` : '<0.01%';
+}
+
+/** What a threshold keeps, in words: "brighter than 0.26% of white". */
+export function thresholdWords(value: number, dark: boolean): string {
+  return `${dark ? 'darker' : 'brighter'} than ${percentOfWhite(value)} of white`;
+}
+
+/**
+ * The photo set's methods (``Options.stereo_methods``) by what they assume of the surface; the
+ * library's name and its description go in the option's tooltip. A method not listed here shows
+ * its own name.
+ */
+const STEREO_METHOD_WORDS: Record<string, string> = {
+  bivariate: 'Glossy or matte',
+  robust: 'Matte, skip glints',
+  least_squares: 'Matte, every photo',
+};
+
+/** The photo set's Method and Integrator choices, from the server's registries. */
+export function fillStereoChoices(
+  method: HTMLSelectElement,
+  integrator: HTMLSelectElement,
+  options: { stereo_methods: Array<{ name: string; description: string }>; integrators: Array<{ name: string; description: string }> },
+): void {
+  method.append(...stereoMethodOptions(options.stereo_methods));
+  integrator.append(...integratorOptions(options.integrators));
+}
+
+/** The photo set's Method choices: what each assumes, its name and description in the tooltip. */
+export function stereoMethodOptions(entries: Array<{ name: string; description: string }>): HTMLOptionElement[] {
+  return entries.map(({ name, description }) => {
+    const option = new Option(STEREO_METHOD_WORDS[name] ?? name.replace(/_/g, ' '), name);
+    option.title = `${capitalised(description)} (the CLI's: shadeform stereo --method ${name})`;
+    return option;
+  });
+}
+
+/** The Integrator choices, each with what it does in its tooltip. */
+export function integratorOptions(entries: Array<{ name: string; description: string }>): HTMLOptionElement[] {
+  return entries.map(({ name, description }) => {
+    const option = new Option(capitalised(name), name);
+    option.title = capitalised(description);
+    return option;
+  });
+}
+
+function capitalised(text: string): string {
+  return text.charAt(0).toUpperCase() + text.slice(1);
+}
+
+/** ``info["depth_bounded"]`` of a result: the share of the object pulled back, and how far it had strayed. */
+export interface DepthBounded {
+  pixels: number;
+  max_over: number;
+}
+
+export function readDepthBounded(info: Record<string, unknown> | undefined): DepthBounded | null {
+  const said = info?.depth_bounded as Partial<DepthBounded> | undefined;
+  if (!said || typeof said.pixels !== 'number' || typeof said.max_over !== 'number') return null;
+  return { pixels: said.pixels, max_over: said.max_over };
+}
+
+/** The message shown with a model whose depth was pulled back within what its outline allows. */
+export function depthBoundedText(said: DepthBounded): { text: string; tip: string } {
+  const share = Math.max(0.1, 100 * said.pixels);
+  return {
+    text:
+      `Depth limited on ${share < 10 ? share.toFixed(1) : share.toFixed(0)}% of the object: the solve went up to ` +
+      `${said.max_over.toFixed(1)}× deeper than its outline allows and was pulled back there`,
+    tip:
+      "An object's outline says roughly how deep it can be (about half its width). Where the solved " +
+      'depth went far beyond that (a spike or a sheet, often from a shadow or a dent read as a bump), it ' +
+      'was squeezed back smoothly. The shape there is a guess: check it, mark concave regions, or improve the mask.',
+  };
+}
+
+/** ``info["unsure_others"]``: the lesser unsure areas the result counts but does not list. */
+export interface UnsureOthers {
+  areas: number;
+  share: number;
+}
+
+export function readUnsureOthers(info: Record<string, unknown> | undefined): UnsureOthers {
+  const said = info?.unsure_others as Partial<UnsureOthers> | undefined;
+  const areas = typeof said?.areas === 'number' && said.areas > 0 ? Math.round(said.areas) : 0;
+  return { areas, share: areas && typeof said?.share === 'number' ? said.share : 0 };
+}
+
+/** " (and 2 smaller ones, 4% of the object, not listed)", or "" where there are none. */
+export function unsureOthersText(others: UnsureOthers): string {
+  if (!others.areas) return '';
+  const share = Math.max(1, Math.round(100 * others.share));
+  return ` (and ${others.areas} smaller one${others.areas === 1 ? '' : 's'}, ${share}% of the object, not listed)`;
+}
