@@ -107,6 +107,20 @@ class TestPastTheBound:
         np.testing.assert_array_equal(result.depth[far], depth[far])
         np.testing.assert_array_equal(result.normals[far], normals[far])
 
+    @pytest.mark.parametrize("slope", [5.0, 40.0])
+    def test_a_sheet_stood_on_edge_is_caught_whatever_its_slope(self, slope):
+        # a result marched down a wrong slope: the fitted tilt takes it whole, so nothing strays
+        # from the fit unless the fit itself is held to the outline's diameter
+        scene = synth.scene("sphere", size=128)
+        rows = np.arange(128, dtype=np.float64)[:, None]
+        depth = np.where(scene.mask, scene.depth - slope * rows, np.nan)
+        result = bound_depth(depth, _normals_of(depth), scene.mask)
+        rows_in, cols_in = np.nonzero(scene.mask)
+        diameter = max(np.ptp(rows_in), np.ptp(cols_in)) + 1
+        assert result.applied and result.max_over > 1.0
+        # the fit's span (the diameter) plus the limiter's ceiling either side
+        assert np.nanmax(result.depth) - np.nanmin(result.depth) <= (1 + 2 * (1 + HEADROOM) * SPREAD) * diameter + 2
+
     @pytest.mark.parametrize("size", [96, 400])  # 400: on a grid, the normals in bands of rows
     def test_the_normals_are_those_of_the_new_depth(self, size):
         # normals that are exactly the depth's differences, so the check reads the bound alone

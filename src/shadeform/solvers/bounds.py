@@ -10,8 +10,11 @@ down a wrong slope). The outline tells how deep the object is likely to be, at a
   shape scaled, d < 0 for a bowl), fitted to its depth in least absolute deviations, so that the
   pixels that stray do not pull the fit;
 - its *diameter* ``D``: an object no deeper along the view than across fits in a ball of that
-  diameter, whose depths lie within ``D / 2`` of its middle. A pixel may stray from the fitted
-  shape by :data:`SPREAD` ``* D`` (per connected part of the object).
+  diameter, whose depths lie within ``D / 2`` of its middle. The fitted shape itself may span at
+  most ``D`` over the part (a steeper fit, a sheet stood on edge, is scaled down about its
+  median: without this a result marched down a wrong slope is all "shape" and nothing strays),
+  and a pixel may stray from it by :data:`SPREAD` ``* D`` (per connected part of the object).
+  A plane tilted up to 63 degrees (slope ``1 + 2 SPREAD``) passes unchanged.
 
 Where a result is within the bound it is returned as it is. Beyond, the excess is compressed
 smoothly (:func:`soft_limit`: the identity up to the bound, then rising ever more slowly to at
@@ -175,8 +178,9 @@ def bound_depth(depth, normals, mask) -> DepthBound:
             if np.count_nonzero(on) < _MIN_PIXELS or not shape[where][on].any():
                 continue  # too small to fit, or no outline in view
             rows, cols = np.nonzero(on)
-            bound = SPREAD * _diameter(rows, cols) * step
-            stray = _stray(z[where][on], rows, cols, shape[where][on], bound)
+            diameter = _diameter(rows, cols) * step
+            bound = SPREAD * diameter
+            stray = _stray(z[where][on], rows, cols, shape[where][on], bound, span=diameter)
             worst = max(worst, float(np.abs(stray).max()) / bound)
             past += int(np.count_nonzero(np.abs(stray) > bound))
             change[where][on] = soft_limit(stray, bound) - stray
@@ -186,14 +190,20 @@ def bound_depth(depth, normals, mask) -> DepthBound:
     return DepthBound(new_depth, new_normals, past / int(np.count_nonzero(grid)), worst)
 
 
-def _stray(z, rows, cols, shape, scale):
+def _stray(z, rows, cols, shape, scale, *, span):
     """How far the depths ``z`` (n,) at ``rows``, ``cols`` (n,) stray from ``a + b x + c y + d
     shape`` fitted to them in least absolute deviations (``shape`` (n,) the silhouette's, ``scale``
-    a length that keeps the coefficients of one size), (n,)."""
+    a length that keeps the coefficients of one size), the fit scaled about its median to span
+    at most ``span``, (n,)."""
     design = np.column_stack(
         [np.ones(z.size), (cols - cols.mean()) / scale, (rows - rows.mean()) / scale, shape / scale]
     )
-    return z - design @ least_absolute(design, z, iterations=_FIT_ITERATIONS)
+    fit = design @ least_absolute(design, z, iterations=_FIT_ITERATIONS)
+    extent = float(np.ptp(fit))
+    if extent > span:
+        middle = float(np.median(fit))
+        fit = middle + (fit - middle) * (span / extent)
+    return z - fit
 
 
 def _diameter(rows, cols):
