@@ -119,7 +119,10 @@ class TestPastTheBound:
         diameter = max(np.ptp(rows_in), np.ptp(cols_in)) + 1
         assert result.applied and result.max_over > 1.0
         # the fit's span (the diameter) plus the limiter's ceiling either side
-        assert np.nanmax(result.depth) - np.nanmin(result.depth) <= (1 + 2 * (1 + HEADROOM) * SPREAD) * diameter + 2
+        assert (
+            np.nanmax(result.depth) - np.nanmin(result.depth)
+            <= (1 + 2 * (1 + HEADROOM) * SPREAD) * diameter + 2
+        )
 
     @pytest.mark.parametrize("size", [96, 400])  # 400: on a grid, the normals in bands of rows
     def test_the_normals_are_those_of_the_new_depth(self, size):
