@@ -133,7 +133,10 @@ def calibrate(rows) -> tuple[float | None, str]:
 
 
 def warning_lines(rows, threshold) -> list[str]:
-    lines = ["| cases | masks below the bar | of them warned | masks at or above the bar | of them warned |", "|---|---:|---:|---:|---:|"]
+    lines = [
+        "| cases | masks below the bar | of them warned | masks at or above the bar | of them warned |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for label, families in (("training", composites.TRAINING), ("held out", composites.HELD_OUT)):
         subset = [r for r in rows if r["family"] in families and r["confidence"] is not None]
         bad = [r for r in subset if r["auto"] < BAR]
@@ -159,7 +162,10 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
         "| backgrounds | cases | auto median | auto >= 0.9 | click median | click >= 0.9 | box median | box >= 0.9 |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    groups = [("training (table, paper, wood, cloth)", composites.TRAINING), ("held out (granite)", composites.HELD_OUT)]
+    groups = [
+        ("training (table, paper, wood, cloth)", composites.TRAINING),
+        ("held out (granite)", composites.HELD_OUT),
+    ]
     groups += [(family, (family,)) for family in composites.FAMILIES]
     groups.append(("all", composites.FAMILIES))
     for label, families in groups:
@@ -170,7 +176,11 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
             + " |"
         )
     auto_s = [r["auto_s"] for r in rows]
-    lines += ["", f"Automatic mask time: median {np.median(auto_s):.2f} s, max {np.max(auto_s):.2f} s per photo.", ""]
+    lines += [
+        "",
+        f"Automatic mask time: median {np.median(auto_s):.2f} s, max {np.max(auto_s):.2f} s per photo.",
+        "",
+    ]
     threshold, how = calibrate(rows)
     if threshold is not None:
         lines += [
@@ -184,7 +194,10 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
     lines += ["## Lab photos as they are (automatic mask)", "", "| object | photo | IoU |", "|---|---|---:|"]
     lines += [f"| {r['object']} | {r['photo']} | {r['auto']:.3f} |" for r in lab]
     lines += ["", "## Per object and background (auto / click / box; confidence)", ""]
-    lines += ["| object | " + " | ".join(composites.FAMILIES) + " |", "|---|" + "---|" * len(composites.FAMILIES)]
+    lines += [
+        "| object | " + " | ".join(composites.FAMILIES) + " |",
+        "|---|" + "---|" * len(composites.FAMILIES),
+    ]
     for name in dict.fromkeys(r["object"] for r in rows):
         cells = []
         for family in composites.FAMILIES:

@@ -73,7 +73,10 @@ def cutout(name: str, *, size: int = 240) -> Cutout:
     scale = size / max(mask.shape)
     shape = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
     rgb = np.stack(
-        [np.asarray(Image.fromarray(rgb[..., c].astype(np.float32)).resize(shape, Image.BILINEAR)) for c in range(3)],
+        [
+            np.asarray(Image.fromarray(rgb[..., c].astype(np.float32)).resize(shape, Image.BILINEAR))
+            for c in range(3)
+        ],
         axis=-1,
     ).astype(np.float64)
     cover = np.asarray(Image.fromarray(mask.astype(np.float32)).resize(shape, Image.BILINEAR))
@@ -150,7 +153,9 @@ def cloth(rng, shape) -> np.ndarray:
     period = rng.uniform(3, 6)
     warp = np.sin(2 * np.pi * cols / period)
     weft = np.sin(2 * np.pi * rows / period)
-    threads = 0.5 + 0.25 * np.where(np.sin(np.pi * (rows // (period / 2) + cols // (period / 2))) >= 0, warp, weft)
+    threads = 0.5 + 0.25 * np.where(
+        np.sin(np.pi * (rows // (period / 2) + cols // (period / 2))) >= 0, warp, weft
+    )
     colours = rng.uniform(0.04, 0.6, (3, 3))
     stripe = rng.uniform(15, 60)
     band_x = (np.floor(cols / stripe) % 3).astype(int)
