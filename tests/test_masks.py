@@ -154,7 +154,7 @@ class TestFindObject:
         with pytest.raises(InputError, match="constant"):
             find_object(np.full((8, 8), 0.5))
         with pytest.raises(InputError, match="2-D"):
-            find_object(np.ones((4, 4, 3)))
+            find_object(np.ones((4, 4, 2)))
 
 
 class TestThresholdObject:

@@ -19,6 +19,7 @@ from shadeform.confidence import assess
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.light import as_light, estimate_light
+from shadeform.masks import find_object
 from shadeform.preprocess import Filter, apply_filter, image_detail, noise_level, object_mask, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, as_regions, concave_masks
@@ -150,12 +151,18 @@ def reconstruct(
         raise InputError(f"refine must be at most {MAX_REFINE} iterations, got {refine}")
     user_filter = parse_filter(filter) if filter else None
 
-    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
+    decided: dict[str, Any] = {}  # what was settled on the way, for info
+    if mask is None:
+        found = find_object(image)
+        mask = found.mask
+        if found.warning:  # a doubtful automatic mask: the CLI prints it, the app shows it
+            decided["mask_warning"] = found.warning
+    else:
+        mask = check_mask(mask, image.shape)
     _check_shading(image, mask)
     lap("mask")
     shading = apply_filter(image, mask, user_filter) if user_filter else image
     lap("filter")
-    decided: dict[str, Any] = {}  # what was settled on the way, for info
     if estimate_wanted:
         estimate = estimate_light(shading, mask)
         light = np.asarray(estimate.light, dtype=np.float64)

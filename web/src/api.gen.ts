@@ -350,6 +350,13 @@ export interface SeedMaskRequest {
   radius: number;
 }
 
+/** The object inside a box the user drew (:func:`shadeform.masks.segment_from_box`). */
+export interface BoxMaskRequest {
+  channel: Channel;
+  /** ``[top, left, bottom, right]`` in pixels, bottom and right exclusive. */
+  box: [number, number, number, number];
+}
+
 /** A mask file the user loads, to be checked against the image and made the app's PNG. */
 export interface MaskFileRequest {
   /** base64 of the file's bytes (PNG, TIFF, BMP, ...); non-zero = object. */
@@ -368,6 +375,8 @@ export interface MaskResult {
   dark: boolean;
   /** One line in the user's words saying what was found. */
   note: string;
+  /** How sure the mask is, 0 to 1 (the agreement of the ways of finding it); null for a threshold's or a file's mask. Below ``shadeform.masks.LOW_CONFIDENCE`` the note says it is doubtful. */
+  confidence: number | null;
 }
 
 /** A print's options (:func:`shadeform.relief`); the server checks them (:func:`shadeform.solid.check_options`) and says what is wrong in one line. */

@@ -4,11 +4,13 @@ mask file checked; and the user's mask that every solve and export then uses.
 ==============================================  =================================================
 ``POST /api/images/{id}/mask/auto``             ``AutoMaskRequest`` -> ``MaskResult``
 ``POST /api/images/{id}/mask/seeds``            ``SeedMaskRequest`` -> ``MaskResult``
+``POST /api/images/{id}/mask/box``              ``BoxMaskRequest`` -> ``MaskResult``
 ``POST /api/images/{id}/mask/file``             ``MaskFileRequest`` -> ``MaskResult``
 ==============================================  =================================================
 
 A mask travels as base64 of a PNG, 255 (any non-zero value) on the object, the image's size: in
-every :class:`~shadeform.app.schema.MaskResult`, and from the client in
+every :class:`~shadeform.app.schema.MaskResult` (with its confidence, and a doubtful mask's
+warning in its note), and from the client in
 ``ReconstructParams.mask``, which :func:`user_mask` reads for the solve (decoded once per mask
 and kept). Brush, polygon, invert and fill holes are edits the client makes on its own copy.
 Errors are the library's one-line :class:`~shadeform.InputError` messages (422): a mask of
@@ -28,7 +30,7 @@ from fastapi.responses import Response
 
 from shadeform.app.encoding import png_base64
 from shadeform.app.guard import ERROR_RESPONSES
-from shadeform.app.schema import AutoMaskRequest, MaskFileRequest, MaskResult, SeedMaskRequest
+from shadeform.app.schema import AutoMaskRequest, BoxMaskRequest, MaskFileRequest, MaskResult, SeedMaskRequest
 from shadeform.errors import InputError
 
 __all__ = ["add_mask_routes", "mask_from_file", "user_mask"]
@@ -62,7 +64,10 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
         if entry.mask is not None and body.dark is None:
             return _result(automatic, threshold=None, dark=False, note="the example's true mask")
         found = find_object(image, dark=body.dark)
-        return _result(found.mask, threshold=found.threshold, dark=found.dark, note=found.note)
+        note = found.note if found.warning is None else f"{found.note}; {found.warning}"
+        return _result(
+            found.mask, threshold=found.threshold, dark=found.dark, note=note, confidence=found.confidence
+        )
 
     @router.post("/seeds", response_model=MaskResult)
     def post_seeds(image_id: str, body: SeedMaskRequest) -> Response:
@@ -70,12 +75,24 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
 
         entry = state.image(image_id)
         image, _, _ = _channel(state, entry, body.channel)
-        mask = segment_from_seeds(image, body.inside, body.outside, radius=body.radius)
+        mask, confidence = segment_from_seeds(
+            image, body.inside, body.outside, radius=body.radius, return_confidence=True
+        )
         inside, outside = len(body.inside), len(body.outside)
         note = f"grown from {inside} click{'s' * (inside != 1)} on the object"
         if outside:
             note += f" and {outside} on the background"
-        return _result(mask, threshold=None, dark=_darker(image, mask), note=note)
+        return _result(mask, threshold=None, dark=_darker(image, mask), note=note, confidence=confidence)
+
+    @router.post("/box", response_model=MaskResult)
+    def post_box(image_id: str, body: BoxMaskRequest) -> Response:
+        from shadeform.masks import segment_from_box
+
+        entry = state.image(image_id)
+        image, _, _ = _channel(state, entry, body.channel)
+        mask, confidence = segment_from_box(image, body.box, return_confidence=True)
+        note = "found inside the box drawn round the object"
+        return _result(mask, threshold=None, dark=_darker(image, mask), note=note, confidence=confidence)
 
     @router.post("/file", response_model=MaskResult)
     def post_file(image_id: str, body: MaskFileRequest) -> Response:
@@ -194,12 +211,19 @@ def _check_shape(mask: np.ndarray, shape: tuple[int, ...]) -> None:
         )
 
 
-def _result(mask: np.ndarray, *, threshold: float | None, dark: bool, note: str) -> Response:
+def _result(
+    mask: np.ndarray, *, threshold: float | None, dark: bool, note: str, confidence: float | None = None
+) -> Response:
+    from shadeform.masks import LOW_CONFIDENCE
+
+    if confidence is not None and confidence < LOW_CONFIDENCE and "doubtful" not in note:
+        note += f"; doubtful (confidence {confidence:.2f}): check the mask, or add clicks"
     result = MaskResult(
         mask_png=png_base64(mask.astype(np.float32)),
         pixels=int(np.count_nonzero(mask)),
         threshold=None if threshold is None else float(threshold),
         dark=bool(dark),
         note=note,
+        confidence=None if confidence is None else float(confidence),
     )
     return Response(result.model_dump_json(), media_type="application/json")

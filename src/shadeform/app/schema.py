@@ -52,6 +52,7 @@ __all__ = [
     "ViewSetInfo",
     "AutoMaskRequest",
     "SeedMaskRequest",
+    "BoxMaskRequest",
     "MaskFileRequest",
     "MaskResult",
     "Outline",
@@ -555,6 +556,20 @@ class MaskResult(_Model):
     )
     dark: bool = Field(description="Whether the object is darker than its background.")
     note: str = Field(description="One line in the user's words saying what was found.")
+    confidence: float | None = Field(
+        default=None,
+        description="How sure the mask is, 0 to 1 (the agreement of the ways of finding it); null for a "
+        "threshold's or a file's mask. Below ``shadeform.masks.LOW_CONFIDENCE`` the note says it is doubtful.",
+    )
+
+
+class BoxMaskRequest(_Model):
+    """The object inside a box the user drew (:func:`shadeform.masks.segment_from_box`)."""
+
+    channel: Channel = "luma"
+    box: tuple[_PixelIndex, _PixelIndex, _PixelIndex, _PixelIndex] = Field(
+        description="``[top, left, bottom, right]`` in pixels, bottom and right exclusive."
+    )
 
 
 # --- printing and texture maps (shadeform.app.printing) -----------------------------------------
@@ -781,6 +796,7 @@ _EXPORTED = (
     ViewSetInfo,
     AutoMaskRequest,
     SeedMaskRequest,
+    BoxMaskRequest,
     MaskFileRequest,
     MaskResult,
     ReliefParams,

@@ -303,6 +303,8 @@ def print_notes(console: Console, photo_info: dict, info: dict) -> None:
     """The notes on stderr of a photo solved: the channel chosen, an unsure light estimate, a
     depth pulled back within its outline's reach, the areas the shading cannot settle."""
     note_channel(console, photo_info)
+    if info.get("mask_warning"):  # a doubtful automatic mask (shadeform.masks.FoundObject.warning)
+        console.print(f"warning: {info['mask_warning']}", soft_wrap=True, highlight=False)
     note_light(console, info)
     note_bounded(console, info)
     note_unsure(console, info)
