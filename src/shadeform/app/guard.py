@@ -334,8 +334,10 @@ def _bound_port(scope) -> int | None:
     return server[1] if server and isinstance(server[1], int) else None
 
 
-#: A JSON string escape of a UTF-16 surrogate (half of a character outside the BMP).
-_SURROGATE_ESCAPE = re.compile(rb"\\u[dD][89a-fA-F][0-9a-fA-F]{2}")
+#: Where a JSON body may hold a UTF-16 surrogate: an escape of one (half of a character outside
+#: the BMP), its three bytes as UTF-8 would write them (Python's parser decodes bytes with
+#: ``surrogatepass``), or a body in UTF-16 or UTF-32 (zero bytes in its first four).
+_MAY_HAVE_SURROGATE = re.compile(rb"\\u[dD][89a-fA-F][0-9a-fA-F]{2}|\xed[\xa0-\xbf]|\A[^\x00]{0,3}\x00")
 _SURROGATE = re.compile("[\ud800-\udfff]")
 
 _LONE_SURROGATE = (
@@ -352,9 +354,10 @@ def lone_surrogate(body: bytes) -> bool:
     into a ``str`` that is not Unicode text: UTF-8 cannot encode it, so it would fail wherever
     the text goes next (the session store, a file name, a JSON answer). Refusing such a body
     before any route parses it keeps every string the routes see encodable. A body that is not
-    JSON is the route's to refuse (False here); one without a surrogate escape is not parsed.
+    JSON is the route's to refuse (False here); one that cannot hold a surrogate (no escape of
+    one, no bytes of one, not UTF-16 or UTF-32) is not parsed here.
     """
-    if not _SURROGATE_ESCAPE.search(body):
+    if not _MAY_HAVE_SURROGATE.search(body):
         return False
     try:
         text = json.dumps(json.loads(body), ensure_ascii=False)
