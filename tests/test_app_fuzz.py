@@ -684,3 +684,23 @@ def test_images_over_the_pixel_cap_are_never_decoded(client, known, no_decoding,
     assert "too large" in assert_one_line(response, 413)
     response = client.post("/api/photosets", files=[*photos, ("mask", ("bomb.png", bomb, "image/png"))])
     assert "too large" in assert_one_line(response, 413)
+
+
+def test_library_warnings_stay_off_the_console(capfd, caplog):
+    """Pillow warns of an upload's corrupt EXIF on every read: the server logs it once, at DEBUG
+    level, and prints nothing (the lifespan started in this test: pytest's own capture of
+    warnings is undone after each test)."""
+    buffer = io.BytesIO()
+    # an orientation tag whose entry count runs past the data: "Corrupt EXIF data"
+    exif = b"Exif\x00\x00MM\x00*\x00\x00\x00\x08\x00\x05\x01\x12\x00\x03\x00\x00\x00\x01\x00\x06"
+    Image.fromarray(np.full((16, 16, 3), 128, np.uint8)).save(buffer, format="JPEG", exif=exif)
+    app = create_app(limits=LIMITS)
+    with caplog.at_level("DEBUG", logger="shadeform.app.quiet"), TestClient(app, base_url=LOCAL) as client:
+        for _ in range(3):
+            response = client.post(
+                "/api/images", files={"file": ("exif.jpg", buffer.getvalue(), "image/jpeg")}
+            )
+            assert response.status_code == 201, response.text
+    assert "EXIF" not in capfd.readouterr().err
+    logged = [record.getMessage() for record in caplog.records if record.name == "shadeform.app.quiet"]
+    assert len(logged) == 1 and "Corrupt EXIF data" in logged[0], logged
