@@ -5,8 +5,9 @@ upload, ...) is about the library's internals: the user of the app can do nothin
 printed raw it would repeat on the server's console with every request that meets it. While the
 server runs (:func:`warnings_logged`, the app's lifespan; the solver process sets
 :func:`log_warning` itself) each distinct warning is logged once, at DEBUG level, on this
-module's logger: out of sight unless the server is started with debug logging. What the user
-must know is said by the routes themselves, in their answers.
+module's logger: out of sight unless the server is started with debug logging. So are the
+warnings python-multipart logs about each malformed upload. What the user must know is said by
+the routes themselves, in their answers.
 
 ``warnings.catch_warnings`` cannot do this per request: it changes the interpreter's global
 state, and the routes run in several threads at once.
@@ -39,13 +40,24 @@ def log_warning(message, category, filename, lineno, file=None, line=None) -> No
     logger.debug("a library warned (shown once): %s:%s: %s: %s", filename, lineno, category.__name__, message)
 
 
+#: Libraries that log a malformed request's details as warnings (python-multipart: "Did not find
+#: CR at end of boundary"): the client is told in its 400; the console hears only their errors.
+_CHATTY_LOGGERS = ("python_multipart", "multipart")
+
+
 @contextlib.contextmanager
 def warnings_logged() -> Iterator[None]:
-    """While inside, warnings go to :func:`log_warning` instead of stderr."""
+    """While inside, warnings go to :func:`log_warning` instead of stderr, and the libraries of
+    :data:`_CHATTY_LOGGERS` log only their errors."""
     previous = warnings.showwarning
     warnings.showwarning = log_warning
+    levels = {name: logging.getLogger(name).level for name in _CHATTY_LOGGERS}
+    for name in _CHATTY_LOGGERS:
+        logging.getLogger(name).setLevel(logging.ERROR)
     try:
         yield
     finally:
         if warnings.showwarning is log_warning:  # unless someone replaced it meanwhile
             warnings.showwarning = previous
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
