@@ -697,7 +697,7 @@ class Failure:
     request: Request
 
 
-def run(cases: int, seed: int = 0, *, timeout: float = 10.0, first: int = 0, progress: bool = False):
+def run(cases: int, seed: int = 0, *, timeout: float = 60.0, first: int = 0, progress: bool = False):
     """Send ``cases`` cases (numbers ``first`` on) of ``seed``; returns (counts by label and
     outcome, failures, seconds)."""
     log = logging.getLogger("shadeform")
@@ -754,7 +754,7 @@ def report(counts, failures, seconds: float, args) -> str:
     lines = [
         "# Fuzzing the app's HTTP server",
         "",
-        f"`python benchmarks/fuzz_server.py --cases {args.cases} --seed {args.seed}`: {sum(total.values()):,} requests "
+        f"`python benchmarks/fuzz_server.py --cases {args.cases} --seed {args.seed} --timeout {args.timeout:g}`: {sum(total.values()):,} requests "
         f"in {seconds:.0f} s ({platform.machine()}, Python {platform.python_version()}), in-process through "
         f"FastAPI's TestClient, {args.timeout:g} s per request before it counts as a hang.",
         "",
@@ -791,7 +791,7 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", type=int, default=10_000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
-        "--timeout", type=float, default=10.0, help="Seconds per request before it is a hang."
+        "--timeout", type=float, default=60.0, help="Seconds per request before it is a hang."
     )
     parser.add_argument("--case", type=int, help="Send this one case, print it and its answer.")
     parser.add_argument("--out", type=Path, default=RESULTS)
