@@ -748,8 +748,36 @@ class TestGuard:
         assert_error(client.get("/api/options", headers={"host": "attacker.example:8000"}), 403)
 
     def test_loopback_hosts(self, client):
-        for host in ("127.0.0.1:8000", "localhost", "LOCALHOST:1", "[::1]:8000"):
+        # the server is bound to port 8000 (the test client's base URL): any loopback name at it
+        for host in ("127.0.0.1:8000", "localhost:8000", "LOCALHOST:8000", "[::1]:8000", "localhost:08000"):
             assert client.get("/api/options", headers={"host": host}).status_code == 200, host
+
+    @pytest.mark.parametrize(
+        "host", ["localhost", "127.0.0.1:80", "LOCALHOST:1", "[::1]:8001", "127.0.0.1:18000", "localhost:"]
+    )
+    def test_other_ports_refused(self, client, host):
+        # a loopback name at another port: something forwarded it (the browser took the app for
+        # that other address's origin); the refusal names the addresses that are answered
+        for response in (
+            client.get("/api/options", headers={"host": host}),
+            client.get("/", headers={"host": host}),
+        ):
+            detail = assert_error(response, 403, "only answers requests addressed to", "127.0.0.1:8000")
+            assert repr(host) in detail
+
+    def test_the_bound_port_is_the_servers(self):
+        app = create_app(allowed_hosts=["localhost"])
+        with TestClient(app, base_url="http://localhost:8765") as client:
+            assert client.get("/api/options").status_code == 200
+            assert client.get("/api/options", headers={"host": "localhost:8000"}).status_code == 403
+        with TestClient(app, base_url="http://localhost") as client:  # port 80: Host may leave it out
+            assert client.get("/api/options", headers={"host": "localhost"}).status_code == 200
+            assert client.get("/api/options", headers={"host": "localhost:80"}).status_code == 200
+            assert client.get("/api/options", headers={"host": "localhost:8765"}).status_code == 403
+        # a forwarder the user runs, named with its port, is answered as it is
+        with TestClient(create_app(allowed_hosts=["localhost", "127.0.0.1:9000"]), base_url=LOCAL) as client:
+            assert client.get("/api/options", headers={"host": "127.0.0.1:9000"}).status_code == 200
+            assert client.get("/api/options", headers={"host": "127.0.0.1:9001"}).status_code == 403
 
     def test_other_origins_refused(self, client, bowl):
         evil = {"origin": "http://attacker.example"}
@@ -792,8 +820,12 @@ class TestGuard:
             assert client.get("/api/options", headers={"origin": origin}).status_code == 200
         response = upload_with(client, {"origin": LOCAL})
         assert response.status_code == 201, response.text
-        # another address of this machine, asked for by the page itself (Host and Origin agree)
-        for host, origin in (("localhost:5173", "http://localhost:5173"), ("[::1]:80", "http://[::1]")):
+        # another address of this machine, asked for by the page itself (Host and Origin agree),
+        # and the Vite dev server's (npm run dev), which forwards its page's Host and Origin
+        for host, origin in (
+            ("localhost:5173", "http://localhost:5173"),
+            ("[::1]:8000", "http://[::1]:8000"),
+        ):
             response = client.get("/api/options", headers={"host": host, "origin": origin})
             assert response.status_code == 200, (host, response.text)
 

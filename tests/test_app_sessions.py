@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import io
+import sqlite3
 
 import numpy as np
 import pytest
@@ -106,3 +107,65 @@ def test_a_kept_upload_obeys_todays_limits(tmp_path):
 def test_the_app_command_says_where_sessions_live(command, cli):
     result = cli(*command)
     assert result.exit_code == 0 and "--sessions" in result.output
+
+
+def damage(path, offset: int, size: int = 3000) -> bytes:
+    """Overwrite ``size`` bytes of the file at ``offset`` (from its end if negative) with noise;
+    the file's bytes after."""
+    data = bytearray(path.read_bytes())
+    start = offset % len(data)
+    data[start : start + size] = np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+    return bytes(data)
+
+
+def test_a_file_damaged_past_its_header_is_set_aside_once_and_what_can_be_read_kept(tmp_path, caplog):
+    path = tmp_path / "app.sqlite3"
+    store = SessionStore(path, max_bytes=10**9)
+    files = {f"k{i}": bytes([i]) * 3000 for i in range(20)}
+    for key, data in files.items():
+        store.put(key, "upload", {"name": f"{key}.png"}, [data])
+    store.save_project("p", "mine", {"a": 1})
+    store.close()
+    damaged = damage(path, -5000)  # the last pages: the header and the schema are whole
+    with caplog.at_level("WARNING"):
+        store = SessionStore(path, max_bytes=10**9)
+    lines = [record.getMessage() for record in caplog.records]
+    assert len(lines) == 1 and lines[0] == store.notice, lines
+    aside = [p for p in tmp_path.iterdir() if p.name.startswith("app.sqlite3.damaged-") and p.suffix != ""]
+    (kept_aside,) = [p for p in aside if not p.name.endswith(("-wal", "-shm"))]
+    assert kept_aside.read_bytes() == damaged  # renamed, not deleted, not changed
+    assert "damaged" in lines[0] and kept_aside.name in lines[0] and "\n" not in lines[0]
+    kept = len(store)
+    assert 0 < kept < 20 and f"({kept} photos, 1 project)" in lines[0]
+    for key, data in files.items():  # what was kept has all its bytes (SQLite keeps no checksum
+        found = store.get(key)  # of them: a damaged upload is refused when it is decoded again)
+        assert found is None or (found[:2], len(found[2][0])) == (
+            ("upload", {"name": f"{key}.png"}),
+            len(data),
+        )
+    assert store.get_project("p")["name"] == "mine"
+    with store._lock:
+        assert store._db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    store.close()
+    # an app over the fresh file keeps every new session, and says nothing more
+    caplog.clear()
+    with caplog.at_level("WARNING"), app_client(path) as client:
+        ids = [
+            client.post("/api/images", files={"file": (f"{i}.png", png(np.full((16, 16), 0.1 * i)))}).json()[
+                "image_id"
+            ]
+            for i in range(1, 4)
+        ]
+    assert not caplog.records
+    with app_client(path) as client:
+        for image_id in ids:
+            assert client.get(f"/api/images/{image_id}/photo.png").status_code == 200
+
+
+def test_a_file_that_is_not_sqlite_is_never_set_aside(tmp_path):
+    path = tmp_path / "photo.png"
+    path.write_bytes(png(np.zeros((8, 8))))
+    with pytest.raises(sqlite3.DatabaseError):
+        SessionStore(path, max_bytes=1000)
+    assert [p.name for p in tmp_path.iterdir()] == ["photo.png"]

@@ -105,7 +105,9 @@ def add_error_handlers(app: FastAPI) -> None:
 
 
 def _error(status: int, detail: str, headers: dict | None = None) -> Response:
-    return JSONResponse({"detail": " ".join(str(detail).split())}, status_code=status, headers=headers)
+    # a detail quoting a client's text: anything UTF-8 cannot hold is escaped, never a failure here
+    text = " ".join(str(detail).split()).encode("utf-8", "backslashreplace").decode("utf-8")
+    return JSONResponse({"detail": text}, status_code=status, headers=headers)
 
 
 def _unreadable_body(cause: BaseException | None) -> str:
@@ -167,7 +169,9 @@ _OPEN_IT_HERE = "open the app at the address it printed"
 class Guard:
     """ASGI middleware run before anything else sees a request.
 
-    - ``Host`` must name an allowed host: a DNS name rebound to 127.0.0.1 cannot reach the app.
+    - ``Host`` must name an allowed host at the port the server is bound to (or an allowed
+      forwarder's ``host:port``): a DNS name rebound to 127.0.0.1 cannot reach the app.
+    - A JSON body with a lone UTF-16 surrogate is refused (:func:`lone_surrogate`).
     - ``Origin``, when a browser sends one, must be exactly the app's own origin: the scheme,
       host and port the request was addressed to. Another site's page, a page on another port
       of this machine, and a sandboxed page or local file (``Origin: null``) are refused; so is
@@ -186,8 +190,21 @@ class Guard:
 
     def __init__(self, app, *, allowed_hosts: Iterable[str] | None, limits: AppLimits) -> None:
         self.app = app
-        self.allowed = None if allowed_hosts is None else {h.lower().strip("[]") for h in allowed_hosts}
         self.limits = limits
+        self.allowed: set[str] | None = None  # host names, at the port the server is bound to
+        self.forwarders: set[tuple[str, int]] = set()  # host and port exactly
+        if allowed_hosts is not None:
+            self.allowed = set()
+            for entry in allowed_hosts:
+                bare_v6 = entry.count(":") > 1 and not entry.startswith("[")
+                authority = _authority(f"[{entry}]" if bare_v6 else entry)
+                if authority is None:
+                    raise ValueError(f"not a host or host:port: {entry!r}")
+                host, port = authority
+                if port is None:
+                    self.allowed.add(host)
+                else:
+                    self.forwarders.add((host, port))
 
     async def __call__(self, scope, receive, send) -> None:
         if scope["type"] != "http":
@@ -219,6 +236,9 @@ class Guard:
             if not message.get("more_body", False):
                 break
         body = b"".join(chunks)
+        content_type = headers.get("content-type", [""])[0].strip().lower()
+        if not content_type.startswith("multipart/") and lone_surrogate(body):
+            return await _send_error(send, 400, _LONE_SURROGATE)
         replayed = False
 
         async def replay():
@@ -246,10 +266,12 @@ class Guard:
         """Why a request must be refused (one line for the user), or None to serve it."""
         host_header = headers.get("host", [""])[0]
         own = _authority(host_header)
-        if self.allowed is not None and (own is None or own[0] not in self.allowed):
+        if self.allowed is not None and not self._addressed_here(scope, own):
+            shown = host_header if len(host_header) <= 60 else host_header[:57] + "..."
             return (
-                f"this server only answers requests addressed to {', '.join(sorted(self.allowed))}; "
-                "open it at the address it printed (or start it with --host and --allow-remote)"
+                f"this server only answers requests addressed to {self._addresses(scope)} (this one was "
+                f"addressed to {shown!r}); open it at the address it printed (or start it with --host "
+                "and --allow-remote)"
             )
         origins = headers.get("origin", [])
         if origins:
@@ -272,6 +294,76 @@ class Guard:
             if scope["method"] not in _SAFE_METHODS or mode != "navigate":
                 return f"requests from other sites' pages are refused (the browser marked this one {site}); {_OPEN_IT_HERE}"
         return None
+
+    def _addressed_here(self, scope, own: tuple[str, int | None] | None) -> bool:
+        """Whether ``Host`` (as :func:`_authority` reads it) names this server: an allowed host
+        name at the port the server is bound to (the scheme's default port where ``Host`` gives
+        none), or a forwarder's exact ``host:port`` given in ``allowed_hosts``.
+
+        The name is what stops DNS rebinding (a page of ``attacker.example`` whose name was
+        rebound to 127.0.0.1 sends that name). The port makes ``Host`` the address the browser
+        really used: ``localhost:9000`` reaching the app on 8000 went through something that
+        forwarded it, whose origin (and whatever else that origin serves) the browser would take
+        for the app's own; a forwarder the user runs is named in ``allowed_hosts``.
+        """
+        if own is None:
+            return False
+        host, port = own
+        port = _DEFAULT_PORTS.get(scope.get("scheme", "http"), 0) if port is None else port
+        if (host, port) in self.forwarders:
+            return True
+        bound = _bound_port(scope)
+        return host in (self.allowed or ()) and (bound is None or port == bound)
+
+    def _addresses(self, scope) -> str:
+        """The addresses :meth:`_addressed_here` accepts, for the refusal."""
+        bound = _bound_port(scope)
+
+        def shown(host: str, port: int | None) -> str:
+            name = f"[{host}]" if ":" in host else host
+            return name if port is None else f"{name}:{port}"
+
+        names = [shown(host, bound) for host in sorted(self.allowed or ())]
+        return ", ".join(names + [shown(*pair) for pair in sorted(self.forwarders)])
+
+
+def _bound_port(scope) -> int | None:
+    """The port the server listens on (the ASGI scope's ``server``); None when it does not say
+    (a Unix socket)."""
+    server = scope.get("server")
+    return server[1] if server and isinstance(server[1], int) else None
+
+
+#: Where a JSON body may hold a UTF-16 surrogate: an escape of one (half of a character outside
+#: the BMP), its three bytes as UTF-8 would write them (Python's parser decodes bytes with
+#: ``surrogatepass``), or a body in UTF-16 or UTF-32 (zero bytes in its first four).
+_MAY_HAVE_SURROGATE = re.compile(rb"\\u[dD][89a-fA-F][0-9a-fA-F]{2}|\xed[\xa0-\xbf]|\A[^\x00]{0,3}\x00")
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+_LONE_SURROGATE = (
+    "the request body has a string with a lone UTF-16 surrogate (an escape such as \\ud800 without "
+    "its pair), which is not a character; send the text as UTF-8"
+)
+
+
+def lone_surrogate(body: bytes) -> bool:
+    """Whether a JSON ``body`` has a string holding a lone UTF-16 surrogate.
+
+    JSON may write any character as ``\\uXXXX`` escapes, a character outside the BMP as a
+    pair of surrogates (``\\ud83d\\ude00``); Python's parser turns a lone one (``\\ud800``)
+    into a ``str`` that is not Unicode text: UTF-8 cannot encode it, so it would fail wherever
+    the text goes next (the session store, a file name, a JSON answer). Refusing such a body
+    before any route parses it keeps every string the routes see encodable. A body that is not
+    JSON is the route's to refuse (False here); one that cannot hold a surrogate (no escape of
+    one, no bytes of one, not UTF-16 or UTF-32) is not parsed here.
+    """
+    if not _MAY_HAVE_SURROGATE.search(body):
+        return False
+    try:
+        text = json.dumps(json.loads(body), ensure_ascii=False)
+    except (ValueError, RecursionError):
+        return False
+    return _SURROGATE.search(text) is not None
 
 
 def _authority(text: str) -> tuple[str, int | None] | None:

@@ -109,6 +109,12 @@ def _worker(conn) -> None:
     # stretched past 50 ms of wall time on the 2-core machine (benchmarks/results/app-large.md)
     with contextlib.suppress(OSError):
         os.nice(BACKGROUND_NICENESS)
+    # its stderr is the server's: libraries' warnings are logged, not printed (shadeform.app.quiet)
+    import warnings
+
+    from shadeform.app.quiet import log_warning
+
+    warnings.showwarning = log_warning
     # imported while the worker waits for its first job
     from shadeform.errors import InputError
     from shadeform.pipeline import reconstruct

@@ -32,7 +32,7 @@ Errors are always ``{"detail": "<one line: what was wrong and what to do>"}``: a
 id 404, malformed requests 4xx; nothing else of an exception (no traceback) reaches the client.
 
 Safety: the server binds to loopback unless told otherwise (``shadeform app --allow-remote``);
-requests whose ``Host`` names another machine are refused (DNS rebinding), and so are requests
+requests whose ``Host`` names another machine or port are refused (DNS rebinding), as are requests
 from any page but the app's own: an ``Origin`` other than exactly the scheme, host and port the
 request came to (another site, another port of this machine, ``null`` for a sandboxed page or a
 local file), or a browser's ``Sec-Fetch-Site: cross-site``. Request bodies are capped before
@@ -83,6 +83,7 @@ from shadeform.app.large import FIT_FACTOR, LARGE_PIXELS, TILED_COMMAND, downsam
 from shadeform.app.masks import add_mask_routes, user_mask
 from shadeform.app.printing import add_print_routes
 from shadeform.app.projects import add_project_routes
+from shadeform.app.quiet import warnings_logged
 from shadeform.app.schema import (
     ExampleInfo,
     FilterParams,
@@ -109,8 +110,9 @@ logger = logging.getLogger(__name__)
 #: Where ``make web`` (and the package build) put the built client.
 STATIC_DIR = Path(__file__).with_name("static")
 
-#: Host names that mean this machine; the default ``allowed_hosts``.
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+#: The default ``allowed_hosts``: host names that mean this machine (at the server's port), and
+#: the Vite dev server's address (``npm run dev`` forwards ``/api`` with its page's ``Host``).
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "localhost:5173")
 
 _NO_CLIENT_PAGE = (
     "<!doctype html><title>shadeform</title><p>The web client is not built: run "
@@ -138,8 +140,8 @@ def create_app(
     limits : AppLimits
         Upload and memory limits.
     allowed_hosts : sequence of str or None
-        Host names a request's ``Host`` may name; None allows any (for ``--allow-remote``).
-        Either way a request with an ``Origin`` must come from the app's own origin.
+        Host names a request's ``Host`` may name at the server's port, and forwarders' ``host:port``;
+        None allows any (``--allow-remote``). Either way an ``Origin`` must be the app's own.
     warm : bool
         Compile (or load from numba's cache) the solvers' kernels in a background thread at
         start-up, so that the first reconstruction does not wait for them.
@@ -542,7 +544,8 @@ def _lifespan(warm: bool, state: _State):
         if warm:
             threading.Thread(target=warm_up, name="shadeform-warm-up", daemon=True).start()
         try:
-            yield
+            with warnings_logged():  # libraries' warnings kept off the console
+                yield
         finally:
             state.jobs.close()
 
@@ -848,9 +851,6 @@ def _job_info(job) -> SolveJob:
 def _export_bytes(state: _State, entry: StoredImage, params: ReconstructParams, suffix: str) -> bytes:
     solved, _ = _solve(state, entry, params)
     return mesh_file(solved.reconstruction, params.step, suffix)
-
-
-# --- encoding ----------------------------------------------------------------------------------
 
 
 # --- the parameters ----------------------------------------------------------------------------

@@ -17,7 +17,9 @@ whose storage was cleared and a change of browser; the most recently updated are
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
 import sqlite3
 import sys
@@ -27,6 +29,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 __all__ = ["SessionStore", "data_folder"]
+
+logger = logging.getLogger(__name__)
+
+#: The first bytes of every SQLite database file.
+_SQLITE_HEADER = b"SQLite format 3\0"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS entries (
@@ -99,13 +106,91 @@ class SessionStore:
         self.max_projects = int(max_projects)
         self.max_project_bytes = int(max_project_bytes)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        #: What was done about a damaged file, in the user's words (logged once); None if nothing.
+        self.notice: str | None = None
+        try:
+            self._open()
+            damaged = self._db.execute("PRAGMA quick_check").fetchone()[0] != "ok"
+        except sqlite3.DatabaseError as err:
+            if not _corrupt(err, self.path):
+                raise
+            damaged = True
+        if damaged:
+            self._set_aside()
+
+    def _open(self) -> None:
         # one connection, shared by the server's worker threads under a lock
         self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-        self._lock = threading.Lock()
         with self._lock:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)
+
+    def _set_aside(self) -> None:
+        """The file is an SQLite database damaged past its header: rename it (with its WAL)
+        aside, start a fresh one, copy into it what can still be read, and say so once."""
+        with contextlib.suppress(AttributeError, sqlite3.Error):
+            self._db.close()
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        aside = self.path.with_name(f"{self.path.name}.damaged-{stamp}")
+        count = 1
+        while aside.exists():  # never over an earlier one
+            count += 1
+            aside = self.path.with_name(f"{self.path.name}.damaged-{stamp}-{count}")
+        for suffix in ("", "-wal", "-shm"):
+            source = Path(f"{self.path}{suffix}")
+            if source.exists():
+                os.replace(source, f"{aside}{suffix}")
+        self._open()
+        entries, projects = self._salvage(aside)
+        self.notice = (
+            f"the sessions file {self.path} was damaged: kept what could still be read ({entries} "
+            f"photo{'s' * (entries != 1)}, {projects} project{'s' * (projects != 1)}) in a fresh one, "
+            f"and set the damaged file aside as {aside.name}"
+        )
+        logger.warning("%s", self.notice)
+
+    def _salvage(self, aside: Path) -> tuple[int, int]:
+        """Copy the entries whose files are whole, and the projects, readable in the damaged
+        file ``aside`` into the fresh one; how many of each."""
+        entries = projects = 0
+        try:
+            old = sqlite3.connect(f"{aside.as_uri()}?mode=ro", uri=True)
+        except sqlite3.Error:
+            return 0, 0
+        try:
+            for row in _readable(old, "SELECT key, kind, recipe, nbytes, used FROM entries"):
+                try:
+                    blobs = [
+                        bytes(data)
+                        for (data,) in old.execute(
+                            "SELECT data FROM blobs WHERE key = ? ORDER BY position", (row[0],)
+                        )
+                    ]
+                    json.loads(row[2])
+                except (sqlite3.Error, ValueError):
+                    continue
+                if sum(len(blob) for blob in blobs) != row[3]:
+                    continue  # a file lost in part
+                with self._lock, self._db:
+                    self._db.execute("BEGIN")
+                    self._db.execute("INSERT OR REPLACE INTO entries VALUES (?, ?, ?, ?, ?)", row)
+                    self._db.executemany(
+                        "INSERT INTO blobs VALUES (?, ?, ?)",
+                        [(row[0], i, sqlite3.Binary(b)) for i, b in enumerate(blobs)],
+                    )
+                entries += 1
+            fields = "id, name, image, kind, document, created, updated"
+            for row in _readable(old, f"SELECT {fields} FROM projects"):
+                with self._lock:
+                    self._db.execute(
+                        f"INSERT OR REPLACE INTO projects ({fields}) VALUES (?, ?, ?, ?, ?, ?, ?)", row
+                    )
+                projects += 1
+        finally:
+            old.close()
+        return entries, projects
 
     @property
     def journal_mode(self) -> str:
@@ -228,3 +313,26 @@ class SessionStore:
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+
+def _corrupt(err: sqlite3.DatabaseError, path: Path) -> bool:
+    """Whether ``err`` says that the SQLite database at ``path`` is damaged (not that it is
+    locked, unreadable or not a database at all: a file that is not SQLite is never set aside)."""
+    code = getattr(err, "sqlite_errorcode", None)
+    if code is None or code & 0xFF not in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB):
+        return False
+    try:
+        with open(path, "rb") as file:
+            return file.read(len(_SQLITE_HEADER)) == _SQLITE_HEADER
+    except OSError:
+        return False
+
+
+def _readable(db: sqlite3.Connection, query: str):
+    """The rows of ``query`` up to the first that cannot be read."""
+    try:
+        cursor = db.execute(query)
+        while (row := cursor.fetchone()) is not None:
+            yield row
+    except sqlite3.DatabaseError:
+        return
