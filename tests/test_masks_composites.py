@@ -109,3 +109,14 @@ def test_a_clear_mask_has_no_warning():
     luma, _, truth = photo("paper", 2)
     rec = reconstruct(luma, method="propagation")
     assert "mask_warning" not in rec.info
+
+
+@pytest.mark.parametrize("name", ["sphere", "cylinder", "bowl", "saddle"])
+def test_a_render_on_black_is_not_doubtful(name):
+    # the brightness mask and the cut agree exactly: two ways confirm it, whatever a third says
+    from shadeform import synth
+
+    scene = synth.scene(name, size=128)
+    found = find_object(np.nan_to_num(scene.image))
+    assert np.array_equal(found.mask, scene.mask)
+    assert not found.doubtful and found.warning is None

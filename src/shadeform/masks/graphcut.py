@@ -12,10 +12,11 @@ models and the cut. OpenCV's ``cv2.grabCut`` is the implementation used here.
 Each cut starts from a few hints, and :func:`cut` runs it from several (:class:`Hints`): the
 frame as background and everything else as probably object; or the brightness mask of
 :mod:`shadeform.masks.brightness` as probably object; and, on a colour photo, on its colours as well as its
-grey. The answer is the cut that agrees best with the others (the medoid by IoU), and the
-**confidence** is how well it agrees with them: the mean IoU between it and the other answers.
-On a plain dark lab backdrop every start gives the same object (confidence near 1); on a busy
-cloth they part ways, and the mask is doubtful.
+grey. The **confidence** of an answer (:func:`agreement`) is how well another, independent way
+of finding the object confirms it: the highest IoU between it and any other answer (another
+start's cut, the brightness mask). Two ways that find the same outline are unlikely to be wrong
+the same way; an answer that nothing else finds is doubtful. On a plain dark lab backdrop the
+brightness mask and the cut agree (confidence near 1); on a busy cloth they part ways.
 
 The cut runs on the picture scaled down to at most :data:`WORK_PIXELS` pixels (a mean over
 blocks) and the mask is brought back to full size; the cut's detail is then a block of pixels.
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage as ndi
 
-__all__ = ["Hints", "Cut", "cut", "iou", "WORK_PIXELS", "frame_band"]
+__all__ = ["Hints", "Cut", "agreement", "cut", "iou", "WORK_PIXELS", "frame_band"]
 
 #: The cut works on the picture scaled down to at most this many pixels.
 WORK_PIXELS = 90_000
@@ -75,8 +76,8 @@ class Cut:
     mask : (H, W) bool
         The object at full size: the first start's answer (on the colours, for a colour picture).
     confidence : float
-        The mean IoU between ``mask`` and the other cuts' answers, in ``[0, 1]`` (1 when there
-        is no other).
+        ``mask``'s :func:`agreement` with the other answers, in ``[0, 1]`` (1 when there is no
+        other).
     answers : list of (H, W) bool
         Every start's answer, at full size, ``mask`` among them.
     """
@@ -105,8 +106,7 @@ def cut(image: np.ndarray, starts: list[Hints], *, extra: list[np.ndarray] = (),
     starts : list of Hints
         Where each run starts.
     extra : list of (H, W) bool
-        Answers of other methods (e.g. the brightness mask), kept in ``Cut.answers``; they do not
-        count in the confidence.
+        Answers of other methods (e.g. the brightness mask), kept first in ``Cut.answers``.
     tidy : callable, optional
         Applied to each cut's answer at full size (fill holes, keep the part clicked).
 
@@ -130,9 +130,14 @@ def cut(image: np.ndarray, starts: list[Hints], *, extra: list[np.ndarray] = (),
             answer = _upsample(_grabcut(picture, labels), step, shape) | hints.objects
             answers.append(tidy(answer) if tidy is not None else answer)
     primary = answers[len(extra)] if len(answers) > len(extra) else answers[0]
-    others = [answer for answer in answers[len(extra) :] if answer is not primary]
-    confidence = float(np.mean([iou(primary, answer) for answer in others])) if others else 1.0
-    return Cut(primary, confidence, answers)
+    return Cut(primary, agreement(primary, answers), answers)
+
+
+def agreement(mask: np.ndarray, answers: list[np.ndarray]) -> float:
+    """How well another answer confirms ``mask``: the highest IoU between it and any of
+    ``answers`` other than itself (the same array), in ``[0, 1]``; 1 when there is no other."""
+    others = [answer for answer in answers if answer is not mask]
+    return max(iou(mask, answer) for answer in others) if others else 1.0
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:

@@ -56,8 +56,8 @@ def find_object(
     graph cut (:func:`shadeform.masks.graphcut.cut`: GrabCut started from the frame as background
     and the rest as object, and again from a central ellipse as object), which follows a background that is not darker than the object or
     has a texture of its own. Where the cut agrees with the brightness mask (IoU >= 0.95) the
-    brightness mask is kept; otherwise the answer most agreed with. ``confidence`` is that
-    agreement.
+    brightness mask is kept; otherwise the cut's. ``confidence`` is how well another way
+    confirms the answer (:func:`shadeform.masks.graphcut.agreement`).
 
     Parameters
     ----------
@@ -122,13 +122,14 @@ def find_object(
             found.threshold,
             found.separation,
             False,
-            chosen.confidence,
+            segment.agreement(chosen.mask, chosen.answers),
         )
     mask = found.mask if _iou(found.mask, chosen.mask) >= _AGREE else chosen.mask
     if not mask.any():
         mask = found.mask
     object_darker = _darker(grey, mask) if mask is not found.mask else found.dark
-    return FoundObject(mask, object_darker, found.threshold, found.separation, False, chosen.confidence)
+    confidence = segment.agreement(mask, chosen.answers)
+    return FoundObject(mask, object_darker, found.threshold, found.separation, False, confidence)
 
 
 def segment_from_seeds(
@@ -228,7 +229,7 @@ def segment_from_seeds(
         mask = grown
     elif refusal is not None and np.count_nonzero(mask) <= 4 * np.count_nonzero(seeds_in):
         raise refusal
-    return (mask, chosen.confidence) if return_confidence else mask
+    return (mask, segment.agreement(mask, chosen.answers)) if return_confidence else mask
 
 
 def segment_from_box(
@@ -303,7 +304,7 @@ def segment_from_box(
     mask = chosen.mask
     if extra and _iou(extra[0], mask) >= _AGREE:
         mask = extra[0]
-    return (mask, chosen.confidence) if return_confidence else mask
+    return (mask, segment.agreement(mask, chosen.answers)) if return_confidence else mask
 
 
 # --- the pieces --------------------------------------------------------------------------------
