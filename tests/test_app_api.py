@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import dataclasses
 import io
 import json
 import time
@@ -328,6 +329,26 @@ class TestPreviews:
 
 
 class TestReconstruct:
+    def test_a_doubtful_automatic_mask_is_said_with_the_result(self, client, monkeypatch):
+        # as the CLI says it (info["mask_warning"]): the server finds the mask itself, so it adds it
+        import shadeform.masks as masks
+
+        found = masks.find_object
+
+        def doubtful(image, **options):
+            result = found(image, **options)
+            return dataclasses.replace(result, confidence=masks.LOW_CONFIDENCE / 2)
+
+        monkeypatch.setattr(masks, "find_object", doubtful)
+        info = upload(client, png_bytes(disk_photo(40, colour=False)), name="doubtful.png").json()
+        result = reconstruct(client, info["image_id"], method="propagation").json()
+        assert "doubtful" in result["info"]["mask_warning"]
+        monkeypatch.undo()
+        clear = upload(client, png_bytes(disk_photo(44, colour=False)), name="clear.png").json()
+        assert (
+            "mask_warning" not in reconstruct(client, clear["image_id"], method="propagation").json()["info"]
+        )
+
     def test_same_as_the_library(self, client, bowl):
         result = reconstruct(client, bowl["image_id"], request_id=7, step=2).json()
         rec, mesh = library_result("synth:bowl", SIZE, step=2)

@@ -5,7 +5,14 @@
 import type { Options, ReconstructResult } from './api.gen';
 import { AXIS_COLOURS, UNSURE_COLOUR, unsureQuestion, type Unsure } from './imagePane';
 import type { Axis, Params, Region } from './state';
-import { depthBoundedText, readDepthBounded, readUnsureOthers, unsureOthersText, type UnsureOthers } from './words';
+import {
+  depthBoundedText,
+  maskWarningText,
+  readDepthBounded,
+  readUnsureOthers,
+  unsureOthersText,
+  type UnsureOthers,
+} from './words';
 
 export type Urgency = 'now' | 'drag';
 
@@ -346,8 +353,8 @@ export function shownLight(
 
 /**
  * Under the model's badge, while the result on screen says so: its depth ran past what the
- * object's outline allows and was pulled back (``info["depth_bounded"]``), in words, with why in
- * its tooltip.
+ * object's outline allows and was pulled back (``info["depth_bounded"]``), or its automatic mask
+ * is doubtful (``info["mask_warning"]``), in words, with why in the tooltip.
  */
 function showDepthNote(result: ReconstructResult | null): void {
   let note = document.getElementById('depth-note');
@@ -359,8 +366,10 @@ function showDepthNote(result: ReconstructResult | null): void {
     $('view-host').append(note);
   }
   const said = readDepthBounded(result?.info);
-  note.hidden = said === null;
-  const { text, tip } = said ? depthBoundedText(said) : { text: '', tip: '' };
-  note.textContent = text;
-  note.title = tip;
+  const notes = [said ? depthBoundedText(said) : null, maskWarningText(result?.info)].filter(
+    (note): note is { text: string; tip: string } => note !== null,
+  );
+  note.hidden = notes.length === 0;
+  note.textContent = notes.map((one) => one.text).join('. ');
+  note.title = notes.map((one) => one.tip).join('\n');
 }

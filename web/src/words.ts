@@ -104,3 +104,13 @@ export function unsureOthersText(others: UnsureOthers): string {
   const share = Math.max(1, Math.round(100 * others.share));
   return ` (and ${others.areas} smaller one${others.areas === 1 ? '' : 's'}, ${share}% of the object, not listed)`;
 }
+
+/** ``info["mask_warning"]``: the automatic mask is doubtful; what to do, with the library's line as the tip. */
+export function maskWarningText(info: Record<string, unknown> | undefined): { text: string; tip: string } | null {
+  const said = info?.mask_warning;
+  if (typeof said !== 'string' || !said) return null;
+  return {
+    text: 'The object was found automatically and its outline is doubtful: check the mask, or click or box the object',
+    tip: capitalised(said),
+  };
+}

@@ -616,6 +616,8 @@ def _solve(
         if spacing > 1
         else reconstruct(image, **settings)
     )
+    if params.mask is None and (warning := _mask_warning(state, entry, params.channel)):
+        rec.info["mask_warning"] = warning  # as the CLI says it: the pipeline was given this mask
     depth = rec.depth[rec.mask]
     solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
     nbytes = rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes
@@ -722,16 +724,27 @@ def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarra
     """One channel of a stored image, its object mask and the mask as base64 PNG, kept per
     image and channel: the mask does not change with the other parameters."""
     from shadeform.io.images import select_channel
-    from shadeform.preprocess import object_mask
+    from shadeform.masks import find_object
 
     image = select_channel(entry.pixels, channel)
     key = ("mask", entry.image_id, channel)
     known = state.masks.get(key)
     if known is None:
-        mask = entry.mask if entry.mask is not None else object_mask(image)
-        known = (mask, png_base64(mask.astype(np.float32)))
+        warning = None
+        if entry.mask is not None:
+            mask = entry.mask
+        else:
+            found = find_object(image)
+            mask, warning = found.mask, found.warning
+        known = (mask, png_base64(mask.astype(np.float32)), warning)
         state.masks.put(key, known, mask.nbytes)
-    return image, *known
+    return image, *known[:2]
+
+
+def _mask_warning(state: _State, entry: StoredImage, channel: str) -> str | None:
+    """The automatic mask's one-line warning when it is doubtful (kept with it by :func:`_channel`)."""
+    known = state.masks.get(("mask", entry.image_id, channel))
+    return known[2] if known is not None else None
 
 
 def _reconstruct_result(state: _State, entry: StoredImage, body: ReconstructRequest) -> ReconstructResult:
