@@ -114,6 +114,14 @@ def positive(value, what: str) -> float:
     return value
 
 
+def within(value, what: str, low: float, high: float, *, unit: str = "") -> float:
+    """A finite number from ``low`` to ``high`` (``unit`` names its unit in the message)."""
+    value = finite(value, what)
+    if not low <= value <= high:
+        raise InputError(f"{what} must be from {low:g} to {high:g} {unit}, got {value:g}".replace("  ", " "))
+    return value
+
+
 def fraction(value, what: str, *, closed: bool = False) -> float:
     """A number in (0, 1), or (0, 1] when ``closed``."""
     value = finite(value, what)

@@ -24,6 +24,12 @@ from shadeform.errors import InputError
 
 AXES = ("x", "y", "both")
 
+#: The largest coordinate a region's point may have, in pixels. A polygon may reach past the frame
+#: (it is clipped there), but no photo has a side near 1e10 pixels (the loader's default limit is
+#: 6.7e7 pixels in all): a point beyond is a typing mistake, not a region, and float64 arithmetic
+#: on the polygon keeps the pixel grid only for coordinates far below 1e16.
+MAX_COORDINATE = 1e10
+
 _FORMAT = '{"regions": [{"polygon": [[x, y], ...], "axis": "x" | "y" | "both"}]}'
 
 
@@ -238,6 +244,8 @@ def loads_json(text: str, where: str):
         ) from None
     except RecursionError:
         raise InputError(f"{where} nests lists or objects too deeply; give a flat JSON document") from None
+    except ValueError:  # a whole number of more digits than Python converts (sys.get_int_max_str_digits)
+        raise InputError(f"{where} holds a number with thousands of digits; give ordinary numbers") from None
 
 
 def _region(entry, index: int) -> Region:
@@ -266,10 +274,13 @@ def _region(entry, index: int) -> Region:
                 raise InputError(f"point {k} has a non-numeric coordinate {_short(value)} {at}")
             try:
                 vertices[k - 1, j] = value
-            except OverflowError:
+            except OverflowError:  # a whole number beyond any float
                 vertices[k - 1, j] = np.inf
-            if not np.isfinite(vertices[k - 1, j]):
-                raise InputError(f"point {k} has a non-finite coordinate {_short(value)} {at}")
+            if not abs(vertices[k - 1, j]) <= MAX_COORDINATE:
+                raise InputError(
+                    f"point {k} has the coordinate {_short(value)} {at}; give pixel coordinates, "
+                    f"finite and within {MAX_COORDINATE:.0e} of the image"
+                )
     return Region(polygon=vertices, axis=axis)
 
 
