@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from skimage.draw import polygon2mask
 
+from shadeform._checks import regular_file
 from shadeform.errors import InputError
 
 AXES = ("x", "y", "both")
@@ -91,7 +92,7 @@ def parse_regions(source) -> tuple[Region, ...]:
     if isinstance(source, Path):
         where = f"regions file {str(source)!r}"
         try:
-            text = source.read_text(encoding="utf-8")
+            text = regular_file(source, "regions file").read_text(encoding="utf-8")
         except FileNotFoundError:
             raise InputError(f"{where} not found; check the path") from None
         except IsADirectoryError:

@@ -205,6 +205,8 @@ def tile_size(tiles: str, image: Path, max_pixels: int | None) -> int | None:
 def _is_tiff(path: Path) -> bool:
     from shadeform.io.images import _TIFF_MAGICS
 
+    if not path.is_file():  # a folder, or a pipe or device that could block forever
+        return False
     try:
         with open(path, "rb") as handle:
             return handle.read(4) in _TIFF_MAGICS
@@ -691,11 +693,14 @@ def batch(
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
-    from shadeform.batch import reconstruct_files
+    from shadeform.batch import reconstruct_files, worker_count
 
     suffix = format if format.startswith(".") else f".{format}"
     light_vector = resolve_light(light, slant, tilt)
     err = stderr_console()
+    if workers is not None and worker_count(workers, len(photos)) < workers:
+        err.print(f"note: --workers {workers} lowered to {worker_count(workers, len(photos))}, "
+                  "one per photo and at most one per CPU (more would only wait)", soft_wrap=True)  # fmt: skip
     total = time.perf_counter()
     # the folder is made for the run and removed again if the run is refused (bad options)
     with (
