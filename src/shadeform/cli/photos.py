@@ -698,9 +698,6 @@ def batch(
     suffix = format if format.startswith(".") else f".{format}"
     light_vector = resolve_light(light, slant, tilt)
     err = stderr_console()
-    if workers is not None and worker_count(workers, len(photos)) < workers:
-        err.print(f"note: --workers {workers} lowered to {worker_count(workers, len(photos))}, "
-                  "one per photo and at most one per CPU (more would only wait)", soft_wrap=True)  # fmt: skip
     total = time.perf_counter()
     # the folder is made for the run and removed again if the run is refused (bad options)
     with (
@@ -768,7 +765,10 @@ def batch(
             f"{len(results) - len(failed)} of {len(results)} photos in "
             f"{format_seconds(seconds)}, models in {escape(str(out))}"
         )
-    for r in failed:
-        err.print(f"error: {escape(str(r.photo))}: {escape(r.error)}", soft_wrap=True)
-    if failed:
+    if workers is not None and worker_count(workers, len(photos)) < workers:
+        err.print(f"note: --workers {workers} lowered to {worker_count(workers, len(photos))}, "
+                  "one per photo and at most one per CPU (more would only wait)", soft_wrap=True)  # fmt: skip
+    if failed:  # one line: the first photo's reason, the others counted (--json has each)
+        more = f" (and {len(failed) - 1} more photo(s) failed; --json lists each)" if len(failed) > 1 else ""
+        err.print(f"error: {escape(str(failed[0].photo))}: {escape(failed[0].error)}{more}", soft_wrap=True)
         raise typer.Exit(2)
