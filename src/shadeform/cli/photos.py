@@ -765,7 +765,7 @@ def batch(
             f"{len(results) - len(failed)} of {len(results)} photos in "
             f"{format_seconds(seconds)}, models in {escape(str(out))}"
         )
-    if workers is not None and worker_count(workers, len(photos)) < workers:
+    if not failed and workers is not None and worker_count(workers, len(photos)) < workers:
         err.print(f"note: --workers {workers} lowered to {worker_count(workers, len(photos))}, "
                   "one per photo and at most one per CPU (more would only wait)", soft_wrap=True)  # fmt: skip
     if failed:  # one line: the first photo's reason, the others counted (--json has each)
