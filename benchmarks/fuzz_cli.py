@@ -23,7 +23,7 @@ working directory, with ``--case-seconds`` as a hang guard (SIGALRM). A case cou
 - a *raw warning*: a line of a Python warning (``...Warning:``) on stderr;
 - an *internal warning*: a Python warning the command line's edge caught and hid (a bug to fix
   where it arises; logged to the ``shadeform`` logger);
-- *leftovers*: a hidden or temporary file (``.name``, ``*.shadeform-*``, ``*.tiles``) anywhere in
+- *leftovers*: a temporary (``.NAME.shadeform-*``) or a tiles folder (``*.tiles``) anywhere in
   the case's folder, or any file written there by a refused command (``batch`` excepted, whose
   other photos' models stand).
 
@@ -385,7 +385,8 @@ def run_case(args: list[str], case: Path, seconds: float) -> tuple[list[str], di
     left = []
     for path in case.rglob("*"):
         relative = path.relative_to(case).as_posix()
-        temporary = path.name.startswith(".") or ".shadeform-" in path.name or path.name.endswith(".tiles")
+        # a hidden name the case asked for (``-o .hidden.png``) is an output, not a leftover
+        temporary = ".shadeform-" in path.name or path.name.endswith(".tiles")
         refused_wrote = done["exit"] == 2 and args[0] != "batch" and path.is_file()
         if temporary or refused_wrote:
             left.append(relative)
