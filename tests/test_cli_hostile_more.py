@@ -67,7 +67,7 @@ def guard():
 
 
 @pytest.mark.parametrize(("name", "fragment"), [("digits", "thousands of digits"), ("huge", "1e+300"),
-                                                 ("nan", "NaN"), ("inf", "Infinity")])  # fmt: skip
+                                                 ("nan", "non-finite"), ("inf", "non-finite")])  # fmt: skip
 def test_a_regions_file_of_absurd_numbers_is_one_line(files, out, cli, name, fragment):
     result = cli("reconstruct", files / "photo.png", "-o", out / "m.glb", "--concave", files / f"{name}.json")
     one_line_refusal(result, out, fragment)
@@ -247,19 +247,20 @@ def test_a_signal_ends_the_process_even_when_its_exception_is_swallowed(tmp_path
         "from pathlib import Path\n"
         "from shadeform.io.atomic import OutputSet, exit_on_signals\n"
         "exit_on_signals()\n"
-        "outputs = OutputSet()\n"
-        "outputs.temp(Path(sys.argv[1]) / 'model.obj').write_bytes(b'v 0 0 0')\n"
-        "print('ready', flush=True)\n"
-        "while True:\n"
-        "    try:\n"
-        "        time.sleep(0.01)\n"
-        "    except BaseException:\n"
-        "        pass\n"
+        "with OutputSet() as outputs:\n"
+        "    outputs.temp(Path(sys.argv[1]) / 'model.obj').write_bytes(b'v 0 0 0')\n"
+        "    while True:\n"
+        "        try:\n"
+        "            print('ready', flush=True)\n"
+        "            time.sleep(0.01)\n"
+        "        except BaseException:\n"
+        "            pass\n"
     )
     process = subprocess.Popen([sys.executable, "-c", script, tmp_path], stdout=subprocess.PIPE)
     assert process.stdout.readline() == b"ready\n"
     process.send_signal(signal.SIGTERM)
     process.wait(timeout=60)  # a hang guard: it used to run forever
+    process.stdout.close()
     assert process.returncode == 128 + signal.SIGTERM
     assert _hidden(tmp_path) == []
 

@@ -273,15 +273,18 @@ def _region(entry, index: int) -> Region:
         for j, value in enumerate(point):
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise InputError(f"point {k} has a non-numeric coordinate {_short(value)} {at}")
+            far = (
+                f"point {k} has the coordinate {_short(value)} {at}; give pixel coordinates within "
+                f"{MAX_COORDINATE:.0e} of the image"
+            )
             try:
                 vertices[k - 1, j] = value
             except OverflowError:  # a whole number beyond any float
-                vertices[k - 1, j] = np.inf
-            if not abs(vertices[k - 1, j]) <= MAX_COORDINATE:
-                raise InputError(
-                    f"point {k} has the coordinate {_short(value)} {at}; give pixel coordinates, "
-                    f"finite and within {MAX_COORDINATE:.0e} of the image"
-                )
+                raise InputError(far) from None
+            if not np.isfinite(vertices[k - 1, j]):
+                raise InputError(f"point {k} has a non-finite coordinate {_short(value)} {at}")
+            if abs(vertices[k - 1, j]) > MAX_COORDINATE:
+                raise InputError(far)
     return Region(polygon=vertices, axis=axis)
 
 

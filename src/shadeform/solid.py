@@ -293,7 +293,7 @@ def check_options(
     """
     names = {key: (names or {}).get(key, key) for key in _OPTION_NAMES}
     width_mm, height_mm, base_mm = (
-        within(value, names[key], *SIZE_RANGE_MM, unit="mm")
+        within(positive(value, names[key]), names[key], *SIZE_RANGE_MM, unit="mm")
         for value, key in ((width_mm, "width_mm"), (height_mm, "height_mm"), (base_mm, "base_mm"))
     )
     min_wall_mm = positive(min_wall_mm, names["min_wall_mm"])
