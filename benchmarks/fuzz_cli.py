@@ -356,14 +356,25 @@ def run_case(args: list[str], case: Path, seconds: float) -> tuple[list[str], di
     start = time.perf_counter()
     findings: list[str] = []
     result = None
+    # what reaches the process's own stderr (fd 2): worker processes write there, not to the
+    # runner's captured stream
+    sys.stderr.flush()
+    saved = os.dup(2)
+    raw = tempfile.TemporaryFile()  # noqa: SIM115 (closed below, once fd 2 is back)
+    os.dup2(raw.fileno(), 2)
     try:
         result = CliRunner(env={"COLUMNS": "200"}).invoke(app, args, catch_exceptions=True)
     except Hang:
         findings.append("hang")
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
+        os.dup2(saved, 2)
+        os.close(saved)
         os.chdir(before)
         logger.removeHandler(catcher)
+    raw.seek(0)
+    elsewhere = raw.read().decode("utf-8", "replace")
+    raw.close()
     took = time.perf_counter() - start
     done = {"seconds": took, "exit": None, "stderr": "", "stdout": "", "hidden": hidden}
     if result is not None:
@@ -378,8 +389,9 @@ def run_case(args: list[str], case: Path, seconds: float) -> tuple[list[str], di
             findings.append("bad refusal")
         if result.exit_code not in (0, 2) and not escaped:
             findings.append("bad exit")
-        if any(WARNING_LINE.search(line) for line in lines):
+        if any(WARNING_LINE.search(line) for line in lines + elsewhere.splitlines()):
             findings.append("raw warning")
+            done["stderr"] += elsewhere
     if hidden:
         findings.append("internal warning")
     left = []

@@ -243,6 +243,11 @@ def _start_worker(batch: int) -> None:
     is gone. A SIGTERM (the pool terminated) keeps its default, ending the worker at once: a
     Python handler would run only in the main thread, which may be blocked in the pool's queue
     while the signal lands on another thread (a pool's join then waited forever)."""
+    import warnings
+
+    # a worker has no user to speak to (its stderr is the batch's terminal, shared by all): the
+    # libraries' warnings stay quiet here, as the command line's edge keeps them in its process
+    warnings.simplefilter("ignore")
     threading.Thread(target=_watch, args=(batch,), daemon=True, name="shadeform-watch").start()
 
 
