@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import stat
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -114,6 +116,14 @@ def positive(value, what: str) -> float:
     return value
 
 
+def within(value, what: str, low: float, high: float, *, unit: str = "") -> float:
+    """A finite number from ``low`` to ``high`` (``unit`` names its unit in the message)."""
+    value = finite(value, what)
+    if not low <= value <= high:
+        raise InputError(f"{what} must be from {low:g} to {high:g} {unit}, got {value:g}".replace("  ", " "))
+    return value
+
+
 def fraction(value, what: str, *, closed: bool = False) -> float:
     """A number in (0, 1), or (0, 1] when ``closed``."""
     value = finite(value, what)
@@ -127,3 +137,18 @@ def whole(value, what: str, *, minimum: int = 0) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise InputError(f"{what} must be a whole number >= {minimum}, got {value!r}")
     return int(value)
+
+
+def regular_file(path: Path, what: str) -> Path:
+    """``path``, unless it names a folder, a pipe or a device (reading one could block forever or
+    never end): then a one-line :class:`InputError` naming ``what``. A path that cannot be
+    looked at passes: the caller's own read says what is wrong with it."""
+    try:
+        mode = Path(path).stat().st_mode
+    except (OSError, ValueError):
+        return path
+    if stat.S_ISDIR(mode):
+        raise InputError(f"{what} '{path}' is a folder; give a file")
+    if not stat.S_ISREG(mode):
+        raise InputError(f"{what} '{path}' is a pipe or a device, not a file; give a file")
+    return path

@@ -105,8 +105,8 @@ def reconstruct_files(
     depth, normals : bool
         Also write each photo's depth map and normal map.
     workers : int, optional
-        Worker processes; default the CPU count. 1 runs the photos one after the other in this
-        process.
+        Worker processes; default the CPU count, and never more than the photos or the CPUs
+        (:func:`worker_count`). 1 runs the photos one after the other in this process.
     max_pixels : int, optional
         Refuse a photo whose header declares more pixels than this, before decoding it (that
         photo's result carries the message); default
@@ -162,9 +162,7 @@ def reconstruct_files(
     if options.get("integrator") is not None:
         check_choice(options["integrator"], tuple(available_integrators()), "integrator")
     parse_filter(options.get("filter"))
-    workers = (os.cpu_count() or 1) if workers is None else workers
-    if int(workers) != workers or workers < 1:
-        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    workers = worker_count(workers, len(photos))
     max_pixels = MAX_PIXELS if max_pixels is None else max_pixels
     if not isinstance(max_pixels, int) or isinstance(max_pixels, bool) or max_pixels < 1:
         raise InputError(f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
@@ -217,11 +215,39 @@ def reconstruct_files(
     return list(results)
 
 
+def worker_count(workers: int | None, photos: int) -> int:
+    """The worker processes a batch of ``photos`` photos starts: ``workers`` (default one per
+    CPU this process may use), but never more than the photos, nor than those CPUs (each task
+    runs compiled kernels that keep a core busy: more processes only wait, each holding its
+    memory).
+
+    Raises
+    ------
+    InputError
+        ``workers`` not a whole number >= 1.
+    """
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    workers = cpus if workers is None else workers
+    if (
+        isinstance(workers, bool)
+        or not isinstance(workers, (int, float))
+        or int(workers) != workers
+        or workers < 1
+    ):
+        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    return max(1, min(int(workers), photos, cpus))
+
+
 def _start_worker(batch: int) -> None:
     """A worker's set-up: a thread that ends the worker soon after the batch process ``batch``
     is gone. A SIGTERM (the pool terminated) keeps its default, ending the worker at once: a
     Python handler would run only in the main thread, which may be blocked in the pool's queue
     while the signal lands on another thread (a pool's join then waited forever)."""
+    import warnings
+
+    # a worker has no user to speak to (its stderr is the batch's terminal, shared by all): the
+    # libraries' warnings stay quiet here, as the command line's edge keeps them in its process
+    warnings.simplefilter("ignore")
     threading.Thread(target=_watch, args=(batch,), daemon=True, name="shadeform-watch").start()
 
 

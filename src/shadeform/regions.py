@@ -20,9 +20,16 @@ from pathlib import Path
 import numpy as np
 from skimage.draw import polygon2mask
 
+from shadeform._checks import regular_file
 from shadeform.errors import InputError
 
 AXES = ("x", "y", "both")
+
+#: The largest coordinate a region's point may have, in pixels. A polygon may reach past the frame
+#: (it is clipped there), but no photo has a side near 1e10 pixels (the loader's default limit is
+#: 6.7e7 pixels in all): a point beyond is a typing mistake, not a region, and float64 arithmetic
+#: on the polygon keeps the pixel grid only for coordinates far below 1e16.
+MAX_COORDINATE = 1e10
 
 _FORMAT = '{"regions": [{"polygon": [[x, y], ...], "axis": "x" | "y" | "both"}]}'
 
@@ -85,7 +92,7 @@ def parse_regions(source) -> tuple[Region, ...]:
     if isinstance(source, Path):
         where = f"regions file {str(source)!r}"
         try:
-            text = source.read_text(encoding="utf-8")
+            text = regular_file(source, "regions file").read_text(encoding="utf-8")
         except FileNotFoundError:
             raise InputError(f"{where} not found; check the path") from None
         except IsADirectoryError:
@@ -238,6 +245,8 @@ def loads_json(text: str, where: str):
         ) from None
     except RecursionError:
         raise InputError(f"{where} nests lists or objects too deeply; give a flat JSON document") from None
+    except ValueError:  # a whole number of more digits than Python converts (sys.get_int_max_str_digits)
+        raise InputError(f"{where} holds a number with thousands of digits; give ordinary numbers") from None
 
 
 def _region(entry, index: int) -> Region:
@@ -264,12 +273,18 @@ def _region(entry, index: int) -> Region:
         for j, value in enumerate(point):
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise InputError(f"point {k} has a non-numeric coordinate {_short(value)} {at}")
+            far = (
+                f"point {k} has the coordinate {_short(value)} {at}; give pixel coordinates within "
+                f"{MAX_COORDINATE:.0e} of the image"
+            )
             try:
                 vertices[k - 1, j] = value
-            except OverflowError:
-                vertices[k - 1, j] = np.inf
+            except OverflowError:  # a whole number beyond any float
+                raise InputError(far) from None
             if not np.isfinite(vertices[k - 1, j]):
                 raise InputError(f"point {k} has a non-finite coordinate {_short(value)} {at}")
+            if abs(vertices[k - 1, j]) > MAX_COORDINATE:
+                raise InputError(far)
     return Region(polygon=vertices, axis=axis)
 
 

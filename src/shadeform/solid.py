@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shadeform._checks import check_choice, finite, positive, whole
+from shadeform._checks import check_choice, finite, positive, whole, within
 from shadeform.errors import InputError
 from shadeform.mesh import Mesh, cell_triangles
 from shadeform.reconstruction import Reconstruction
@@ -67,6 +67,10 @@ OUTLINES = ("mask", "frame")
 #: Default thinnest wall, mm: two perimeters of a 0.4 mm nozzle, the usual minimum of desktop
 #: filament printers (their slicers' defaults), not measured here. Resin printers go thinner.
 MIN_WALL_MM = 0.8
+
+#: The range of each size (width, height, base), mm: up to 100 m (2 x 100 m tall) STL's and 3MF's
+#: float32 coordinates keep steps under 0.02 mm; below a micrometre no printer resolves anything.
+SIZE_RANGE_MM = (1e-3, 1e5)
 
 #: The fewest triangles a budget may allow: a box.
 MIN_TRIANGLES = 12
@@ -288,9 +292,10 @@ def check_options(
         ``max_triangles`` is given.
     """
     names = {key: (names or {}).get(key, key) for key in _OPTION_NAMES}
-    width_mm = positive(width_mm, names["width_mm"])
-    height_mm = positive(height_mm, names["height_mm"])
-    base_mm = positive(base_mm, names["base_mm"])
+    width_mm, height_mm, base_mm = (
+        within(positive(value, names[key]), names[key], *SIZE_RANGE_MM, unit="mm")
+        for value, key in ((width_mm, "width_mm"), (height_mm, "height_mm"), (base_mm, "base_mm"))
+    )
     min_wall_mm = positive(min_wall_mm, names["min_wall_mm"])
     if base_mm < min_wall_mm:
         raise InputError(

@@ -4,10 +4,12 @@ types its commands share (printing, timing, output files written together or not
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import sys
 import time
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -56,19 +58,28 @@ class _Group(TyperGroup):
         import sys
 
         kwargs["standalone_mode"] = False  # click's exceptions reach us instead of its printer
-        try:
-            code = super().main(*args, **kwargs)
-        except typer.Abort:
-            typer.echo("error: stopped", err=True)
-            sys.exit(1)
-        except _NO_ARGS as err:  # a bare ``shadeform``: the help is the answer, not an error line
-            sys.exit(err.exit_code)
-        except _CLICK_ERROR as err:
-            where = err.ctx.command_path if getattr(err, "ctx", None) is not None else "shadeform"
-            message = " ".join(err.format_message().split()).rstrip(".")
-            typer.echo(f"error: {message}; see '{where} --help'", err=True)
-            sys.exit(err.exit_code)
-        sys.exit(code if isinstance(code, int) else 0)
+        # the libraries' warnings and log records never reach stderr raw (see _warning_notes)
+        if not logging.getLogger().handlers:
+            logging.getLogger().addHandler(logging.NullHandler())
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")  # each once per place
+            try:
+                code = super().main(*args, **kwargs)
+            except typer.Abort:
+                typer.echo("error: stopped", err=True)
+                sys.exit(1)
+            except _NO_ARGS as err:  # a bare ``shadeform``: the help is the answer, not an error line
+                sys.exit(err.exit_code)
+            except _CLICK_ERROR as err:
+                where = err.ctx.command_path if getattr(err, "ctx", None) is not None else "shadeform"
+                message = " ".join(err.format_message().split()).rstrip(".")
+                typer.echo(f"error: {message}; see '{where} --help'", err=True)
+                sys.exit(err.exit_code)
+        code = code if isinstance(code, int) else 0
+        if code == 0:  # a refusal stays one line
+            for note in _warning_notes(caught):
+                typer.echo(f"note: {note}", err=True)
+        sys.exit(code)
 
     def list_commands(self, ctx):
         """The commands in ``--help`` in the order a user reaches for them, not the order their
@@ -89,6 +100,29 @@ class _Group(TyperGroup):
             message = _os_error_message(err)
         typer.echo(f"error: {' '.join(message.split())}", err=True)
         raise typer.Exit(USAGE_EXIT)
+
+
+#: What a damaged EXIF block (Pillow parses it with its TIFF tag reader) means to the user.
+_EXIF_NOTE = (
+    "the photo's EXIF data is damaged and was ignored: it is taken as stored, not turned "
+    "upright; save it again if it looks rotated"
+)
+
+
+def _warning_notes(caught) -> list[str]:
+    """What the warnings caught during a command say to its user, each once, in their words:
+    Pillow's about a damaged EXIF block (its TIFF tag reader's, or any naming EXIF). Any other
+    warning is an internal matter (a bug to fix where it arises, not something the user can act
+    on): it goes to the ``shadeform`` logger at debug level, for a developer, not to stderr."""
+    notes = []
+    for caught_warning in caught:
+        text = str(caught_warning.message)
+        if "EXIF" in text or Path(caught_warning.filename).name == "TiffImagePlugin.py":
+            notes += [_EXIF_NOTE] if _EXIF_NOTE not in notes else []
+        else:
+            where = f"{caught_warning.filename}:{caught_warning.lineno}"
+            logging.getLogger("shadeform").debug("warning at %s: %s", where, text)
+    return notes
 
 
 def _os_error_message(err: OSError) -> str:

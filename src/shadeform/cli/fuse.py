@@ -285,10 +285,11 @@ def _views(photos, angles, views_file, masks) -> list[ViewEntry]:
 
 
 def _views_file(path: Path) -> list[ViewEntry]:
+    from shadeform._checks import regular_file
     from shadeform.regions import loads_json
 
     try:
-        text = path.read_text(encoding="utf-8")
+        text = regular_file(path, "views file").read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"views file '{path}' does not exist; check the path") from None
     except UnicodeDecodeError as err:

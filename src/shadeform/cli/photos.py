@@ -220,6 +220,8 @@ def _is_tiff(path: Path) -> bool:
 
     from shadeform.io.images import _TIFF_MAGICS
 
+    if not path.is_file():  # a folder, or a pipe or device that could block forever
+        return False
     try:
         if not stat.S_ISREG(path.stat().st_mode):
             return False  # a pipe or device could block forever: the loader refuses it
@@ -730,7 +732,7 @@ def batch(
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""
-    from shadeform.batch import reconstruct_files
+    from shadeform.batch import reconstruct_files, worker_count
 
     suffix = format if format.startswith(".") else f".{format}"
     light_vector = resolve_light(light, slant, tilt)
@@ -802,7 +804,10 @@ def batch(
             f"{len(results) - len(failed)} of {len(results)} photos in "
             f"{format_seconds(seconds)}, models in {escape(str(out))}"
         )
-    for r in failed:
-        err.print(f"error: {escape(str(r.photo))}: {escape(r.error)}", soft_wrap=True)
-    if failed:
+    if not failed and workers is not None and worker_count(workers, len(photos)) < workers:
+        err.print(f"note: --workers {workers} lowered to {worker_count(workers, len(photos))}, "
+                  "one per photo and at most one per CPU (more would only wait)", soft_wrap=True)  # fmt: skip
+    if failed:  # one line: the first photo's reason, the others counted (--json has each)
+        more = f" (and {len(failed) - 1} more photo(s) failed; --json lists each)" if len(failed) > 1 else ""
+        err.print(f"error: {escape(str(failed[0].photo))}: {escape(failed[0].error)}{more}", soft_wrap=True)
         raise typer.Exit(2)

@@ -20,6 +20,7 @@ import secrets
 import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -53,7 +54,8 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
     """Open a file for writing so that it appears at ``path`` only once complete.
 
     The data goes to a hidden temporary file ``.<name>.<random>.tmp`` in the same folder (so the
-    final rename stays on one file system); on leaving the ``with`` block it is flushed,
+    final rename stays on one file system), unless ``path`` is itself a temporary of this
+    process (an :class:`OutputSet`'s), which is written in place; on leaving the ``with`` block it is flushed,
     fsynced and moved onto ``path`` with :func:`os.replace`. If the block raises, the temporary
     file is deleted and the exception propagates: ``path`` keeps its old content, if any.
 
@@ -93,11 +95,20 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
     if path.is_dir():
         raise InputError(f"output path '{path}' is a folder; give a file name instead")
 
+    text_options = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
+    own = _TEMPORARY.match(path.name)
+    if own is not None and int(own["pid"]) == os.getpid():
+        # a temporary of this process's already (an OutputSet's): hidden, and renamed by its
+        # owner, so written in place; a temporary of a temporary would be one more name to leave
+        with open(path, mode, **text_options) as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        return
     if path.exists():
         permissions = stat.S_IMODE(path.stat().st_mode)
     else:
         permissions = 0o666 & ~_UMASK
-    text_options = {"encoding": "utf-8", "newline": "\n"} if mode == "w" else {}
 
     sweep(parent)
     tmp = tempfile.NamedTemporaryFile(  # noqa: SIM115 (the with below closes it)
@@ -184,17 +195,36 @@ def remove_temporaries() -> None:
         _LIVE.discard(path)
 
 
+#: Seconds a process given SIGINT, SIGTERM or SIGHUP has to end by its exception before it is
+#: ended outright (its temporaries removed first): an exception can be swallowed (a library's
+#: ``except BaseException`` around an optional import) and clean-up can hang.
+STOP_SECONDS = 0.5
+
+
 def exit_on_signals() -> None:
     """Make SIGTERM and SIGHUP (``kill``, a closed terminal) end the process as an exception
-    would, so that ``with`` blocks remove their temporaries; Python's default for them ends the
-    process without any clean-up. Call from the main thread."""
-    for name in ("SIGTERM", "SIGHUP"):
+    would, so that ``with`` blocks remove their temporaries (Python's default for them ends the
+    process without any clean-up), and SIGINT (Ctrl-C) raise KeyboardInterrupt as usual; and if
+    the process still runs :data:`STOP_SECONDS` after any of them, remove this process's
+    temporaries and end it. Call from the main thread."""
+    for name in ("SIGTERM", "SIGHUP", "SIGINT"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), _raise_exit)
 
 
 def _raise_exit(signum, frame) -> None:
+    timer = threading.Timer(STOP_SECONDS, _end_now, args=(signum,))
+    timer.daemon = True  # does not hold up an exit that goes well
+    timer.start()
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise SystemExit(128 + signum)
+
+
+def _end_now(signum: int) -> None:
+    """The end of a process that a signal's exception did not end in time."""
+    remove_temporaries()
+    os._exit(128 + signum)
 
 
 def _running(pid: int) -> bool:

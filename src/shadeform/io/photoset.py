@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shadeform._checks import regular_file
 from shadeform.errors import InputError
 from shadeform.io.images import (
     CALIBRATED_SET_FILE,
@@ -278,7 +279,7 @@ def read_rows(path: str | os.PathLike, what: str, count: int, columns: tuple[int
     comments skipped) as ``(count, columns)``, or ``(count,)`` for one column."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = regular_file(path, f"{what} file").read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"{what} file '{path}' does not exist; check the path") from None
     except UnicodeDecodeError:
@@ -318,7 +319,7 @@ def read_lp(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = regular_file(path, "light file").read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"light file '{path}' does not exist; check the path") from None
     except UnicodeDecodeError:

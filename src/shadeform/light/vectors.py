@@ -55,15 +55,16 @@ def as_light(light) -> np.ndarray:
         )
     if not np.isfinite(vector).all():
         raise InputError(f"light has NaN or infinite components: {light!r}; give finite numbers")
-    length = math.sqrt(float(vector @ vector))
-    if length == 0:
+    largest = float(np.abs(vector).max())
+    if largest == 0:
         raise InputError("light is the zero vector; give a direction toward the light, e.g. (0, 0, 1)")
     if vector[2] <= 0:
         raise InputError(
             f"light {tuple(float(v) for v in vector)} has z <= 0: it is at or behind the object's "
             "horizon and lights nothing the camera sees; give a light with z > 0"
         )
-    return vector / length
+    vector = vector / largest  # first to the unit cube: the squares of 1e300 or 1e-300 stay finite
+    return vector / math.sqrt(float(vector @ vector))
 
 
 def light_from_slant_tilt(slant: float, tilt: float) -> np.ndarray:

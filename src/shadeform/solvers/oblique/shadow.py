@@ -102,9 +102,12 @@ class ShadowFill:
             moved = filled[bad] - facing[bad, None] * light
             length = np.linalg.norm(moved, axis=1, keepdims=True)
             moved = np.where(length > 1e-12, moved / np.maximum(length, 1e-12), filled[bad])
-            filled[bad] = _visible(moved, SHADOW_NZ)
-            filled[bad] -= np.maximum(filled[bad] @ light, 0.0)[:, None] * light
-            filled[bad] /= np.linalg.norm(filled[bad], axis=1, keepdims=True)
+            visible = _visible(moved, SHADOW_NZ)
+            onto = visible - np.maximum(visible @ light, 0.0)[:, None] * light
+            # a visible normal along the light (a light within SHADOW_NZ's cone of the viewer) has
+            # no terminator to go to: it stays the visible one
+            length = np.linalg.norm(onto, axis=1, keepdims=True)
+            filled[bad] = np.where(length > 1e-12, onto / np.maximum(length, 1e-12), visible)
         out = normals.copy()
         values[free] = filled
         out[self.mask] = values
