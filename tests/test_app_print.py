@@ -126,7 +126,7 @@ class TestRelief:
             ({"max_triangles": 1.5}, "max_triangles"),
             ({"compress": 1.5}, "the compression must be in [0, 1]"),
             ({"border_mm": 50}, "less than half of the width"),
-            ({"width_mm": 1e12}, "at most 10,000 mm"),
+            ({"width_mm": 1e12}, "from 0.001 to 10000 mm"),
             ({"outline": "circle"}, "outline"),
             ({"colour": "red"}, "colour"),
         ],

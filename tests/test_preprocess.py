@@ -115,7 +115,7 @@ class TestObjectMask:
 
     def test_bad_shapes(self):
         with pytest.raises(InputError, match="2-D"):
-            object_mask(np.ones((4, 4, 3)))
+            object_mask(np.ones((4, 4, 2)))  # grey (H, W) or colour (H, W, 3) only
         image = np.ones((5, 5))
         image[2, 2] = np.nan
         with pytest.raises(InputError, match="NaN"):

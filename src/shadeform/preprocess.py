@@ -57,8 +57,9 @@ def object_mask(
 
     Parameters
     ----------
-    image : (H, W) array_like
-        Intensities, e.g. from :func:`shadeform.load_image`.
+    image : (H, W) or (H, W, 3) array_like
+        Intensities, e.g. from :func:`shadeform.load_image`, or linear colours (without
+        ``threshold``: :func:`shadeform.masks.find_object` then models colours too).
     threshold : float, optional
         Use ``image > threshold`` (``<`` with ``dark=True``) instead of the automatic choice.
     dark : bool, optional
@@ -78,7 +79,7 @@ def object_mask(
     Raises
     ------
     InputError
-        If ``image`` is not 2-D or holds NaN, if it is black or constant (nothing to separate),
+        If ``image`` is neither (H, W) nor (H, W, 3) or holds NaN, if it is black or constant (nothing to separate),
         or if no pixel is on the object's side of ``threshold``.
 
     References

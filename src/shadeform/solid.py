@@ -68,9 +68,10 @@ OUTLINES = ("mask", "frame")
 #: filament printers (their slicers' defaults), not measured here. Resin printers go thinner.
 MIN_WALL_MM = 0.8
 
-#: The range of each size (width, height, base), mm: up to 100 m (2 x 100 m tall) STL's and 3MF's
-#: float32 coordinates keep steps under 0.02 mm; below a micrometre no printer resolves anything.
-SIZE_RANGE_MM = (1e-3, 1e5)
+#: The range of each size (width, height, base), mm: 10 m is beyond any printer (and STL's and
+#: 3MF's float32 coordinates keep steps under 0.002 mm there); below a micrometre no printer
+#: resolves anything.
+SIZE_RANGE_MM = (1e-3, 1e4)
 
 #: The fewest triangles a budget may allow: a box.
 MIN_TRIANGLES = 12

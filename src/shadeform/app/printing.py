@@ -53,15 +53,11 @@ from shadeform.app.schema import (
     ReliefRequest,
     ReliefResult,
 )
-from shadeform.errors import InputError
 
-__all__ = ["PREVIEW_SIDE", "MAX_SIZE_MM", "add_print_routes", "relief_options"]
+__all__ = ["PREVIEW_SIDE", "add_print_routes", "relief_options"]
 
 #: Longest side of a map's preview, pixels.
 PREVIEW_SIDE = 256
-
-#: Largest size a print may ask for, mm: beyond any printer, and far enough from float overflow.
-MAX_SIZE_MM = 10_000.0
 
 #: What the options are called in messages: the Print panel's labels, as a sentence reads them.
 _NAMES = {
@@ -134,8 +130,8 @@ def add_print_routes(app: FastAPI, state: Any) -> None:
 
 
 def relief_options(params: ReliefParams) -> dict:
-    """A request's print options checked as :func:`shadeform.relief` checks them, named as the
-    Print panel names them, and bounded to sizes a printer could make (:data:`MAX_SIZE_MM`).
+    """A request's print options checked as :func:`shadeform.relief` checks them (sizes within
+    :data:`shadeform.solid.SIZE_RANGE_MM`), named as the Print panel names them.
 
     Raises
     ------
@@ -144,13 +140,7 @@ def relief_options(params: ReliefParams) -> dict:
     """
     from shadeform.solid import check_options
 
-    options = check_options(**params.model_dump(), names=_NAMES)
-    for key in ("width_mm", "height_mm", "base_mm"):
-        if options[key] > MAX_SIZE_MM:
-            raise InputError(
-                f"{_NAMES[key]} must be at most {MAX_SIZE_MM:,.0f} mm, got {options[key]:g}; give the size in mm"
-            )
-    return options
+    return check_options(**params.model_dump(), names=_NAMES)
 
 
 # --- the work ----------------------------------------------------------------------------------

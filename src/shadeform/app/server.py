@@ -815,15 +815,18 @@ def _start_job(state: _State, entry: StoredImage, body: ReconstructRequest):
     image = select_channel(entry.pixels, params.channel)
     # the automatic mask is found in the worker (1.6 s at 12 Mpx), unless it is known already
     known = state.masks.get(("mask", entry.image_id, params.channel))
-    mask, mask_png = known if known is not None else (entry.mask, None)
+    mask, mask_png = known[:2] if known is not None else (entry.mask, None)
     if params.mask is not None:
         mask, mask_png = user_mask(state, params.mask, image.shape)
 
     def finish(job, rec) -> str:
         nonlocal mask_png
-        if mask_png is None:
+        if mask_png is None:  # found by the pipeline, which said whether it is doubtful
             mask_png = png_base64(rec.mask.astype(np.float32))
-            state.masks.put(("mask", entry.image_id, params.channel), (rec.mask, mask_png), rec.mask.nbytes)
+            known = (rec.mask, mask_png, rec.info.get("mask_warning"))
+            state.masks.put(("mask", entry.image_id, params.channel), known, rec.mask.nbytes)
+        elif params.mask is None and (warning := _mask_warning(state, entry, params.channel)):
+            rec.info["mask_warning"] = warning
         depth = rec.depth[rec.mask]
         solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
         state.results.put(full_key, solved, rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes)
