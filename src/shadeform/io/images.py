@@ -61,6 +61,7 @@ from shadeform.errors import InputError
 
 __all__ = [
     "Photo",
+    "TIFF_MAGICS",
     "read_photo",
     "load_image",
     "load_image_rgb",
@@ -106,7 +107,8 @@ _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 _MIN_SIDE = 3
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+#: The first four bytes of a TIFF (little- and big-endian) and a BigTIFF.
+TIFF_MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
 
 # tifffile logs each oddity of a damaged file as a warning, and where nothing configured logging,
 # Python prints them all on stderr around our one-line error. A handler that drops them ends that
@@ -643,7 +645,7 @@ def _decode(path: str | PathLike | bytes, max_pixels: int) -> tuple[_Samples, _S
     source = _read_source(path, int(max_pixels))
     if source.data.startswith(_PNG_SIGNATURE):
         samples = _decode_png(source, max_pixels)
-    elif source.data[:4] in _TIFF_MAGICS:
+    elif source.data[:4] in TIFF_MAGICS:
         samples = _decode_tiff(source, max_pixels)
     else:
         samples = _decode_pillow(source, max_pixels)
