@@ -47,16 +47,16 @@ import random
 import re
 import shutil
 import signal
-import struct
 import sys
 import tempfile
 import time
 import traceback
-import zlib
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
+
+from hostile_files import jpeg_with_damaged_exif, png_claiming
 
 RESULTS = Path(__file__).resolve().parent / "results" / "fuzz_cli.md"
 
@@ -184,8 +184,8 @@ def make_inputs(folder: Path) -> dict[str, list[str]]:
     # hostile files
     (folder / "empty.png").write_bytes(b"")
     (folder / "notes.png").write_text("these are notes, not a photo")
-    (folder / "bomb.png").write_bytes(_png_header(100_000, 100_000))
-    (folder / "exif.jpg").write_bytes(_damaged_exif_jpeg())
+    (folder / "bomb.png").write_bytes(png_claiming(100_000, 100_000, colour=False))
+    (folder / "exif.jpg").write_bytes(jpeg_with_damaged_exif())
     fifo = folder / "fifo.png"
     if not fifo.exists():
         os.mkfifo(fifo)
@@ -208,35 +208,6 @@ def make_inputs(folder: Path) -> dict[str, list[str]]:
         "mask": ([str(folder / "mask.png")], [str(folder / "photo.png"), *hostile]),
         **pools,
     }
-
-
-def _png_header(width: int, height: int) -> bytes:
-    """A PNG that declares ``width`` x ``height`` pixels and holds none."""
-
-    def chunk(kind: bytes, body: bytes) -> bytes:
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
-
-    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(b"\0" * 64))
-        + chunk(b"IEND", b"")
-    )
-
-
-def _damaged_exif_jpeg() -> bytes:
-    """A small JPEG whose EXIF block declares a tag longer than the block."""
-    import io
-
-    from PIL import Image
-
-    ifd = struct.pack("<2sHI", b"II", 42, 8) + struct.pack("<H", 1)
-    ifd += struct.pack("<HHII", 0x010E, 2, 1000, 26) + struct.pack("<I", 0)
-    picture = (np.random.default_rng(0).random((16, 16)) * 255).astype(np.uint8)
-    buffer = io.BytesIO()
-    Image.fromarray(picture).save(buffer, format="JPEG", exif=b"Exif\x00\x00" + ifd)
-    return buffer.getvalue()
 
 
 def command_options() -> dict[str, list[tuple[str, str, bool, bool, bool]]]:

@@ -36,29 +36,30 @@ from __future__ import annotations
 
 import os
 
-for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+if __name__ == "__main__":  # one thread each when run, before numpy loads; never when a test imports it
+    for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_name, "1")
 
-import argparse  # noqa: E402
-import concurrent.futures  # noqa: E402
-import io  # noqa: E402
-import json  # noqa: E402
-import logging  # noqa: E402
-import platform  # noqa: E402
-import random  # noqa: E402
-import re  # noqa: E402
-import struct  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-import warnings  # noqa: E402
-import zlib  # noqa: E402
-from collections import Counter, defaultdict  # noqa: E402
-from dataclasses import dataclass, field  # noqa: E402
-from pathlib import Path  # noqa: E402
-from urllib.parse import quote  # noqa: E402
+import argparse
+import concurrent.futures
+import io
+import json
+import logging
+import platform
+import random
+import re
+import sys
+import tempfile
+import time
+import warnings
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import quote
 
-import numpy as np  # noqa: E402
+import numpy as np
+
+from hostile_files import jpeg_with_damaged_exif, png_claiming
 
 RESULTS = Path(__file__).resolve().parent / "results" / "fuzz_server.md"
 HOST = "127.0.0.1:8000"
@@ -104,30 +105,6 @@ def png_bytes(array: np.ndarray) -> bytes:
 
     buffer = io.BytesIO()
     Image.fromarray(np.asarray(array)).save(buffer, format="PNG")
-    return buffer.getvalue()
-
-
-def png_claiming(width: int, height: int) -> bytes:
-    """A PNG of a few dozen bytes whose IHDR declares ``width`` x ``height`` RGB pixels."""
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(b"\0" * 16))
-        + chunk(b"IEND", b"")
-    )
-
-
-def jpeg_with_corrupt_exif() -> bytes:
-    from PIL import Image
-
-    buffer = io.BytesIO()
-    exif = b"Exif\x00\x00MM\x00*\x00\x00\x00\x08\x00\x05\x01\x12\x00\x03\x00\x00\x00\x01\x00\x06"
-    Image.fromarray(np.full((SIDE, SIDE, 3), 128, np.uint8)).save(buffer, format="JPEG", exif=exif)
     return buffer.getvalue()
 
 
@@ -712,7 +689,7 @@ def run(cases: int, seed: int = 0, *, timeout: float = 60.0, first: int = 0, pro
 def _run(cases: int, seed: int, *, timeout: float, first: int, progress: bool):
     ops, spec = operations()
     server = start_server()
-    files = {"photos": photos(), "exif": jpeg_with_corrupt_exif(), "lights": LIGHTS}
+    files = {"photos": photos(), "exif": jpeg_with_damaged_exif(SIDE), "lights": LIGHTS}
     counts: dict[str, Counter] = defaultdict(Counter)
     failures: list[Failure] = []
     times: list[tuple[float, int, str]] = []
@@ -800,7 +777,7 @@ def main(argv=None) -> int:
         warnings.simplefilter("ignore")
         ops, spec = operations()
         server = start_server()
-        files = {"photos": photos(), "exif": jpeg_with_corrupt_exif(), "lights": LIGHTS}
+        files = {"photos": photos(), "exif": jpeg_with_damaged_exif(SIDE), "lights": LIGHTS}
         request = make_request(Draw(args.seed, args.case, spec, server.known, files), ops)
         print(request.shown())
         print(send(server, request, args.timeout))

@@ -714,6 +714,7 @@ def test_request_fuzz_seeded(monkeypatch):
     """A few hundred cases of ``benchmarks/fuzz_server.py`` (seed 0; the benchmark sends 10,000):
     every route, method, header and body kind; no 5xx, exception, hang or 4xx without its line."""
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_server.py"
+    monkeypatch.syspath_prepend(str(path.parent))  # its sibling hostile_files
     spec = importlib.util.spec_from_file_location("fuzz_server", path)
     fuzz = importlib.util.module_from_spec(spec)
     monkeypatch.setitem(sys.modules, "fuzz_server", fuzz)  # its dataclasses look their module up

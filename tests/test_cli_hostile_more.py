@@ -154,13 +154,21 @@ def test_the_shadow_fill_of_a_normal_along_the_light_is_finite():
     assert np.allclose(np.linalg.norm(filled, axis=2), 1.0)
 
 
-@pytest.fixture(scope="module")
-def damaged_exif(tmp_path_factory) -> Path:
+def fuzz_cli():
+    """``benchmarks/fuzz_cli.py`` as a module (its folder on the path for its sibling imports)."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location("fuzz_cli", ROOT / "benchmarks" / "fuzz_cli.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def damaged_exif(tmp_path_factory) -> Path:
+    module = fuzz_cli()
     path = tmp_path_factory.mktemp("exif") / "photo.jpg"
-    path.write_bytes(module._damaged_exif_jpeg())
+    path.write_bytes(module.jpeg_with_damaged_exif())
     return path
 
 
@@ -267,9 +275,7 @@ def test_a_signal_ends_the_process_even_when_its_exception_is_swallowed(tmp_path
 
 def test_a_short_fuzz_of_the_command_line_finds_nothing():
     """A few hundred seeded argument sets of benchmarks/fuzz_cli.py (the full run: 10,000)."""
-    spec = importlib.util.spec_from_file_location("fuzz_cli", ROOT / "benchmarks" / "fuzz_cli.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = fuzz_cli()
     result = module.fuzz(200, seed=1, seconds=60)
     found = [
         (number, args, findings, done["stderr"][-300:]) for number, args, findings, done in result["failures"]
