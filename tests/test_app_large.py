@@ -279,3 +279,28 @@ def test_the_background_solver_gives_way_to_what_the_user_looks_at():
         assert os.getpriority(os.PRIO_PROCESS, pid) == wanted
     finally:
         jobs.close()
+
+
+def test_the_object_is_found_on_the_photos_colours(client):
+    # a painted body on wood grain (benchmarks/composites.py), as a JPEG: the luma alone takes a
+    # sixth of the object; the background solve's worker and the quick look find it on the colours
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_masks_composites import body, composites, iou
+
+    picture, truth = composites.composite(body(seed=3), "wood", 3, shadow=True)
+    buffer = io.BytesIO()
+    Image.fromarray(np.round(srgb_encode(picture) * 255).astype(np.uint8)).save(buffer, "JPEG", quality=90)
+    upload = client.post("/api/images", files={"file": ("wood.jpg", buffer.getvalue(), "image/jpeg")}).json()
+    body_ = {"image_id": upload["image_id"], "request_id": 3, "params": {"method": "propagation"}}
+    job = wait(client, client.post("/api/solves", json=body_).json()["job_id"])
+    assert job["state"] == "done", job
+    result = client.get(f"/api/solves/{job['job_id']}/result").json()
+    mask = np.asarray(Image.open(io.BytesIO(base64.b64decode(result["mask_png"])))) > 0
+    mask = mask[..., 0] if mask.ndim == 3 else mask
+    assert iou(mask, truth) >= 0.9
+    auto = client.post(f"/api/images/{upload['image_id']}/mask/auto", json={}).json()
+    found = np.asarray(Image.open(io.BytesIO(base64.b64decode(auto["mask_png"])))) > 0
+    assert iou(found[..., 0] if found.ndim == 3 else found, truth) >= 0.9

@@ -276,6 +276,7 @@ def _reconstruct_one(
     from shadeform.io.atomic import OutputSet
     from shadeform.io.images import read_photo
     from shadeform.io.maps import save_depth, save_normal_map
+    from shadeform.masks import find_object
 
     start = time.perf_counter()
     read = None
@@ -283,7 +284,8 @@ def _reconstruct_one(
         with OutputSet() as outputs:  # a photo's files appear together or not at all
             temps = [outputs.temp(path) for path in files]
             read = read_photo(photo, channel=channel, linear=linear, max_pixels=max_pixels)
-            rec = shadeform.reconstruct(read.image, **options)
+            found = find_object(read.pixels)  # on the photo's colours, which find it best
+            rec = shadeform.reconstruct(read.image, mask=found, **options)
             mesh = shadeform.to_mesh(rec, step=step)
             shadeform.export(mesh, temps[0])
             for path, temp in zip(files[1:], temps[1:]):

@@ -19,8 +19,8 @@ from shadeform.confidence import assess
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.light import as_light, estimate_light
-from shadeform.masks import find_object
-from shadeform.preprocess import Filter, apply_filter, image_detail, noise_level, object_mask, parse_filter
+from shadeform.masks import FoundObject, find_object
+from shadeform.preprocess import Filter, apply_filter, image_detail, noise_level, parse_filter
 from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, as_regions, concave_masks
 from shadeform.solvers import (
@@ -50,7 +50,7 @@ def reconstruct(
     *,
     light: Sequence[float] | str = (0.0, 0.0, 1.0),
     method: str = "auto",
-    mask: np.ndarray | None = None,
+    mask: np.ndarray | FoundObject | None = None,
     filter: str | Filter | None = None,
     references: Sequence | None = None,
     concave: Any = None,
@@ -85,8 +85,13 @@ def reconstruct(
         shadows as ``N . L <= 0``; marching from the brightest pixels, then descent on chord
         equations: :mod:`shadeform.solvers.oblique`; the first reference only sets where
         ``z = 0``), or any solver added with :func:`shadeform.solvers.register`.
-    mask : (H, W) bool, optional
-        Object pixels; by default found automatically (dark background).
+    mask : (H, W) bool or FoundObject, optional
+        Object pixels; by default found automatically on ``image``
+        (:func:`shadeform.masks.find_object`). A :class:`~shadeform.masks.FoundObject` is an
+        automatic mask the caller found, e.g. on the photo's colours (``find_object(photo.pixels)``,
+        as the command line does; colours find an object on a textured background far more often
+        than brightness does, ``benchmarks/results/masks.md``): its warning, if doubtful, is
+        ``info["mask_warning"]`` as for the mask found here.
     filter : str or Filter, optional
         ``"none"``, ``"gaussian:SIGMA"``, ``"mean:R"``, ``"median:R"`` or ``"minimum:R"``. Not
         given, a solver with a noise policy smooths a noisy image its own way (the oblique solver:
@@ -152,13 +157,9 @@ def reconstruct(
     user_filter = parse_filter(filter) if filter else None
 
     decided: dict[str, Any] = {}  # what was settled on the way, for info
-    if mask is None:
-        found = find_object(image)
-        mask = found.mask
-        if found.warning:  # a doubtful automatic mask: the CLI prints it, the app shows it
-            decided["mask_warning"] = found.warning
-    else:
-        mask = check_mask(mask, image.shape)
+    mask, warning = _object(image, mask)
+    if warning:  # a doubtful automatic mask: the CLI prints it, the app shows it
+        decided["mask_warning"] = warning
     _check_shading(image, mask)
     lap("mask")
     shading = apply_filter(image, mask, user_filter) if user_filter else image
@@ -388,7 +389,7 @@ def reconstruct_on_grid(
     image: np.ndarray,
     *,
     step: int,
-    mask: np.ndarray | None = None,
+    mask: np.ndarray | FoundObject | None = None,
     filter: str | None = None,
     references: Sequence | None = None,
     concave: Any = None,
@@ -434,10 +435,13 @@ def reconstruct_on_grid(
     """
     image = _check_image(image)
     step = whole(step, "step", minimum=1)
-    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
+    found = mask if isinstance(mask, FoundObject) else None
+    mask, warning = _object(image, mask)
     _check_shading(image, mask)
     if step == 1:
-        rec = reconstruct(image, mask=mask, filter=filter, references=references, concave=concave, **options)
+        rec = reconstruct(
+            image, mask=found or mask, filter=filter, references=references, concave=concave, **options
+        )
         return replace(rec, info={**rec.info, "grid_step": 1})
     coarse_mask = mask[::step, ::step]
     if not coarse_mask.any():
@@ -458,6 +462,7 @@ def reconstruct_on_grid(
     )
     info = {
         **rec.info,
+        **({"mask_warning": warning} if warning else {}),
         "grid_step": step,
         "references": [(r * step, c * step) for r, c in rec.info["references"]],
         "unsure": [  # in input pixels, like the references
@@ -476,7 +481,7 @@ def reconstruct_preview(
     image: np.ndarray,
     *,
     step: int,
-    mask: np.ndarray | None = None,
+    mask: np.ndarray | FoundObject | None = None,
     **options: Any,
 ) -> Reconstruction:
     """A quick look at what ``to_mesh(reconstruct(...), step=step)`` will show.
@@ -492,7 +497,7 @@ def reconstruct_preview(
         As for :func:`reconstruct`.
     step : int, keyword-only
         The mesh's grid spacing in pixels, ``>= 1`` (1 is the full solve).
-    mask : (H, W) bool, keyword-only
+    mask : (H, W) bool or FoundObject, keyword-only
         As for :func:`reconstruct`.
     **options
         ``filter``, ``references``, ``concave``, ``light``, ``method``, ``integrator``,
@@ -517,10 +522,12 @@ def reconstruct_preview(
     """
     image = _check_image(image)
     step = whole(step, "step", minimum=1)
-    mask = object_mask(image) if mask is None else check_mask(mask, image.shape)
+    if mask is None:
+        mask = find_object(image)  # once, for the grid's solve and the full-size mask
     if step == 1:
         return reconstruct(image, mask=mask, **options)
     rec = reconstruct_on_grid(image, step=step, mask=mask, **options)
+    mask, _ = _object(image, mask)  # as the grid's solve took it (its warning is in rec.info)
     coarse_mask = rec.mask
 
     normals = np.full(image.shape + (3,), np.nan)
@@ -542,6 +549,16 @@ def reconstruct_preview(
         info=info,
         confidence=confidence,
     )
+
+
+def _object(image: np.ndarray, mask) -> tuple[np.ndarray, str | None]:
+    """The object's mask, checked, and the warning of a doubtful automatic one: found here on
+    ``image`` when ``mask`` is None, or by the caller (a :class:`FoundObject`)."""
+    if mask is None:
+        mask = find_object(image)
+    if isinstance(mask, FoundObject):
+        return check_mask(mask.mask, image.shape), mask.warning
+    return check_mask(mask, image.shape), None
 
 
 def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:

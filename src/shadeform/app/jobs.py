@@ -117,6 +117,7 @@ def _worker(conn) -> None:
     warnings.showwarning = log_warning
     # imported while the worker waits for its first job
     from shadeform.errors import InputError
+    from shadeform.masks import find_object
     from shadeform.pipeline import reconstruct
 
     while True:
@@ -126,12 +127,15 @@ def _worker(conn) -> None:
             return
         if message is None:
             return
-        image_spec, mask_spec, out_specs, settings = message
+        image_spec, mask_spec, colour_spec, out_specs, settings = message
         opened: list = []
         image = mask = rec = None
         try:
             image = _attach(image_spec, opened)
             mask = None if mask_spec is None else _attach(mask_spec, opened)
+            if colour_spec is not None:  # the object found on the photo's colours
+                conn.send(("progress", "mask", 0.0))
+                mask = find_object(_attach(colour_spec, opened))
             rec = reconstruct(
                 image,
                 mask=mask,
@@ -223,9 +227,13 @@ class SolveJobs:
         mask: np.ndarray | None,
         settings: dict[str, Any],
         finish: Callable[[Job, Any], Any],
+        *,
+        colour: np.ndarray | None = None,
     ) -> Job:
         """Solve ``reconstruct(image, mask=mask, **settings)`` in the worker; ``finish(job, rec)``
-        (run in this process, in the job's thread) makes what the job's result is."""
+        (run in this process, in the job's thread) makes what the job's result is. Without a
+        ``mask``, the worker finds the object on ``colour`` (the photo's colours, (H, W, 3)) when
+        given, else the pipeline on ``image``."""
         job = Job(secrets.token_hex(8), request_id)
         with self._lock:
             superseded = self._running
@@ -237,7 +245,10 @@ class SolveJobs:
                 self._jobs.popitem(last=False)
             self._running = job
         job.thread = threading.Thread(
-            target=self._run, args=(job, image, mask, settings, finish), name="shadeform-job", daemon=True
+            target=self._run,
+            args=(job, image, mask, colour, settings, finish),
+            name="shadeform-job",
+            daemon=True,
         )
         job.thread.start()
         return job
@@ -265,7 +276,7 @@ class SolveJobs:
                 self._stop_worker()
         return job
 
-    def _run(self, job: Job, image, mask, settings, finish) -> None:
+    def _run(self, job: Job, image, mask, colour, settings, finish) -> None:
         from shadeform.reconstruction import Reconstruction
 
         blocks: list = []
@@ -285,7 +296,10 @@ class SolveJobs:
             }
             image_spec = _share(np.asarray(image, dtype=np.float32), blocks)
             mask_spec = None if mask is None else _share(np.asarray(mask, dtype=bool), blocks)
-            conn.send((image_spec, mask_spec, out_specs, settings))
+            colour_spec = None
+            if mask is None and colour is not None:
+                colour_spec = _share(np.asarray(colour, dtype=np.float32), blocks)
+            conn.send((image_spec, mask_spec, colour_spec, out_specs, settings))
             while True:
                 message = conn.recv()
                 if message[0] != "progress":

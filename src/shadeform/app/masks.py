@@ -63,7 +63,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
             return _result(mask, threshold=body.threshold, dark=dark, note=note)
         if entry.mask is not None and body.dark is None:
             return _result(automatic, threshold=None, dark=False, note="the example's true mask")
-        found = find_object(image, dark=body.dark)
+        found = find_object(entry.pixels if body.dark is None else image, dark=body.dark)  # colours
         note = found.note if found.warning is None else f"{found.note}; {found.warning}"
         return _result(
             found.mask, threshold=found.threshold, dark=found.dark, note=note, confidence=found.confidence
@@ -75,8 +75,8 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
 
         entry = state.image(image_id)
         image, _, _ = _channel(state, entry, body.channel)
-        mask, confidence = segment_from_seeds(
-            image, body.inside, body.outside, radius=body.radius, return_confidence=True
+        mask, confidence = segment_from_seeds(  # cut on the photo's colours
+            entry.pixels, body.inside, body.outside, radius=body.radius, return_confidence=True
         )
         inside, outside = len(body.inside), len(body.outside)
         note = f"grown from {inside} click{'s' * (inside != 1)} on the object"
@@ -90,7 +90,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
 
         entry = state.image(image_id)
         image, _, _ = _channel(state, entry, body.channel)
-        mask, confidence = segment_from_box(image, body.box, return_confidence=True)
+        mask, confidence = segment_from_box(entry.pixels, body.box, return_confidence=True)
         note = "found inside the box drawn round the object"
         return _result(mask, threshold=None, dark=_darker(image, mask), note=note, confidence=confidence)
 

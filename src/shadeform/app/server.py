@@ -616,7 +616,7 @@ def _solve(
         if spacing > 1
         else reconstruct(image, **settings)
     )
-    if params.mask is None and (warning := _mask_warning(state, entry, params.channel)):
+    if params.mask is None and (warning := _mask_warning(state, entry)):
         rec.info["mask_warning"] = warning  # as the CLI says it: the pipeline was given this mask
     depth = rec.depth[rec.mask]
     solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
@@ -677,10 +677,12 @@ def _solve_level(
     settings = _settings(params, factor)
     known = state.masks.get(("level", entry.image_id, params.channel, factor))
     if known is None:
-        from shadeform.preprocess import object_mask
+        from shadeform.masks import find_object
 
         image, mask = level(select_channel(entry.pixels, params.channel), entry.mask, factor)
-        known = (image, object_mask(image) if mask is None else mask)
+        if mask is None:  # found on the level's colours, as the full photo's (_channel)
+            mask = find_object(downsample(entry.pixels, factor)).mask
+        known = (image, mask)
         state.masks.put(("level", entry.image_id, params.channel, factor), known, known[0].nbytes)
     image, mask = known
     if params.mask is not None:  # the user's mask, at the level
@@ -721,29 +723,29 @@ def _level_references(references: list, mask: np.ndarray, factor: int) -> list:
 
 
 def _channel(state: _State, entry: StoredImage, channel: str) -> tuple[np.ndarray, np.ndarray, str]:
-    """One channel of a stored image, its object mask and the mask as base64 PNG, kept per
-    image and channel: the mask does not change with the other parameters."""
+    """One channel of a stored image, its object mask and the mask as base64 PNG, the mask kept
+    per image: it is found on the photo's colours, whatever the channel and other parameters."""
     from shadeform.io.images import select_channel
     from shadeform.masks import find_object
 
     image = select_channel(entry.pixels, channel)
-    key = ("mask", entry.image_id, channel)
+    key = ("mask", entry.image_id)
     known = state.masks.get(key)
     if known is None:
         warning = None
         if entry.mask is not None:
             mask = entry.mask
         else:
-            found = find_object(image)
+            found = find_object(entry.pixels)
             mask, warning = found.mask, found.warning
         known = (mask, png_base64(mask.astype(np.float32)), warning)
         state.masks.put(key, known, mask.nbytes)
     return image, *known[:2]
 
 
-def _mask_warning(state: _State, entry: StoredImage, channel: str) -> str | None:
+def _mask_warning(state: _State, entry: StoredImage) -> str | None:
     """The automatic mask's one-line warning when it is doubtful (kept with it by :func:`_channel`)."""
-    known = state.masks.get(("mask", entry.image_id, channel))
+    known = state.masks.get(("mask", entry.image_id))
     return known[2] if known is not None else None
 
 
@@ -814,7 +816,7 @@ def _start_job(state: _State, entry: StoredImage, body: ReconstructRequest):
     settings = _settings(params)
     image = select_channel(entry.pixels, params.channel)
     # the automatic mask is found in the worker (1.6 s at 12 Mpx), unless it is known already
-    known = state.masks.get(("mask", entry.image_id, params.channel))
+    known = state.masks.get(("mask", entry.image_id))
     mask, mask_png = known[:2] if known is not None else (entry.mask, None)
     if params.mask is not None:
         mask, mask_png = user_mask(state, params.mask, image.shape)
@@ -824,8 +826,8 @@ def _start_job(state: _State, entry: StoredImage, body: ReconstructRequest):
         if mask_png is None:  # found by the pipeline, which said whether it is doubtful
             mask_png = png_base64(rec.mask.astype(np.float32))
             known = (rec.mask, mask_png, rec.info.get("mask_warning"))
-            state.masks.put(("mask", entry.image_id, params.channel), known, rec.mask.nbytes)
-        elif params.mask is None and (warning := _mask_warning(state, entry, params.channel)):
+            state.masks.put(("mask", entry.image_id), known, rec.mask.nbytes)
+        elif params.mask is None and (warning := _mask_warning(state, entry)):
             rec.info["mask_warning"] = warning
         depth = rec.depth[rec.mask]
         solved = _Solved(rec, mask_png, (float(np.nanmin(depth)), float(np.nanmax(depth))))
@@ -838,7 +840,8 @@ def _start_job(state: _State, entry: StoredImage, body: ReconstructRequest):
             body.request_id, _result(entry, body, cached, True, start).model_dump_json()
         )
         return job
-    return state.jobs.start(body.request_id, image, mask, settings, finish)
+    colour = entry.pixels if mask is None else None  # the worker finds the object on it
+    return state.jobs.start(body.request_id, image, mask, settings, finish, colour=colour)
 
 
 def _job(state: _State, job_id: str):

@@ -122,6 +122,7 @@ def fuse(
     from shadeform._checks import check_choice
     from shadeform.fusion import SURFACES, place, solid
     from shadeform.io.images import read_photo
+    from shadeform.masks import find_object
     from shadeform.mesh import solid_measures
     from shadeform.regions import as_regions
 
@@ -161,7 +162,7 @@ def fuse(
                 object_masks.append(
                     shadeform.load_mask(entry.mask, shape=photo.image.shape, max_pixels=max_pixels)
                     if entry.mask
-                    else None
+                    else find_object(photo.pixels)  # on the photo's colours, which find it best
                 )
                 try:
                     drawn.append(list(as_regions(entry.concave)))

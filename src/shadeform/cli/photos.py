@@ -218,8 +218,8 @@ def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels,
     ``info`` holds the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
     import shadeform
     from shadeform.io.images import read_photo
+    from shadeform.masks import find_object
     from shadeform.pipeline import reconstruct_on_grid
-    from shadeform.preprocess import object_mask as find_mask
 
     with stage(err, f"loading {escape(str(image))}", timings, "load"):
         photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
@@ -229,12 +229,12 @@ def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels,
             else None
         )
     with stage(err, f"reconstructing ({options.get('method', 'auto')})", timings, "reconstruct"):
+        if object_mask is None:  # found on the photo's colours, which tell an object from its table best
+            object_mask = find_object(photo.pixels)
         if grid is None:
             rec = shadeform.reconstruct(photo.image, mask=object_mask, **options)
         else:
-            if object_mask is None:
-                object_mask = find_mask(photo.image)
-            step = grid(object_mask)
+            step = grid(getattr(object_mask, "mask", object_mask))
             rec = reconstruct_on_grid(photo.image, step=step, mask=object_mask, **options)
     return photo, replace(rec, info={**rec.info, "photo": photo.info})
 

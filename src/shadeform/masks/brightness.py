@@ -57,10 +57,10 @@ __all__ = ["FoundObject", "threshold_object", "LOW_CONFIDENCE"]
 
 #: Below this confidence (:attr:`FoundObject.confidence`) a mask is doubtful and the user is told.
 #: Chosen on ``benchmarks/bench_masks.py``'s training backgrounds only (table, paper, wood, cloth;
-#: the threshold that best separates masks under 0.9 IoU from the rest), checked on the held-out
-#: granite (``benchmarks/results/masks.md``: 0.989, rounded; it flags half the training masks under
-#: 0.9 and a tenth of the rest: a weak measure, see there).
-LOW_CONFIDENCE = 0.99
+#: the threshold that best separates the colour masks under 0.9 IoU from the rest), checked on the
+#: held-out granite (``benchmarks/results/masks.md``: 0.965; how many it flags is
+#: there).
+LOW_CONFIDENCE = 0.965
 # How far from the background level a pixel must be to be object: this many noise sigmas ...
 _NOISE_SIGMAS = 3.0
 # ... more than this percentile of the background as the frame shows it (5 % left for dust,
@@ -101,8 +101,8 @@ class FoundObject:
         True when no background was found (``separation <= 2 / pi`` and the object's class
         reaches the frame): the mask is the whole image.
     confidence : float
-        How sure the mask is, in ``[0, 1]``: the mean IoU between the mask and the answers of the
-        other ways of finding it (:func:`shadeform.masks.graphcut.cut`). Below :data:`LOW_CONFIDENCE`
+        How sure the mask is, in ``[0, 1]``: the highest IoU between the mask and the answer of
+        another way of finding it (:func:`shadeform.masks.graphcut.agreement`). Below :data:`LOW_CONFIDENCE`
         the mask is doubtful (:attr:`warning`).
     """
 

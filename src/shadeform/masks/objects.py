@@ -104,7 +104,7 @@ def find_object(
     band = segment.frame_band(grey.shape) & (found.whole_frame | ~found.mask)  # a cut-off object stays one
     nothing = np.zeros(grey.shape, dtype=bool)
     starts = [
-        segment.Hints(band, nothing, ~band),  # the answer; the other measures how sure it is
+        segment.Hints(band, nothing, ~band),  # the lowest-energy of the two answers
         segment.Hints(band, nothing, _ellipse(grey.shape, (0, 0, *grey.shape)) & ~band),
     ]
 
@@ -124,7 +124,7 @@ def find_object(
             False,
             segment.agreement(chosen.mask, chosen.answers),
         )
-    mask = found.mask if _iou(found.mask, chosen.mask) >= _AGREE else chosen.mask
+    mask = found.mask if _confirmed(found.mask, chosen) else chosen.mask
     if not mask.any():
         mask = found.mask
     object_darker = _darker(grey, mask) if mask is not found.mask else found.dark
@@ -225,7 +225,7 @@ def segment_from_seeds(
     ]
     chosen = segment.cut(picture, starts, extra=[] if grown is None else [grown], tidy=tidy)
     mask = chosen.mask
-    if grown is not None and _iou(grown, mask) >= _AGREE:
+    if grown is not None and _confirmed(grown, chosen):
         mask = grown
     elif refusal is not None and np.count_nonzero(mask) <= 4 * np.count_nonzero(seeds_in):
         raise refusal
@@ -302,7 +302,7 @@ def segment_from_box(
 
     chosen = segment.cut(picture, starts, extra=extra, tidy=tidy)
     mask = chosen.mask
-    if extra and _iou(extra[0], mask) >= _AGREE:
+    if extra and _confirmed(extra[0], chosen):
         mask = extra[0]
     return (mask, segment.agreement(mask, chosen.answers)) if return_confidence else mask
 
@@ -350,6 +350,13 @@ def _as_picture(image) -> np.ndarray:
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return segment.iou(a, b)
+
+
+def _confirmed(mask: np.ndarray, chosen: segment.Cut) -> bool:
+    """Whether a cut the answer was chosen from finds ``mask`` too (IoU >= 0.95): any start's cut
+    on the colours (the frame start's may confirm a brightness mask that the ellipse start,
+    lower in energy, cuts short: a phone's dark handset on a lab backdrop), the first on grey."""
+    return max((_iou(mask, answer) for answer in chosen.candidates), default=0.0) >= _AGREE
 
 
 def _darker(image: np.ndarray, mask: np.ndarray) -> bool:
