@@ -189,7 +189,12 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
             *warning_lines(rows, threshold),
             "",
         ]
-    lines += ["## Lab photos as they are (automatic mask)", "", "| object | photo | colour | grey |", "|---|---|---:|---:|"]
+    lines += [
+        "## Lab photos as they are (automatic mask)",
+        "",
+        "| object | photo | colour | grey |",
+        "|---|---|---:|---:|",
+    ]
     lines += [f"| {r['object']} | {r['photo']} | {r['auto']:.3f} | {r['grey']:.3f} |" for r in lab]
     lines += ["", "## Per object and background (auto / grey / click / box; confidence)", ""]
     lines += [

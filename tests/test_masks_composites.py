@@ -171,7 +171,9 @@ def _energy_by_loops(picture, labels, background_model, object_model) -> float:
         for x in range(width):
             for dy, dx, weight in ((0, 1, 1.0), (1, 1, 2**-0.5), (1, 0, 1.0), (1, -1, 2**-0.5)):
                 if 0 <= y + dy < height and 0 <= x + dx < width:
-                    links.append((y, x, y + dy, x + dx, weight, float(((z[y, x] - z[y + dy, x + dx]) ** 2).sum())))
+                    links.append(
+                        (y, x, y + dy, x + dx, weight, float(((z[y, x] - z[y + dy, x + dx]) ** 2).sum()))
+                    )
     beta = 1 / (2 * np.mean([link[5] for link in links]))
     total = sum(
         cost(z[y, x], object_model if labels[y, x] % 2 else background_model)
@@ -200,7 +202,9 @@ def test_energy_matches_its_loop_reference():
     from shadeform.masks.graphcut import energy
 
     picture, ended, models = _small_cut()
-    assert energy(picture, ended, *models) == pytest.approx(_energy_by_loops(picture, ended, *models), rel=1e-9)
+    assert energy(picture, ended, *models) == pytest.approx(
+        _energy_by_loops(picture, ended, *models), rel=1e-9
+    )
 
 
 def test_energy_is_what_the_cut_minimises():
