@@ -162,7 +162,7 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
     ]
     groups = [
         ("training (table, paper, wood, cloth)", composites.TRAINING),
-        ("held out (granite)", composites.HELD_OUT),
+        ("held out (" + ", ".join(composites.HELD_OUT) + ")", composites.HELD_OUT),
     ]
     groups += [(family, (family,)) for family in composites.FAMILIES]
     groups.append(("all", composites.FAMILIES))

@@ -804,6 +804,52 @@ def test_mask_click_the_object(page, tmp_path):
     np.testing.assert_array_equal(params_mask(page), mask)
 
 
+def test_mask_box_round_the_object(page, tmp_path):
+    from PIL import Image
+
+    # a grey disk on a warm wood-like stripe pattern: a box round it finds the disk inside, on its
+    # colours (the stripes are as bright as the disk's edge)
+    rows, cols = np.mgrid[0:120, 0:200]
+    stripes = 0.5 + 0.2 * np.sin(cols / 3.0)
+    image = np.stack([stripes * 0.9, stripes * 0.5, stripes * 0.2], axis=-1)
+    disk = np.hypot(rows - 60, cols - 100) < 35
+    shade = np.sqrt(np.clip(1 - (np.hypot(rows - 60, cols - 100) / 35) ** 2, 0, 1))
+    image[disk] = (0.25 + 0.6 * shade[disk])[:, None] * np.array([0.6, 0.7, 0.9])
+    png = tmp_path / "disk-on-stripes.png"
+    Image.fromarray(np.rint(np.clip(image, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)).save(png)
+    before = applied(page)
+    page.set_input_files("#file-image", str(png))
+    wait_for_result(page, before, timeout=FIRST_RESULT_MS)
+
+    page.keyboard.press("k")
+    page.click('#mask-mode [data-mask-mode="box"]')
+    assert mask_state(page)["mode"] == "box"
+    before = applied(page)
+    start = page.evaluate("window.shadeform.pagePoint(55, 15)")
+    end = page.evaluate("window.shadeform.pagePoint(145, 105)")
+    page.mouse.move(start["x"], start["y"])
+    page.mouse.down()
+    page.mouse.move((start["x"] + end["x"]) / 2, (start["y"] + end["y"]) / 2, steps=4)
+    page.mouse.move(end["x"], end["y"], steps=4)
+    page.screenshot(path=str(tmp_path / "box-drag.png"))
+    page.mouse.up()
+    wait_for_result(page, before)
+    mask = params_mask(page)
+    union = (mask | disk).sum()
+    assert (mask & disk).sum() / union >= 0.9
+    assert not mask[:, :50].any() and not mask[:, 150:].any()  # nothing outside the box
+    assert "box" in mask_state(page)["note"]
+
+    # a box too small to hold anything is refused in words, and the mask stays
+    start = page.evaluate("window.shadeform.pagePoint(10, 10)")
+    page.mouse.move(start["x"], start["y"])
+    page.mouse.down()
+    page.mouse.up()
+    page.wait_for_function("window.shadeform.mask().error !== null")
+    assert "drag a box round the object" in mask_state(page)["error"]
+    np.testing.assert_array_equal(params_mask(page), mask)
+
+
 def test_mask_save_load_and_reload(page, tmp_path):
     from PIL import Image
 

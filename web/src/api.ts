@@ -7,6 +7,7 @@
 // NetworkError, and the connection says so and waits for the server to come back.
 import type {
   AutoMaskRequest,
+  BoxMaskRequest,
   FuseRequest,
   FuseResult,
   ImageInfo,
@@ -210,7 +211,7 @@ export function cancelSolve(jobId: string): Promise<SolveJob> {
   return json<SolveJob>(send(`/api/solves/${encodeURIComponent(jobId)}`, { method: 'DELETE' }));
 }
 
-function maskUrl(imageId: string, what: 'auto' | 'seeds' | 'file'): string {
+function maskUrl(imageId: string, what: 'auto' | 'seeds' | 'box' | 'file'): string {
   return `/api/images/${encodeURIComponent(imageId)}/mask/${what}`;
 }
 
@@ -222,6 +223,11 @@ export function autoMask(imageId: string, request: AutoMaskRequest, signal?: Abo
 /** The object under the user's clicks. */
 export function seedMask(imageId: string, request: SeedMaskRequest): Promise<MaskResult> {
   return json<MaskResult>(postJson(maskUrl(imageId, 'seeds'), request));
+}
+
+/** The object inside a box drawn round it. */
+export function boxMask(imageId: string, request: BoxMaskRequest): Promise<MaskResult> {
+  return json<MaskResult>(postJson(maskUrl(imageId, 'box'), request));
 }
 
 /** A mask file checked against the image (size, not empty) and made the app's PNG. */

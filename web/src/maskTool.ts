@@ -1,6 +1,6 @@
 // The mask tool: the object mask as a bitmap the user edits in the image pane (brush, polygon,
-// invert, fill holes) or asks the server for (automatic, a threshold, "click the object", a
-// file), and the side panel's Mask group.
+// invert, fill holes) or asks the server for (automatic, a threshold, "click the object", a box
+// round it, a file), and the side panel's Mask group.
 //
 // The mask every solve and export uses is params.mask: null for the automatic one (the
 // server's; each result brings it, and the pane shows it), else base64 of a PNG that this tool
@@ -9,11 +9,12 @@
 import * as api from './api';
 import type { Channel, MaskResult } from './api.gen';
 import { segmentDistance, type Point } from './geometry';
+import { MaskBox, MIN_BOX } from './maskBox';
 import { MASK_EDGE, MASK_FILL } from './maskColours';
 import type { MaskDecodeReply } from './maskWorker';
 import { percentOfWhite, thresholdWords } from './words';
 
-export type MaskMode = 'brush' | 'polygon' | 'object';
+export type MaskMode = 'brush' | 'polygon' | 'object' | 'box';
 export type MaskOp = 'add' | 'erase';
 
 /** Pixel bounds, columns x0 .. x1 - 1 and rows y0 .. y1 - 1. */
@@ -294,6 +295,7 @@ export class MaskTool {
   private user = false; // params.mask is set: the bits are the user's, not the automatic ones
   private what = '';
   private draft: Point[] = [];
+  private readonly box = new MaskBox();
   private inside: Array<[number, number]> = [];
   private outside: Array<[number, number]> = [];
   private last: Point | null = null; // the brush's previous point while painting
@@ -415,6 +417,7 @@ export class MaskTool {
   setMode(mode: MaskMode): void {
     this.mode = mode;
     this.draft = [];
+    this.box.forget();
     this.host.notice(null);
     if (mode !== 'object') this.clearClicks();
     this.showControls();
@@ -661,6 +664,22 @@ export class MaskTool {
     }
   }
 
+  /** The box dragged round the object, sent to the server's cut. */
+  private async boxed(): Promise<void> {
+    const image = this.host.image();
+    const box = image ? this.box.finish(image.width, image.height) : null;
+    this.host.redraw();
+    if (!image) return;
+    if (!box) return this.error(`drag a box round the object, at least ${MIN_BOX} pixels each way`);
+    try {
+      const result = await api.boxMask(image.id, { channel: image.channel, box });
+      this.clearClicks();
+      await this.apply(result, true, result.note);
+    } catch (err) {
+      this.error((err as Error).message);
+    }
+  }
+
   // --------------------------------------------------------------------- pane interaction
 
   /** A press on the image with the mask tool; ``flip`` (Alt) swaps add and erase. */
@@ -674,6 +693,10 @@ export class MaskTool {
       this.polygonClick(at, add);
       return;
     }
+    if (this.mode === 'box') {
+      this.box.begin(at);
+      return;
+    }
     const mask = this.editable();
     if (!mask) return;
     this.clearClicks();
@@ -683,6 +706,7 @@ export class MaskTool {
   }
 
   move(at: Point): void {
+    if (this.box.dragging) return this.box.drag(at), this.host.redraw();
     if (this.painting === null || !this.mask || !this.last) return;
     const dirty = this.mask.stroke(this.last, at, this.radius, this.painting);
     this.last = at;
@@ -690,6 +714,7 @@ export class MaskTool {
   }
 
   up(): void {
+    if (this.box.dragging) return void this.boxed();
     if (this.painting === null) return;
     const added = this.painting === 1;
     this.painting = null;
@@ -766,6 +791,7 @@ export class MaskTool {
       if (this.draft.length < 3) return `Click corners of a polygon to ${this.op === 'add' ? 'add' : 'cut'} · ${flip}`;
       return 'Click the first corner or press Enter to close · Backspace removes a corner · Esc cancels';
     }
+    if (this.mode === 'box') return 'Drag a box round the object: it is found inside, on its colours and edges';
     return this.op === 'add'
       ? 'Click the object: it grows from your clicks · Alt-click marks background · Esc forgets the clicks'
       : 'Click the background · Alt-click marks the object · Esc forgets the clicks';
@@ -807,6 +833,7 @@ export class MaskTool {
         ctx.fill();
       });
     }
+    this.box.draw(ctx, toScreen);
     for (const [list, colour] of [[this.inside, '#22c55e'], [this.outside, '#ef4444']] as const) {
       for (const [row, col] of list) {
         const [sx, sy] = toScreen([col, row]);
