@@ -9,6 +9,8 @@ view, which isolates the fusion from the single-photo errors.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import trimesh
@@ -564,3 +566,33 @@ def test_views_from_opposite_sides_only_do_not_fix_the_depth():
     assert not place(list(zip(true_views("waisted", (0, 185)), (0, 185))), refine=False).depth_fixed
     assert place(list(zip(true_views("waisted", (0, 90)), (0, 90))), refine=False).depth_fixed
     assert place(list(zip(true_views("waisted", (0, 180, 270)), (0, 180, 270))), refine=False).depth_fixed
+
+
+@pytest.mark.parametrize("name", ["pebble", "lumpy"])
+def test_a_front_and_back_pair_keeps_its_outline_and_meets_at_its_rim(name):
+    """Views from opposite sides share their outline (the same contour generator): the back view
+    is moved until its rim meets the front's, so the model is as wide and tall as the
+    silhouettes and as deep as the object, and no voxel off the masks is counted inside (such
+    voxels made needles along the line of sight)."""
+    from shadeform.fusion import solid
+    from shadeform.fusion.outlines import outline_iou
+
+    angles = (0, 180)
+    views = true_views(name, angles)
+    placement = place(list(zip(views, angles)))
+    mesh = solid(placement)
+    assert trimesh.Trimesh(mesh.vertices, mesh.faces).is_watertight
+    assert min(outline_iou(mesh, placement)) >= 0.95
+    # a model two thirds the size keeps about half of each outline, and is measured so
+    centre = mesh.vertices.mean(axis=0)
+    shrunk = dataclasses.replace(mesh, vertices=centre + (mesh.vertices - centre) * (2 / 3))
+    assert max(outline_iou(shrunk, placement)) < 0.5
+    rows, cols = np.nonzero(views[0].mask)
+    extent = np.ptp(mesh.vertices, axis=0)
+    np.testing.assert_allclose(extent[:2], [np.ptp(cols) + 1, np.ptp(rows) + 1], rtol=0.05)
+    truth = synth.closed_object(name, size=SMALL)
+    points, _ = truth.surface_points(20_000, seed=1)
+    assert abs(extent[2] - np.ptp(points[:, 2])) <= 0.1 * np.ptp(points[:, 2]), (
+        extent,
+        np.ptp(points, axis=0),
+    )

@@ -313,7 +313,7 @@ export interface FuseResult {
   watertight: boolean;
   /** Other placements the photos fit about as well as the fused model's (``shadeform.fusion.Rival``): per placement, per view the degrees it is turned from where the model has it (0: not turned). Not empty: the photos do not decide, and the model may be wrong. */
   rivals: number[][];
-  /** Whether the views fix the object's depth (``shadeform.fusion.Placement.depth_fixed``): false when they all look along one line (from opposite sides only), and the model's thickness is a guess. */
+  /** Whether the views fix the object's depth (``shadeform.fusion.Placement.depth_fixed``): false when they all look along one line (from opposite sides only), and the model's thickness rests on each photo's shading alone. */
   depth_fixed: boolean;
   /** Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, total. */
   timings: Record<string, number>;

@@ -360,7 +360,7 @@ export class ViewsSession {
     if (!result.depth_fixed) {
       warnings.push(
         'The views look along one line only (from opposite sides), so they cannot tell how deep the object is: ' +
-          'its depth in the model is a guess; add a photo from the side (e.g. at 90°).',
+          "the model's depth rests on each photo's shading alone, the two joined at their shared outline; add a photo from the side (e.g. at 90°).",
       );
     }
     if (rivals.length) {

@@ -489,7 +489,7 @@ class FuseResult(_Model):
     depth_fixed: bool = Field(
         default=True,
         description="Whether the views fix the object's depth (``shadeform.fusion.Placement.depth_fixed``): "
-        "false when they all look along one line (from opposite sides only), and the model's thickness is a guess.",
+        "false when they all look along one line (from opposite sides only), and the model's thickness rests on each photo's shading alone.",
     )
     timings: dict[str, float] = Field(
         description="Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, "

@@ -121,6 +121,7 @@ def fuse(
     import shadeform
     from shadeform._checks import check_choice
     from shadeform.fusion import SURFACES, place, solid
+    from shadeform.fusion.outlines import OUTLINE_KEPT, outline_iou
     from shadeform.io.images import read_photo
     from shadeform.masks import find_object
     from shadeform.mesh import solid_measures
@@ -185,6 +186,7 @@ def fuse(
         outputs.commit()
     timings["total"] = time.perf_counter() - start
     measures = solid_measures(mesh)
+    outlines = outline_iou(mesh, placement)
     settled = [
         [{"centre": area["centre"], "axis": area["axis"], "polygon": area["polygon"]} for area in areas]
         for areas in placement.concave
@@ -202,6 +204,7 @@ def fuse(
                 "depth_fixed": placement.depth_fixed,
                 "files": {"mesh": output},
                 "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, **measures},
+                "outline_iou": outlines,
                 "timings": timings,
             }
         )
@@ -215,6 +218,19 @@ def fuse(
         f"{measures['volume']:,.0f} cubic pixels, "
         f"{'watertight' if measures['watertight'] else 'NOT watertight'}"
     )
+    out.print(
+        "  outlines kept (IoU of the model's projection with each view's mask): "
+        + ", ".join(f"view {i + 1} {value:.3f}" for i, value in enumerate(outlines)),
+        highlight=False,
+    )
+    for i, value in enumerate(outlines):
+        if value < OUTLINE_KEPT:
+            err.print(
+                f"warning: the model covers view {i + 1}'s outline poorly (IoU {value:.2f}): parts it "
+                "shows are missing or the model reaches past it; check that view's mask and angle",
+                soft_wrap=True,
+                highlight=False,
+            )
     for i, areas in enumerate(settled):
         for area in areas:
             x, y = (round(v) for v in area["centre"])
@@ -226,7 +242,7 @@ def fuse(
     if not placement.depth_fixed:
         err.print(
             "warning: the views look along one line only (from opposite sides), so they cannot tell "
-            "how deep the object is: its depth in the model is a guess; add a photo from the side "
+            "how deep the object is: the model's depth rests on each photo's shading alone, the two joined at their shared outline; add a photo from the side "
             "(e.g. at 90 degrees)",
             soft_wrap=True,
             highlight=False,

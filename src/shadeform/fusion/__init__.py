@@ -188,8 +188,9 @@ class Placement:
     def depth_fixed(self) -> bool:
         """Whether the views fix the object's depth: two of them look along directions more than
         :data:`CORRECTED` degrees from parallel (poses may be that far off). Views from opposite
-        sides only (0 and 180 degrees) see its width and height twice and its depth never: each
-        view's depth offset is free, and the fused model's thickness is a guess."""
+        sides only (0 and 180 degrees) see its width and height twice and its depth never: their
+        rims are joined (:func:`~shadeform.fusion.volume.rim_offset`), and the fused
+        model's thickness rests on each photo's shading alone."""
         axes = [view.rotation.T @ np.array([0.0, 0.0, 1.0]) for view in self.views]  # object frame
         return any(
             np.linalg.norm(np.cross(a, b)) > np.sin(np.radians(CORRECTED))

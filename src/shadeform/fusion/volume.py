@@ -8,8 +8,8 @@ the view's mask and lies at most ``truncation`` behind the view's surface) adds
 ``clip(s, -tau, tau) / tau`` weighted by how squarely the view saw that surface (its normal's
 ``n_z``; only a grazing view's weight where the view's depth is not trusted, beyond its own
 occluding contours: :func:`trusted_surface`); a voxel that projects outside any view's
-silhouette is outside (the visual hull, Laurentini 1994); one that no view sees, inside the
-hull, is inside. The zero level is meshed by marching cubes (Lorensen & Cline 1987), on a
+silhouette is outside (the visual hull, Laurentini 1994); one that no view sees is inside where
+a view's surface hides it. The zero level is meshed by marching cubes (Lorensen & Cline 1987), on a
 grid padded with outside so that the mesh is closed.
 
 References
@@ -36,6 +36,7 @@ __all__ = [
     "hull",
     "hull_depth",
     "one_solid",
+    "rim_offset",
     "trusted_surface",
     "view_offsets",
 ]
@@ -50,6 +51,9 @@ TOUCH_PERCENTILE = 2.0
 RIM_NZ = 0.3
 #: Smallest weight of a view's reading: how squarely it saw the surface (``n_z``), at least this.
 MIN_WEIGHT = 0.05
+#: Two views whose directions' dot product is below minus this face each other (within about 18
+#: degrees of opposite: the poses :func:`shadeform.fusion.fuse` corrects are at most 10 off).
+OPPOSITE = 0.95
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,18 +272,68 @@ def view_offsets(views: list[FusionView], grid: Grid, inside: np.ndarray) -> lis
     where both surfaces turn away steeply. A view whose direction no other view crosses keeps
     its offset.
 
+    A view that no other crosses but that another, placed before it, faces from the opposite side
+    (a turntable's 0 and 180 degrees) shares its outline with that view: in an orthographic
+    photo the surface's rim seen from a direction and from its opposite is the same curve (the
+    contour generator), so the view is moved until its rim meets the other's
+    (:func:`rim_offset`). Without it the two surfaces of a front and back pair lie at a guessed
+    distance, crossing each other near the outline (the model then narrower than both
+    silhouettes) or far apart.
+
     Returns
     -------
     list of float
         One offset per view, pixel units.
     """
-    offsets = []
+    offsets: list[float] = []
     for n, view in enumerate(views):
-        if not crossed(view, [other for m, other in enumerate(views) if m != n]):
-            offsets.append(view.offset)
+        if crossed(view, [other for m, other in enumerate(views) if m != n]):
+            offsets.append(touching_offset(view, hull_depth(view, grid, inside)))
             continue
-        offsets.append(touching_offset(view, hull_depth(view, grid, inside)))
+        facing = [m for m in range(n) if float(views[m].rotation[2] @ view.rotation[2]) < -OPPOSITE]
+        if facing:
+            other = views[facing[0]]
+            offsets.append(rim_offset(view, other.at(other.rotation, other.translation, offsets[facing[0]])))
+        else:
+            offsets.append(view.offset)
     return offsets
+
+
+def rim_offset(view: FusionView, other: FusionView) -> float:
+    """The offset that brings a view's rim onto the rim of ``other``, a view from the opposite
+    side (:func:`view_offsets`): the median, over the view's outline pixels that fall on the
+    other's mask, of how far apart the two surfaces lie there along the line of sight; the
+    view's offset unchanged where they share no outline."""
+    mask = view.mask & np.isfinite(view.depth)
+    rim = mask & ~ndimage.binary_erosion(mask, border_value=0)
+    rows, cols = np.nonzero(rim)
+    if not len(rows):
+        return view.offset
+    camera = other.camera(view.surface_points(rows, cols))
+    r, c = other.pixels(camera)
+    on = other.inside(r, c)
+    if not on.any():
+        return view.offset
+    # moving this view's surface by d along its own axis moves it by k * d along the other's
+    k = float(other.rotation[2] @ view.rotation[2])
+    # an outline pixel's centre lies half a pixel inside the outline, where the surface has
+    # already turned toward its camera: each view's rim lies that much behind its pixels
+    ahead = _past_rim(view.normals[rows, cols, 2])[on]
+    ahead_other = _past_rim(
+        ndimage.map_coordinates(np.nan_to_num(other.normals[..., 2]), [r[on], c[on]], order=0)
+    )
+    gap = (other.surface(r[on], c[on]) - ahead_other) - (camera[on, 2] - k * ahead)
+    return view.offset + float(np.median(gap)) / k
+
+
+def _past_rim(nz: np.ndarray) -> np.ndarray:
+    """How far in front of the occluding contour a surface point half a pixel inside the outline
+    lies, from its normal's ``n_z``: on a circle of radius ``R`` through the contour, a point
+    ``d`` in from the outline with ``n_z = sin(phi)`` lies ``R sin(phi)`` in front, with
+    ``d = R (1 - cos(phi))``; ``d = 0.5`` (the outline is half a pixel beyond the outermost pixel
+    centres, :func:`silhouette_distance`)."""
+    nz = np.clip(np.nan_to_num(np.abs(nz)), 0.05, 1.0)  # 0.05: an outline at most 400 px round
+    return 0.5 * nz / (1.0 - np.sqrt(1.0 - nz**2))
 
 
 def touching_offset(view: FusionView, front: np.ndarray) -> float:
@@ -296,6 +350,7 @@ def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) ->
     hull_distance = np.full(grid.shape, -np.inf)
     total = np.zeros(grid.shape)
     weight = np.zeros(grid.shape)
+    hidden = np.zeros(grid.shape, bool)  # on a view's mask, behind its surface
     for view in views:
         # a pixel whose depth is not trusted counts as little as a grazing one
         squarely = np.where(
@@ -324,11 +379,15 @@ def fused_distance(views: list[FusionView], grid: Grid, *, truncation: float) ->
                 continue
             signed = camera[..., 2] - view.surface(rows, cols)
             seen = on & (signed > -truncation)
+            hidden[i] |= on & ~seen
             r, c = np.rint(rows[seen]).astype(np.int64), np.rint(cols[seen]).astype(np.int64)
             w = squarely[r, c]
             total[i][seen] += w * np.clip(signed[seen] / truncation, -1.0, 1.0)
             weight[i][seen] += w
-    fused = np.where(weight > 0, total / np.maximum(weight, 1e-12), -1.0)
+    # a voxel no view sees is inside where a view's surface hides it; one on no view's mask (a
+    # pixel's width off the outline, where the outline's distance, interpolated, still reads
+    # inside) is outside: counted inside, such voxels made needles along every line of sight
+    fused = np.where(weight > 0, total / np.maximum(weight, 1e-12), np.where(hidden, -1.0, 1.0))
     # the solid within the visual hull: the larger of the two signed distances (an intersection),
     # so that where the surface is the hull's it is as smooth as the silhouettes, not voxel steps
     return np.maximum(fused, np.clip(hull_distance / truncation, -1.0, 1.0))
