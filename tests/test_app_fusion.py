@@ -119,6 +119,7 @@ class TestExampleSet:
         assert result["mesh"]["uvs"] == ""  # a fused model has no texture coordinates
         assert result["info"]["resolution"] == RESOLUTION and result["axis"] == pytest.approx(127.5, abs=2)
         assert [view["light"] for view in result["views"]] == [[0.0, 0.0, 1.0]] * 4
+        assert min(view["outline_iou"] for view in result["views"]) >= 0.95  # every outline kept
 
     def test_each_partial_model_lies_on_the_fused_surface(self, client, view_set, library):
         recs, _ = library
@@ -182,6 +183,8 @@ def test_editing_one_views_mask_changes_the_model_and_solves_only_that_view(clie
     assert [view["cached"] for view in after["views"]] == [True, False, True, True]
     assert after["info"]["cached"] is False
     assert after["volume"] < 0.8 * before["volume"] and after["watertight"]
+    # the other views still show the top the model lost: their outlines are not kept, and it is said
+    assert min(view["outline_iou"] for view in after["views"]) < 0.95
     # row 110 is y = -(110 - 127.5) in the object frame
     assert vertices(after["mesh"])[:, 1].max() < 17.5 + RESOLUTION
     assert vertices(before["mesh"])[:, 1].max() > 17.5 + 40

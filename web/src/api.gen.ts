@@ -294,6 +294,8 @@ export interface FusedView {
   settled: ConcaveRegion[];
   /** The 4x4 matrix (rows) that took the view's own mesh (``(col, -row, depth)``) to its partial model in the object frame: its refined pose and depth offset. */
   transform: number[][];
+  /** How well the fused model keeps the view's outline: the IoU of its projection into the view with the view's mask (``shadeform.fusion.outlines.outline_iou``); below 0.95 parts the view shows are missing or the model reaches past them. */
+  outline_iou: number;
 }
 
 /** The fused model, and each view's partial model where the fusion placed it. */

@@ -59,6 +59,9 @@ export const PART_COLOURS = ['#f59e0b', '#38bdf8', '#a3e635', '#f472b6', '#a78bf
  * default (1 px) takes several; the user can ask for it. */
 export const DEFAULT_RESOLUTION = 2;
 
+/** Below this a view's outline is not kept (shadeform.fusion.outlines.OUTLINE_KEPT). */
+const OUTLINE_KEPT = 0.95;
+
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
 /**
@@ -351,6 +354,8 @@ export class ViewsSession {
       result.info.cached ? 'Fused model reused.' : `Fused in ${seconds} s.`,
     ];
     if (solved) parts.push(`${solved} of ${result.views.length} views solved anew.`);
+    const outlines = result.views.map((view) => view.outline_iou);
+    parts.push(`Outlines kept: ${outlines.map((value, i) => `view ${i + 1} ${(100 * value).toFixed(0)}%`).join(', ')}.`);
     $('views-note').textContent = parts.join(' ');
     // photos that fit another placement about as well: said apart, in the colour of unsure areas
     const rivals = result.rivals.map((turns) =>
@@ -361,6 +366,13 @@ export class ViewsSession {
       warnings.push(
         'The views look along one line only (from opposite sides), so they cannot tell how deep the object is: ' +
           "the model's depth rests on each photo's shading alone, the two joined at their shared outline; add a photo from the side (e.g. at 90°).",
+      );
+    }
+    const poor = outlines.flatMap((value, i) => (value < OUTLINE_KEPT ? [`view ${i + 1} (${(100 * value).toFixed(0)}%)`] : []));
+    if (poor.length) {
+      warnings.push(
+        `The model covers the outline of ${poor.join(', ')} poorly: parts the photo shows are missing or the model ` +
+          "reaches past them; check that view's mask and angle.",
       );
     }
     if (rivals.length) {

@@ -64,6 +64,7 @@ class _Fused:
     watertight: bool
     rivals: tuple[tuple[float, ...], ...]
     depth_fixed: bool
+    outlines: tuple[float, ...]
     timings: dict[str, float]
 
 
@@ -174,6 +175,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
     """The fused model of the solved views (cached per views, angles, parameters but ``step``,
     refine, settle and resolution), and whether it was reused."""
     from shadeform.fusion import place, solid
+    from shadeform.fusion.outlines import outline_iou
     from shadeform.mesh import solid_measures
 
     key = (
@@ -199,6 +201,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
     placed = time.perf_counter()
     mesh = solid(placement)
     measures = solid_measures(mesh)
+    outlines = tuple(outline_iou(mesh, placement))
     fused = _Fused(
         mesh,
         placement.readings,
@@ -210,6 +213,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
         measures["watertight"],
         tuple(rival.turns for rival in placement.rivals),
         placement.depth_fixed,
+        outlines,
         {"place": placed - lap, "solid": time.perf_counter() - placed},
     )
     state.results.put(key, fused, mesh.vertices.nbytes + mesh.faces.nbytes + mesh.normals.nbytes)
@@ -246,8 +250,11 @@ def _result(state, entries: list, body: FuseRequest) -> FuseResult:
                 cached=was_cached,
                 settled=[ConcaveRegion(polygon=area["polygon"], axis=area["axis"]) for area in settled],
                 transform=transform.tolist(),
+                outline_iou=outline,
             )
-            for (item, was_cached), settled, transform in zip(solved, fused.settled, fused.transforms)
+            for (item, was_cached), settled, transform, outline in zip(
+                solved, fused.settled, fused.transforms, fused.outlines
+            )
         ],
         axis=fused.axis,
         volume=fused.volume,
