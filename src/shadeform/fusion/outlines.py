@@ -27,18 +27,7 @@ MAX_SAMPLES = 2_000_000
 def projection(mesh, view) -> np.ndarray:
     """The model's silhouette in a placed view (:class:`shadeform.fusion.volume.FusionView`):
     the pixels its surface falls on, closed over one pixel and holes filled, (H, W) bool."""
-    import trimesh
-
-    surface = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False)
-    count = int(min(MAX_SAMPLES, max(1000, DENSITY * surface.area)))
-    points, _ = trimesh.sample.sample_surface(surface, count, seed=0)
-    rows, cols = view.pixels(view.camera(points))
-    r, c = np.rint(rows).astype(np.int64), np.rint(cols).astype(np.int64)
-    shape = view.mask.shape
-    keep = (r >= 0) & (r < shape[0]) & (c >= 0) & (c < shape[1])
-    hit = np.zeros(shape, bool)
-    hit[r[keep], c[keep]] = True
-    return ndimage.binary_fill_holes(ndimage.binary_closing(hit, np.ones((3, 3), bool)))
+    return _projected(_samples(mesh), view)
 
 
 def outline_iou(mesh, placement) -> list[float]:
@@ -55,9 +44,30 @@ def outline_iou(mesh, placement) -> list[float]:
     -------
     list of float
     """
+    points = _samples(mesh)  # once for every view
     out = []
     for view in placement.views:
-        shown = projection(mesh, view)
+        shown = _projected(points, view)
         union = np.count_nonzero(shown | view.mask)
         out.append(float(np.count_nonzero(shown & view.mask) / union) if union else 1.0)
     return out
+
+
+def _samples(mesh) -> np.ndarray:
+    """Points spread uniformly over the model's surface, :data:`DENSITY` per square pixel, (N, 3)."""
+    import trimesh
+
+    surface = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False)
+    count = int(min(MAX_SAMPLES, max(1000, DENSITY * surface.area)))
+    points, _ = trimesh.sample.sample_surface(surface, count, seed=0)
+    return points
+
+
+def _projected(points: np.ndarray, view) -> np.ndarray:
+    rows, cols = view.pixels(view.camera(points))
+    r, c = np.rint(rows).astype(np.int64), np.rint(cols).astype(np.int64)
+    shape = view.mask.shape
+    keep = (r >= 0) & (r < shape[0]) & (c >= 0) & (c < shape[1])
+    hit = np.zeros(shape, bool)
+    hit[r[keep], c[keep]] = True
+    return ndimage.binary_fill_holes(ndimage.binary_closing(hit, np.ones((3, 3), bool)))
