@@ -152,8 +152,9 @@ def cut(image: np.ndarray, starts: list[Hints], *, extra: list[np.ndarray] = (),
             if index > 0 or (image.ndim == 2 and candidates):
                 continue  # on the grey alone the energy does not judge (module notes): the first
             candidates.append(answers[-1])
-            if image.ndim == 2 or (reached := energy(picture, ended, *models)) < lowest:
-                primary, lowest = answers[-1], (np.inf if image.ndim == 2 else reached)
+            reached = energy(picture, ended, *models) if image.ndim == 3 else 0.0
+            if reached < lowest:
+                primary, lowest = answers[-1], reached
     if primary is None:  # no start could cut: the other method's answer
         primary = answers[0]
     return Cut(primary, agreement(primary, answers), answers, candidates)
