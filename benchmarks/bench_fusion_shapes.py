@@ -38,7 +38,8 @@ import numpy as np
 
 import shadeform
 from shadeform import metrics
-from shadeform.synth import ClosedObject, _fibonacci_sphere, _radial, _render_closed, turntable_pose
+from shadeform.synth.closed import ClosedObject, _render_closed, turntable_pose
+from shadeform.synth.rays import _fibonacci_sphere, _radial
 
 SIZE = 256
 ANGLE_SETS = {4: (0.0, 90.0, 180.0, 270.0), 8: tuple(float(a) for a in range(0, 360, 45))}
