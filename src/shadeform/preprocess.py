@@ -368,11 +368,11 @@ def srgb_to_linear(image: np.ndarray) -> np.ndarray:
     >>> round(float(srgb_to_linear(np.array(0.5))), 4)
     0.214
     """
-    from shadeform.io.images import _srgb_decode  # the one implementation of the curve
+    from shadeform.io.colour import srgb_decode  # the one implementation of the curve
 
     values = np.asarray(image, dtype=np.float64)
     if not np.isfinite(values).all() or values.min(initial=0.0) < 0 or values.max(initial=0.0) > 1:
         raise InputError(
             "sRGB values must be finite and in [0, 1], as load_image(..., linear=True) gives them"
         )
-    return _srgb_decode(values)
+    return srgb_decode(values)
