@@ -25,7 +25,7 @@ leaves no file behind.
 
 from __future__ import annotations
 
-from shadeform.cli import fuse, maps, photos, relief, tools  # noqa: F401  (their commands register on the app)
+from shadeform.cli import batch, fuse, maps, photos, relief, stereo, tools  # noqa: F401  (their commands register on the app)
 from shadeform.cli._shell import USAGE_EXIT, app, main
 
 __all__ = ["USAGE_EXIT", "app", "main"]
