@@ -79,10 +79,10 @@ def check(solid) -> str:
 def run_case(name: str, rows: int, cols: int, runs: int, oversample: int | None) -> dict:
     """One row of table 1 (or 3), in this process."""
     import shadeform
-    import shadeform.solid as relief_module
+    import shadeform.solid.options as relief_options
 
     if oversample is not None:
-        relief_module.OVERSAMPLE = oversample
+        relief_options.OVERSAMPLE = oversample  # where grid_step reads it
     depth = vase_depth(rows, cols)
     options = dict(SIZE, max_triangles=BUDGET, **CASES[name])
     middle = np.s_[
@@ -119,7 +119,7 @@ def run_case(name: str, rows: int, cols: int, runs: int, oversample: int | None)
             pixels := int(np.isfinite(depth).sum()) if CASES[name]["outline"] == "mask" else depth.size
         ),
         # the grid relief() samples before simplifying
-        "step": relief_module.grid_step(pixels, BUDGET),
+        "step": relief_options.grid_step(pixels, BUDGET),
     }
 
 
@@ -145,7 +145,7 @@ def run_chain(rows: int, cols: int) -> dict:
     reliefs' surfaces compared with each other and with the true depth, in mm."""
     import shadeform
     from shadeform import synth
-    from shadeform.pipeline import reconstruct_on_grid
+    from shadeform.coarse import reconstruct_on_grid
     from shadeform.preprocess import object_mask
     from shadeform.solid import grid_step
 
@@ -240,8 +240,8 @@ def run_real() -> list[dict]:
     of a sixteenth of the object's pixels samples (grid step 2), compared where both are defined."""
     import real_data
     import shadeform
+    from shadeform.coarse import reconstruct_on_grid
     from shadeform.metrics import angular_error
-    from shadeform.pipeline import reconstruct_on_grid
     from shadeform.solid import grid_step
 
     rows = []

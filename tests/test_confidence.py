@@ -7,9 +7,9 @@ import pytest
 
 import shadeform
 from shadeform import synth
+from shadeform.coarse import reconstruct_preview
 from shadeform.confidence import MAX_NAMED, MIN_SHARE, TOLERANCE, Confidence, Unsure, _standing_maxima, assess
 from shadeform.errors import InputError
-from shadeform.pipeline import reconstruct_preview
 from shadeform.regions import Region, as_regions, concave_masks
 
 VASE_SIZE = 256

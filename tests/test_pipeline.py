@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from shadeform import metrics, pipeline, reconstruct, synth, to_mesh
+from shadeform import coarse, metrics, pipeline, reconstruct, synth, to_mesh
+from shadeform.coarse import preview_step, reconstruct_preview
 from shadeform.errors import InputError
-from shadeform.pipeline import preview_step, reconstruct_preview
 from shadeform.reconstruction import Reconstruction
 from shadeform.solvers import NOISY, OUTLIERS, choose, get_solver
 
@@ -296,6 +296,15 @@ class TestEstimatedLight:
 class TestPreview:
     """reconstruct_preview: the quick look at the mesh's grid that the app shows first."""
 
+    def test_still_importable_from_pipeline(self):
+        from shadeform.pipeline import preview_step as from_pipeline
+
+        assert from_pipeline is preview_step
+        assert pipeline.reconstruct_preview is reconstruct_preview
+        assert pipeline.reconstruct_on_grid is coarse.reconstruct_on_grid
+        with pytest.raises(AttributeError, match="no_such_name"):
+            pipeline.no_such_name  # noqa: B018
+
     @pytest.mark.parametrize(
         ("name", "step", "bound"), [("vase", 2, 0.5), ("vase", 3, 0.5), ("bumps", 2, 5.0)]
     )
@@ -303,7 +312,7 @@ class TestPreview:
         """The vase's lip (its singular point on the top row) and the bumps' small caps fall
         between grid points: sampled plainly, the eikonal quick look lost them (6.3 % and 19 %)."""
         scene = synth.scene(name, size=256)
-        quick = pipeline.reconstruct_preview(
+        quick = coarse.reconstruct_preview(
             scene.image,
             mask=scene.mask,
             step=step,
@@ -323,7 +332,7 @@ class TestPreview:
         references and unsure areas stay in the input's pixels."""
         scene = synth.scene("vase", size=256)
         regions = synth.concave_regions("vase", size=256)
-        grid = pipeline.reconstruct_on_grid(
+        grid = coarse.reconstruct_on_grid(
             scene.image, mask=scene.mask, concave=regions, step=3, references=[(128, 128)]
         )
         quick = reconstruct_preview(
@@ -333,17 +342,19 @@ class TestPreview:
         np.testing.assert_array_equal(grid.mask, scene.mask[::3, ::3])
         np.testing.assert_allclose(grid.depth[grid.mask] * 3, quick.depth[::3, ::3][grid.mask])
         assert grid.info["references"] == quick.info["references"] == [(129, 129)]
-        plain = pipeline.reconstruct_on_grid(scene.image, mask=scene.mask, concave=regions, step=3)
+        plain = coarse.reconstruct_on_grid(scene.image, mask=scene.mask, concave=regions, step=3)
         assert metrics.depth_error(plain.depth, scene.depth[::3, ::3] / 3, plain.mask) < 0.5
-        one = pipeline.reconstruct_on_grid(scene.image, mask=scene.mask, step=1)
+        one = coarse.reconstruct_on_grid(scene.image, mask=scene.mask, step=1)
         assert one.depth.shape == scene.mask.shape and one.info["grid_step"] == 1
 
     def test_keep_caps_moves_a_cap_to_the_nearest_grid_point(self):
+        from shadeform.coarse import _keep_caps
+
         image = np.full((9, 9), 0.5)
         mask = np.ones((9, 9), bool)
         image[3, 5] = 1.0  # between the grid points of step 2 (rows and columns 0, 2, 4, ...)
         coarse = image[::2, ::2].copy()
-        kept = pipeline._keep_caps(image, mask, coarse, mask[::2, ::2], 2)
+        kept = _keep_caps(image, mask, coarse, mask[::2, ::2], 2)
         assert kept.max() == 1.0
         assert kept[1, 2] == 1.0 or kept[2, 2] == 1.0 or kept[1, 3] == 1.0 or kept[2, 3] == 1.0
         assert (kept == 1.0).sum() == 1
@@ -351,7 +362,7 @@ class TestPreview:
         on_grid = image.copy()
         on_grid[3, 5], on_grid[4, 4] = 0.5, 1.0
         np.testing.assert_array_equal(
-            pipeline._keep_caps(on_grid, mask, on_grid[::2, ::2], mask[::2, ::2], 2), on_grid[::2, ::2]
+            _keep_caps(on_grid, mask, on_grid[::2, ::2], mask[::2, ::2], 2), on_grid[::2, ::2]
         )
 
     @pytest.mark.parametrize(("name", "step"), [("vase", 2), ("sphere", 2), ("sphere", 3)])

@@ -112,9 +112,9 @@ class TestNewSolverEverywhere:
             shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", light=(0.5, 0, 0.866))
         other = shadeform.reconstruct(scene.image, mask=scene.mask, method="gradient", integrator="fourier")
         assert other.info["integrator"] == "fourier"
-        quick = shadeform.pipeline.reconstruct_preview(
-            scene.image, mask=scene.mask, step=2, method="gradient"
-        )
+        from shadeform.coarse import reconstruct_preview
+
+        quick = reconstruct_preview(scene.image, mask=scene.mask, step=2, method="gradient")
         assert quick.info["method"] == "gradient" and quick.info["preview_step"] == 2
 
     def test_cli(self, tiny, sphere64, cli, tmp_path):

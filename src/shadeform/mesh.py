@@ -16,10 +16,13 @@ import numpy as np
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
-__all__ = ["UNITS", "Mesh", "cell_triangles", "outward", "solid_measures", "to_mesh"]
+__all__ = ["UNITS", "Mesh", "cell_triangles", "outward", "solid_measures", "to_mesh", "vertex_normals"]
 
 #: The units a mesh's coordinates may be in (the names 3MF uses where it has one).
 UNITS = ("pixel", "millimeter")
+
+# faces per chunk where a whole-mesh temporary would be large (vertex normals)
+_CHUNK_FACES = 1 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,3 +343,39 @@ def outward(solid) -> Mesh:
         faces=np.asarray(solid.faces, dtype=np.int64),
         normals=np.asarray(solid.vertex_normals),
     )
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (``+z`` where they cancel), summed a chunk of faces at a
+    time so that the temporaries stay small next to the mesh.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Vertex positions.
+    faces : (F, 3) int
+        Triangles, counter-clockwise seen from outside (the normals point that way).
+
+    Returns
+    -------
+    (V, 3) float64
+        Unit normals; ``(0, 0, 1)`` at a vertex no face uses or whose faces' normals cancel.
+    """
+    normals = np.zeros((len(vertices), 3))
+    for start in range(0, len(faces), _CHUNK_FACES):
+        chunk = faces[start : start + _CHUNK_FACES]
+        a = vertices[chunk[:, 0]]
+        face_normals = np.cross(vertices[chunk[:, 1]] - a, vertices[chunk[:, 2]] - a)
+        # a chunk's faces use a narrow band of vertex numbers (the grid is numbered row by row)
+        low, high = int(chunk.min()), int(chunk.max()) + 1
+        for corner in range(3):
+            for k in range(3):
+                normals[low:high, k] += np.bincount(
+                    chunk[:, corner] - low, face_normals[:, k], minlength=high - low
+                )
+    length = np.linalg.norm(normals, axis=1)
+    flat = length <= 0
+    normals[flat] = (0.0, 0.0, 1.0)
+    length[flat] = 1.0
+    normals /= length[:, None]
+    return normals

@@ -590,10 +590,11 @@ def _solve(
 
     With ``preview`` the full result if it is cached, else the quick look at the mesh's grid,
     or a coarser one within the solver's pixel budget
-    (:func:`shadeform.pipeline.preview_step`, :func:`shadeform.pipeline.reconstruct_preview`);
+    (:func:`shadeform.coarse.preview_step`, :func:`shadeform.coarse.reconstruct_preview`);
     the returned reconstruction's ``info`` has ``preview_step`` when it is the quick one.
     """
-    from shadeform.pipeline import preview_step, reconstruct, reconstruct_preview
+    from shadeform.coarse import preview_step, reconstruct_preview
+    from shadeform.pipeline import reconstruct
 
     full_key = _full_key(entry, params)
     solved = state.results.get(full_key)
@@ -670,8 +671,8 @@ def _solve_level(
     """The quick look of a large photo: solved on its pyramid level (:func:`shadeform.app.large.
     level`) at the solver's preview grid there, whatever the photo's size."""
     from shadeform.app.large import level
+    from shadeform.coarse import preview_step, reconstruct_preview
     from shadeform.io.images import select_channel
-    from shadeform.pipeline import preview_step, reconstruct_preview
 
     factor = level_factor(entry.pixels.shape)
     settings = _settings(params, factor)

@@ -212,13 +212,13 @@ def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels,
     part of ``reconstruct`` that the commands making other things from one photo share.
 
     ``grid``, if given, maps the object's mask to a grid spacing: the photo is then solved on
-    that grid only (:func:`shadeform.pipeline.reconstruct_on_grid`; the reconstruction has the
+    that grid only (:func:`shadeform.coarse.reconstruct_on_grid`; the reconstruction has the
     grid's shape). Returns the :class:`~shadeform.io.images.Photo` and the reconstruction, whose
     ``info`` holds the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
     import shadeform
+    from shadeform.coarse import reconstruct_on_grid
     from shadeform.io.images import read_photo
     from shadeform.masks import find_object
-    from shadeform.pipeline import reconstruct_on_grid
 
     with stage(err, f"loading {escape(str(image))}", timings, "load"):
         photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)

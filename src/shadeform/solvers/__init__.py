@@ -82,7 +82,7 @@ class Solver:
     depth : str
         What makes its depth when ``integrator`` is None, for ``Reconstruction.info``.
     preview_pixels : int
-        Most object pixels a quick look (:func:`shadeform.pipeline.reconstruct_preview`) solves
+        Most object pixels a quick look (:func:`shadeform.coarse.reconstruct_preview`) solves
         with it: about 0.1 s of its time on one core.
     denoise : str or None
         Its noise policy: when the user gives no filter and the image is noisy (:data:`NOISY`), the

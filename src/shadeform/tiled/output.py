@@ -99,8 +99,8 @@ def _mesh_step(grid: _Grid, max_triangles: int) -> int:
 def _write_mesh(samples: np.ndarray, step: int, max_triangles: int, path: Path) -> None:
     """The depth samples (every ``step``-th pixel) as a grid mesh, decimated to the budget."""
     from shadeform.io.exporters import export
-    from shadeform.mesh import Mesh, cell_triangles
-    from shadeform.solid import _require_print_extra, _vertex_normals
+    from shadeform.mesh import Mesh, cell_triangles, vertex_normals
+    from shadeform.solid.options import require_print_extra
 
     valid = np.isfinite(samples)
     ids = np.full(samples.shape, -1, dtype=np.int64)
@@ -113,7 +113,7 @@ def _write_mesh(samples: np.ndarray, step: int, max_triangles: int, path: Path) 
     if len(faces) == 0:
         raise InputError("the depth map has no 2x2 block of data on the mesh grid; there is no mesh to make")
     if len(faces) > max_triangles:
-        simplify, _ = _require_print_extra()
+        simplify, _ = require_print_extra()
         vertices, faces = simplify(
             vertices.astype(np.float32),
             faces.astype(np.int64),
@@ -122,4 +122,4 @@ def _write_mesh(samples: np.ndarray, step: int, max_triangles: int, path: Path) 
         )
         vertices = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
-    export(Mesh(vertices, faces, _vertex_normals(vertices, faces)), path)
+    export(Mesh(vertices, faces, vertex_normals(vertices, faces)), path)

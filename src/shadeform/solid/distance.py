@@ -1,6 +1,6 @@
 """Distances from a height field's pixels to a triangulated surface (numba kernels of
-:func:`shadeform.solid._deviation`, kept apart so that importing :mod:`shadeform.solid` stays
-cheap)."""
+:func:`shadeform.solid.build._deviation`, imported on first use so that importing
+:mod:`shadeform.solid` stays cheap)."""
 
 from __future__ import annotations
 
