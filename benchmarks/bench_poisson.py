@@ -61,10 +61,10 @@ def pyamg_integrator(mask, *, weights=None, tol=1e-8, kind="sa"):
     import scipy.sparse.linalg as spla
 
     from shadeform.integration._slopes import slopes
-    from shadeform.integration.poisson import _difference_system, _steps
+    from shadeform.integration.poisson import _steps, difference_system
 
     w = np.ones(mask.shape) if weights is None else weights
-    pairs, D, wts = _difference_system(mask, w)
+    pairs, D, wts = difference_system(mask, w)
     A = (D.T @ sp.diags(wts) @ D).tocsr()
     A = A + sp.identity(A.shape[0], format="csr") * (1e-9 * A.diagonal().mean())  # non-singular
     if kind == "sa":

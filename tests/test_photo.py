@@ -9,14 +9,9 @@ from scipy.optimize import minimize, rosen, rosen_der
 
 from shadeform import available_methods, metrics, reconstruct, synth
 from shadeform.solvers.lbfgs import descend, two_loop
-from shadeform.solvers.photo import (
-    _Basis,
-    _Level,
-    concave_start,
-    photo_depth,
-    response_curve,
-    silhouette_depth,
-)
+from shadeform.solvers.photo import concave_start, photo_depth, response_curve, silhouette_depth
+from shadeform.solvers.photo.energy import _Level
+from shadeform.solvers.photo.pyramid import _Basis
 
 
 def test_silhouette_depth_is_a_sphere_for_a_disc():

@@ -126,12 +126,12 @@ class TestPhotometricStereo:
         assert np.isfinite(result.normals[sphere.mask]).all()
 
     def test_chunks_agree(self, sphere, monkeypatch):
-        import shadeform.photometric as photometric
+        import shadeform.photometric.stereo as stereo
 
         lights = ring(7, 35)
         images = photos(sphere, lights, specular=0.3, shininess=40)
         whole = photometric_stereo(images, lights, sphere.mask)
-        monkeypatch.setattr(photometric, "CHUNK", 1000)
+        monkeypatch.setattr(stereo, "CHUNK", 1000)
         parts = photometric_stereo(images, lights, sphere.mask)
         np.testing.assert_array_equal(whole.normals, parts.normals)
         np.testing.assert_array_equal(whole.lights_used, parts.lights_used)
@@ -227,7 +227,7 @@ class TestBivariate:
         assert bivariate.mean() < 1.5 and robust.mean() > 3 * bivariate.mean()  # 1.25 and 5.5 measured
 
     def test_compiled_search_matches_the_reference(self, sphere, lights):
-        from shadeform.photometric import bivariate, lambertian
+        from shadeform.photometric import bivariate, bivariate_kernels, lambertian
 
         images = photos(sphere, lights, albedo=0.5, specular=0.4, shininess=30, noise=0.01, seed=2)
         rows, cols = np.nonzero(sphere.mask)
@@ -235,7 +235,7 @@ class TestBivariate:
         readings = np.ascontiguousarray(images[:, rows[pick], cols[pick]])
         start = sphere.normals[rows[pick], cols[pick]] + 0.05  # off the truth, so the search moves
         start /= np.linalg.norm(start, axis=1, keepdims=True)
-        normals, brightness, weights = bivariate._refine(
+        normals, brightness, weights = bivariate_kernels._refine(
             start, readings, lights, lambertian.half_vectors(lights)
         )
         for p in range(len(pick)):
@@ -245,7 +245,7 @@ class TestBivariate:
             np.testing.assert_allclose(weights[:, p], w, atol=1e-9)
         # and the model's non-negative least squares at one normal, term by term
         work = np.empty((6, 25))
-        fit = bivariate._model_fit(
+        fit = bivariate_kernels._model_fit(
             *start[0], lights, lambertian.half_vectors(lights), readings[:, 0], weights[:, 0], work
         )
         reference, coefficients = bivariate.model_fit_reference(
@@ -258,7 +258,7 @@ class TestBivariate:
     def test_the_model_slope_is_its_derivative(self, lights):
         """The Gauss-Newton steps' gradient of the prediction in the normal, against central
         differences of the basis itself, for readings lit, grazing and in the lobes."""
-        from shadeform.photometric import bivariate, lambertian
+        from shadeform.photometric import bivariate, bivariate_model, lambertian
 
         rng = np.random.default_rng(4)
         half = lambertian.half_vectors(lights)
@@ -270,7 +270,7 @@ class TestBivariate:
                 if n @ light < 1e-3:
                     continue  # the basis has a kink where the light grazes
                 numeric = [
-                    (bivariate._basis(n + e, light, h) - bivariate._basis(n - e, light, h))
+                    (bivariate_model._basis(n + e, light, h) - bivariate_model._basis(n - e, light, h))
                     @ coefficients
                     / 2e-6
                     for e in 1e-6 * np.eye(3)
@@ -348,13 +348,13 @@ class TestPhotosThatContradict:
         np.testing.assert_allclose([f for _, f in result.photos_rescaled], 0.7, rtol=0.08)
         inner = sphere.mask & (sphere.normals[..., 2] > 0.5)
         fixed = angles(result.normals, sphere.normals, inner).mean()
-        import shadeform.photometric as photometric
+        import shadeform.photometric.audit as audit
 
         try:
-            photometric.FAULTY = np.inf  # the same fit without the audit
+            audit.FAULTY = np.inf  # the same fit without the audit
             blind = photometric_stereo(wrong, lights, sphere.mask, method="robust")
         finally:
-            photometric.FAULTY = 3.0
+            audit.FAULTY = 3.0
         assert (
             blind.photos_rescaled == () and fixed < 0.5 * angles(blind.normals, sphere.normals, inner).mean()
         )

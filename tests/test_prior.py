@@ -12,7 +12,8 @@ from shadeform.prior import Window, model_path, predict
 from shadeform.prior.dataset import example, shapes, turned
 from shadeform.prior.photos import random_photo
 from shadeform.prior.shapes import KINDS, random_shape
-from shadeform.solvers.photo import _Level, response_curve, silhouette_depth
+from shadeform.solvers.photo import response_curve, silhouette_depth
+from shadeform.solvers.photo.energy import _Level
 
 
 def _smooth_inside(shape):

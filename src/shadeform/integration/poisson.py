@@ -139,12 +139,27 @@ def integrate_poisson(
 # ---------------------------------------------------------------------------------------------
 
 
-def _difference_system(mask, weights):
+def difference_system(mask, weights):
     """Difference operator over every 4-neighbour pair of object pixels.
 
-    Returns the pairs ``(rh, ch, rv, cv)`` (pixels whose partner is to the right, resp. below),
-    the sparse operator ``D`` with ``(D z)[e] = z[partner] - z[pixel]``, and the pair weights (the
-    smaller of the two pixels' weights).
+    Also the pairs of neighbours the photo solver's smoothness runs over
+    (:mod:`shadeform.solvers.photo`).
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+        The object.
+    weights : (H, W) float
+        Per-pixel weights.
+
+    Returns
+    -------
+    pairs : tuple of 4 (M,) int arrays
+        ``(rh, ch, rv, cv)``: the pixels whose partner is to the right, resp. below.
+    D : (M, n) scipy.sparse.csr_matrix
+        ``(D z)[e] = z[partner] - z[pixel]`` over the ``n`` object pixels in row-major order.
+    weights : (M,) float64
+        Each pair's weight: the smaller of its two pixels' weights.
     """
     import scipy.sparse as sp
 
@@ -184,7 +199,7 @@ def poisson_integrator_reference(mask: np.ndarray, *, weights: np.ndarray | None
 
     mask = np.ascontiguousarray(mask, dtype=bool)
     w, _ = _check_weights(mask, weights)
-    pairs, D, wts = _difference_system(mask, w)
+    pairs, D, wts = difference_system(mask, w)
     n = D.shape[1]
     A = (D.T @ sp.diags(wts) @ D).tocsr()
     A.eliminate_zeros()  # pairs of weight 0 join nothing

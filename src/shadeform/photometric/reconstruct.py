@@ -1,0 +1,112 @@
+"""Photometric stereo, then depth: :func:`reconstruct_stereo`, the several-photo counterpart of
+:func:`shadeform.reconstruct`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shadeform._checks import check_choice
+from shadeform.errors import InputError
+from shadeform.photometric.stereo import photometric_stereo
+
+
+def reconstruct_stereo(
+    images,
+    lights=None,
+    mask=None,
+    *,
+    intensities=None,
+    method: str = "bivariate",
+    integrator: str = "poisson",
+    sphere=None,
+    refine_lights: bool = True,
+):
+    """Photometric stereo, then depth: the several-photo counterpart of
+    :func:`shadeform.reconstruct`.
+
+    Parameters
+    ----------
+    images, lights, intensities, method
+        As for :func:`photometric_stereo` (``lights=None``: read from the photos).
+    mask : (H, W) array_like of bool, optional
+        Object pixels. Default: found in the brightest reading of each pixel over the photos, as
+        :func:`shadeform.preprocess.object_mask` finds an object on a dark background.
+    integrator : {"poisson", "bilateral", "fourier", "paths"}
+        Depth from the normals (:func:`shadeform.integrate`); ``z = 0`` at the most frontal
+        normal.
+    sphere : (3,) array_like, optional
+        A calibration sphere's circle ``(column, row, radius)`` in the photos: left out of the
+        automatic mask (with a rim of a tenth of its radius).
+    refine_lights : bool
+        As for :func:`photometric_stereo`.
+
+    Returns
+    -------
+    shadeform.Reconstruction
+        ``mask`` is the object (every pixel of it has a normal); ``light`` the mean of the
+        lights' directions (for shading a view), ``albedo`` (H, W), or (H, W, C) for colour
+        photos,
+        ``confidence`` the fit's (:class:`PhotometricStereo`, NaN off the mask); ``info`` holds
+        ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel),
+        ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
+        (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
+        directions used, a list of ``[x, y, z]``) and
+        ``timings`` in seconds.
+
+    Raises
+    ------
+    InputError
+        As :func:`photometric_stereo`, or an unknown integrator.
+    """
+    import time
+
+    from shadeform.integration import available_integrators, integrate
+    from shadeform.reconstruction import Reconstruction
+
+    check_choice(integrator, tuple(available_integrators()), "integrator")
+    start = time.perf_counter()
+    if mask is None:
+        from shadeform.preprocess import object_mask
+
+        stack = np.asarray(images)
+        brightest = stack.max(axis=0) if stack.ndim == 3 else stack.max(axis=(0, 3))
+        peak = float(brightest.max()) if brightest.size else 0.0
+        if not (np.isfinite(peak) and peak > 0):
+            raise InputError("every photo is black (or not finite); give photos of the lit object")
+        mask = object_mask(brightest / peak)
+        if sphere is not None:
+            column, row, radius = np.asarray(sphere, dtype=np.float64)
+            rows, cols = np.ogrid[0 : mask.shape[0], 0 : mask.shape[1]]
+            mask &= (cols - column) ** 2 + (rows - row) ** 2 > (1.1 * radius) ** 2
+            if not mask.any():
+                raise InputError("the photos show nothing but the sphere; give a mask of the object")
+    result = photometric_stereo(
+        images, lights, mask, intensities=intensities, method=method, refine_lights=refine_lights
+    )
+    solved = np.isfinite(result.normals[..., 0])
+    normals_time = time.perf_counter()
+    depth = integrate(result.normals, solved, method=integrator)
+    done = time.perf_counter()
+    directions = np.asarray(lights if result.lights is None else result.lights, dtype=np.float64)
+    mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
+    return Reconstruction(
+        normals=result.normals,
+        depth=depth,
+        mask=solved,
+        light=mean / np.linalg.norm(mean),
+        albedo=result.albedo,
+        info={
+            "method": f"photometric stereo ({method})",
+            "integrator": integrator,
+            "photos": len(directions),
+            "lights_used": float(np.median(result.lights_used[solved])),
+            "photos_rescaled": [[i, round(f, 4)] for i, f in result.photos_rescaled],
+            "photos_dropped": list(result.photos_dropped),
+            "light_scale": round(result.light_scale, 4),
+            "lights": "read from the photos" if lights is None else "given",
+            "light_directions": (directions / np.linalg.norm(directions, axis=1, keepdims=True)).tolist(),
+            "timings": {"normals": normals_time - start, "depth": done - normals_time},
+        },
+        confidence=np.where(solved, result.confidence, np.nan),
+    )
