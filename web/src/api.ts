@@ -4,7 +4,8 @@
 // the UI can show it as it is and react to 404 (the server forgot an image) specially. Every
 // request goes through connection.send (the results the mesh worker fetches tell the connection
 // how they went, by answered and unreachable): one that cannot reach the server is a
-// NetworkError, and the connection says so and waits for the server to come back.
+// NetworkError, and the connection says so and waits for the server to come back. ApiError,
+// base64 and the meshes' decoding are decode.ts's (the mesh worker's too), re-exported here.
 import type {
   AutoMaskRequest,
   BoxMaskRequest,
@@ -13,7 +14,6 @@ import type {
   ImageInfo,
   MapsResult,
   MaskResult,
-  MeshData,
   Options,
   PhotoSetInfo,
   ReconstructParams,
@@ -28,45 +28,15 @@ import type {
   ViewSetInfo,
 } from './api.gen';
 import { answered, send, unreachable } from './connection';
+import { ApiError, bytesToBase64, errorLine, type DecodedMesh } from './decode';
 import type { DecodeReply, DecodeRequest, MeshBounds } from './meshWorker';
+
+// the decoding the page shares with the mesh worker, for the page's modules as api.*
+export { ApiError, base64ToBytes, bytesToBase64, decodeMesh, errorLine, type DecodedMesh } from './decode';
 
 export type StereoRequestBody = StereoRequest;
 
 export type FilterSpec = ReconstructParams['filter'];
-
-export class ApiError extends Error {
-  constructor(
-    readonly status: number,
-    message: string,
-    /** The response's headers (a refused upload's offer to downsample: X-Shadeform-Fit). */
-    readonly headers: Headers | null = null,
-  ) {
-    super(message);
-    this.name = 'ApiError';
-  }
-}
-
-/** A mesh with its arrays decoded from base64 into typed arrays (shared with WebGL as is). */
-export interface DecodedMesh {
-  vertexCount: number;
-  triangleCount: number;
-  positions: Float32Array;
-  normals: Float32Array;
-  /** Null for a mesh without texture coordinates (a fused model). */
-  uvs: Float32Array | null;
-  indices: Uint32Array;
-}
-
-/** An error answer's one line: its ``{"detail": ...}``, else its status line (a proxy's page). */
-export function errorLine(response: Response, body: string): string {
-  try {
-    const parsed = JSON.parse(body);
-    if (parsed && typeof parsed.detail === 'string') return parsed.detail;
-  } catch {
-    // not JSON: the status line
-  }
-  return `${response.status} ${response.statusText}`.trim();
-}
 
 async function failure(response: Response): Promise<ApiError> {
   const body = await response.text().catch(() => '');
@@ -313,52 +283,4 @@ async function downloaded(pending: Promise<Response>, suffix: string): Promise<{
   const disposition = response.headers.get('Content-Disposition') ?? '';
   const named = /filename="?([^";]+)"?/i.exec(disposition);
   return { blob: await response.blob(), filename: named ? named[1] : `model${suffix}` };
-}
-
-// Chromium 140+ and Firefox 133+ decode base64 natively, several times faster than atob.
-type Base64Decoder = (text: string) => Uint8Array;
-const nativeFromBase64 = (Uint8Array as unknown as { fromBase64?: Base64Decoder }).fromBase64;
-
-export function base64ToBytes(text: string): Uint8Array {
-  if (nativeFromBase64) return nativeFromBase64(text);
-  const binary = atob(text);
-  const bytes = new Uint8Array(binary.length);
-  for (let i = 0; i < binary.length; i++) bytes[i] = binary.charCodeAt(i);
-  return bytes;
-}
-
-export function bytesToBase64(bytes: Uint8Array): string {
-  const native = (bytes as unknown as { toBase64?: () => string }).toBase64;
-  if (native) return native.call(bytes);
-  let binary = '';
-  const chunk = 0x8000; // String.fromCharCode takes its arguments on the stack
-  for (let i = 0; i < bytes.length; i += chunk) {
-    binary += String.fromCharCode(...bytes.subarray(i, i + chunk));
-  }
-  return btoa(binary);
-}
-
-// The server sends little-endian arrays; every platform a browser runs on is little-endian,
-// so the bytes are viewed in place. A fresh Uint8Array from base64 is 0-offset, so aligned.
-function floats(text: string, expected: number, what: string): Float32Array {
-  const bytes = base64ToBytes(text);
-  const values = new Float32Array(bytes.buffer, bytes.byteOffset, bytes.byteLength / 4);
-  if (values.length !== expected) throw new ApiError(500, `mesh ${what}: expected ${expected} values, got ${values.length}`);
-  return values;
-}
-
-export function decodeMesh(mesh: MeshData): DecodedMesh {
-  const v = mesh.vertex_count;
-  const t = mesh.triangle_count;
-  const indexBytes = base64ToBytes(mesh.indices);
-  const indices = new Uint32Array(indexBytes.buffer, indexBytes.byteOffset, indexBytes.byteLength / 4);
-  if (indices.length !== 3 * t) throw new ApiError(500, `mesh indices: expected ${3 * t} values, got ${indices.length}`);
-  return {
-    vertexCount: v,
-    triangleCount: t,
-    positions: floats(mesh.positions, 3 * v, 'positions'),
-    normals: floats(mesh.normals, 3 * v, 'normals'),
-    uvs: mesh.uvs ? floats(mesh.uvs, 2 * v, 'uvs') : null,
-    indices,
-  };
 }

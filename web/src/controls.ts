@@ -1,10 +1,11 @@
-// The side panel of parameters. It only shows values and reports edits; main.ts owns the state.
+// The side panel of parameters. It only shows values and reports edits; photoPanel.ts wires it, and
+// the settings are the Photo's (photo.ts).
 //
 // Sliders report while dragging ("drag", debounced by the caller) and once more on release
 // ("now"); selects and buttons report "now".
 import type { Options, ReconstructResult } from './api.gen';
-import { AXIS_COLOURS, UNSURE_COLOUR, unsureQuestion, type Unsure } from './imagePane';
-import type { Axis, Params, Region } from './state';
+import type { Axis, Params, Region } from './sessionTypes';
+import { AXIS_COLOURS, UNSURE_COLOUR, unsureQuestion, type Unsure } from './unsure';
 import {
   depthBoundedText,
   maskWarningText,

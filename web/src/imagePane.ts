@@ -1,53 +1,22 @@
 // The left pane: the photo (or its preprocessed channel, or both split before/after), the mask
 // overlay and the mask tool's marks, the reference pixels and the concave-region editor, on one
-// canvas.
+// canvas. This module holds the pane's state, its input (pointer, wheel, keys) and the order it
+// draws in; the marks are drawn by paneDraw.ts, the pictures read by panePictures.ts, and the
+// unsure areas read from a result by unsure.ts.
 //
 // Image coordinates follow docs/conventions.md: x = column, y = row, pixel centres at whole
 // numbers, so pixel (r, c) covers [c - 0.5, c + 0.5] x [r - 0.5, r + 0.5] (the same grid the
 // library rasterises region polygons on).
 import { insidePolygon, outlineDistance, tidy, type Point } from './geometry';
-import { paintMask, type MaskBits, type MaskTool, type Rect } from './maskTool';
-import type { PictureReply, PictureRequest } from './pictureWorker';
-import type { Axis, Region } from './state';
+import { MaskOverlay, type MaskBits, type Rect } from './maskBits';
+import type { MaskTool } from './maskTool';
+import { drawDraft, drawReferences, drawRegion, drawSplit, drawUnsure, HANDLE } from './paneDraw';
+import { loadPicture, type Picture } from './panePictures';
+import type { Axis, Region } from './sessionTypes';
+import { AXIS_COLOURS, type Unsure } from './unsure';
 
 export type Tool = 'select' | 'polygon' | 'reference' | 'mask';
 export type Display = 'photo' | 'channel' | 'filtered' | 'split';
-
-export const AXIS_COLOURS: Record<Axis, string> = { x: '#ff9f43', y: '#38bdf8', both: '#c084fc' };
-/** The dashed outline of an area the shading cannot settle (convex or concave). */
-export const UNSURE_COLOUR = '#fbbf24';
-
-/** An area the library reports in ``info.unsure``: its outline, suggested axis, share and centre. */
-export interface Unsure {
-  polygon: Point[];
-  axis: Axis;
-  share: number;
-  centre: Point;
-}
-
-/** The unsure areas of a result's ``info`` (none when absent or malformed). */
-export function readUnsure(info: Record<string, unknown> | undefined): Unsure[] {
-  const list = info?.unsure;
-  if (!Array.isArray(list)) return [];
-  const point = (p: unknown): p is Point => Array.isArray(p) && p.length === 2 && p.every((v) => typeof v === 'number' && Number.isFinite(v));
-  return list.flatMap((entry): Unsure[] => {
-    const { polygon, axis, share, centre } = (entry ?? {}) as Partial<Record<keyof Unsure, unknown>>;
-    if (!Array.isArray(polygon) || polygon.length < 3 || !polygon.every(point)) return [];
-    if (axis !== 'x' && axis !== 'y' && axis !== 'both') return [];
-    const middle = point(centre) ? centre : polygonMean(polygon);
-    return [{ polygon: polygon.map(([x, y]): Point => [x, y]), axis, share: typeof share === 'number' ? share : 0, centre: [middle[0], middle[1]] }];
-  });
-}
-
-function polygonMean(polygon: Point[]): Point {
-  const n = polygon.length;
-  return [polygon.reduce((s, p) => s + p[0], 0) / n, polygon.reduce((s, p) => s + p[1], 0) / n];
-}
-
-/** The question an unsure area asks, in the panel's list (the image shows its number). */
-export function unsureQuestion(axis: Axis): string {
-  return axis === 'both' ? 'concave along x and y?' : `concave along ${axis}?`;
-}
 
 export interface PaneEvents {
   /** The regions changed; ``final`` is false while a drag is still going on. */
@@ -71,7 +40,6 @@ export interface Sources {
   after: string; // channel, filtered
 }
 
-const HANDLE = 5; // px: vertex handle half-size
 const SNAP = 10; // px: distance at which a click hits a point or closes a polygon
 const DRAG_START = 3; // px: movement before a press becomes a drag
 
@@ -93,11 +61,8 @@ export class ImagePane {
   private fitted = false;
   private sources: Sources | null = null;
   private readonly images = new Map<string, Picture>();
-  // the mask worker's layer as it came (drawing a 12 Mpx one into a canvas took the page 40 ms),
-  // a canvas once edited
-  private maskLayer: HTMLCanvasElement | ImageBitmap | null = null;
-  /** A small copy of the mask's layer (the mask worker's), drawn while the image is shown smaller. */
-  private maskSmall: ImageBitmap | null = null;
+  /** The mask's layer drawn over the picture. */
+  private readonly mask = new MaskOverlay();
   private regionList: Region[] = [];
   private unsureList: Unsure[] = [];
   private selected: number | null = null;
@@ -157,8 +122,7 @@ export class ImagePane {
     this.draft = [];
     this.events.notice(null);
     if (!sameSize) {
-      this.maskLayer = null;
-      this.maskSmall = null;
+      this.mask.forget();
       this.fitted = false;
     }
     this.resize();
@@ -204,30 +168,7 @@ export class ImagePane {
 
   /** The object mask as a tinted overlay with its outline; ``dirty``: only that part changed. */
   setMask(mask: MaskBits | null, dirty?: Rect): void {
-    // a new mask brings its small copy (or none); an edit makes the one shown out of date
-    const small = dirty ? null : (mask?.small ?? null);
-    if (mask) mask.small = null;
-    if (small !== this.maskSmall) this.maskSmall?.close();
-    this.maskSmall = small;
-    const shown = this.maskLayer;
-    const ready = mask?.layer && mask.layer.width === mask.width && mask.layer.height === mask.height ? mask.layer : null;
-    if (!mask) {
-      this.maskLayer = null;
-    } else if (!dirty && ready) {
-      mask.layer = null; // the bits may change after this: only this mask may use it
-      this.maskLayer = ready;
-    } else {
-      // an edit: into a canvas, from the layer shown (where it is the worker's) or painted anew
-      let layer = shown instanceof HTMLCanvasElement ? shown : null;
-      if (!layer) {
-        layer = Object.assign(document.createElement('canvas'), { width: mask.width, height: mask.height });
-        if (shown && dirty && shown.width === mask.width && shown.height === mask.height) layer.getContext('2d')!.drawImage(shown, 0, 0);
-        else dirty = undefined;
-      }
-      paintMask(mask, layer, dirty);
-      this.maskLayer = layer;
-    }
-    if (shown instanceof ImageBitmap && shown !== this.maskLayer) shown.close();
+    this.mask.set(mask, dirty);
     this.redraw();
   }
 
@@ -557,21 +498,24 @@ export class ImagePane {
       const image = this.image(url);
       if (image) ctx.drawImage(image, this.offX, this.offY, w, h);
     }
-    if ((this.showMask || this.tool === 'mask') && this.maskLayer) {
+    const mask = this.showMask || this.tool === 'mask' ? this.mask.picture(w * (window.devicePixelRatio || 1)) : null;
+    if (mask) {
       ctx.imageSmoothingEnabled = false;
-      const shown = w * (window.devicePixelRatio || 1);
-      const small = this.maskSmall && shown <= this.maskSmall.width * 1.25 ? this.maskSmall : null;
-      ctx.drawImage(small ?? this.maskLayer, this.offX, this.offY, w, h);
+      ctx.drawImage(mask, this.offX, this.offY, w, h);
     }
     ctx.strokeStyle = 'rgba(255,255,255,0.18)';
     ctx.lineWidth = 1;
     ctx.strokeRect(this.offX - 0.5, this.offY - 0.5, w + 1, h + 1);
-    this.regionList.forEach((region, i) => this.drawRegion(region, i === this.selected));
-    this.unsureList.forEach((area, i) => this.drawUnsure(area, i));
-    this.drawDraft();
-    this.drawReferences();
-    if (this.tool === 'mask') this.maskEditor?.draw(ctx, (p) => this.toScreen(p), this.scale, this.pointer);
-    if (this.display === 'split') this.drawSplit();
+    const toScreen = (p: Point) => this.toScreen(p);
+    this.regionList.forEach((region, i) => drawRegion(ctx, toScreen, region, i === this.selected));
+    this.unsureList.forEach((area, i) => drawUnsure(ctx, toScreen, area, i));
+    if (this.tool === 'polygon' && this.draft.length) {
+      const closable = this.draft.length >= 3 && this.pointer !== null && this.screenDistance(this.pointer, this.draft[0]) <= SNAP;
+      drawDraft(ctx, toScreen, this.draft, this.pointer, AXIS_COLOURS[this.newAxis], closable);
+    }
+    drawReferences(ctx, toScreen, this.userRefs, this.usedRefs);
+    if (this.tool === 'mask') this.maskEditor?.draw(ctx, toScreen, this.scale, this.pointer);
+    if (this.display === 'split') drawSplit(ctx, this.offX + this.split * this.width * this.scale, this.offY, this.offY + h);
   }
 
   private drawClipped(url: string, left: number, width: number): void {
@@ -584,229 +528,5 @@ export class ImagePane {
     ctx.clip();
     ctx.drawImage(image, this.offX, this.offY, this.width * this.scale, this.height * this.scale);
     ctx.restore();
-  }
-
-  private path(points: Point[], close: boolean): void {
-    const ctx = this.context;
-    ctx.beginPath();
-    points.forEach((p, i) => {
-      const [sx, sy] = this.toScreen(p);
-      if (i === 0) ctx.moveTo(sx, sy);
-      else ctx.lineTo(sx, sy);
-    });
-    if (close) ctx.closePath();
-  }
-
-  private drawRegion(region: Region, selected: boolean): void {
-    const ctx = this.context;
-    const colour = AXIS_COLOURS[region.axis];
-    this.path(region.polygon, true);
-    ctx.fillStyle = colour + (selected ? '40' : '2a');
-    ctx.fill();
-    ctx.lineWidth = selected ? 2.5 : 1.75;
-    ctx.strokeStyle = colour;
-    ctx.setLineDash([]);
-    ctx.stroke();
-    // axis tag just above the topmost corner, clear of the references inside
-    const top = region.polygon.reduce((best, p) => (p[1] < best[1] ? p : best));
-    const [tx, ty] = this.toScreen(top);
-    label(ctx, region.axis === 'both' ? 'concave x·y' : `concave ${region.axis}`, tx, ty - 13, colour);
-    if (!selected) return;
-    for (const p of region.polygon) {
-      const [sx, sy] = this.toScreen(p);
-      ctx.fillStyle = '#fff';
-      ctx.strokeStyle = colour;
-      ctx.lineWidth = 1.5;
-      ctx.fillRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
-      ctx.strokeRect(sx - HANDLE, sy - HANDLE, 2 * HANDLE, 2 * HANDLE);
-    }
-  }
-
-  /** One unsure area: its dashed outline and a short numbered tag (the panel's list says what it
-   * asks: a relief can have many, and full questions would cover the photo). */
-  private drawUnsure(area: Unsure, index: number): void {
-    const ctx = this.context;
-    this.path(area.polygon, true);
-    ctx.lineWidth = 3.5;
-    ctx.strokeStyle = 'rgba(0,0,0,0.55)';
-    ctx.setLineDash([7, 5]);
-    ctx.stroke();
-    ctx.lineWidth = 1.75;
-    ctx.strokeStyle = UNSURE_COLOUR;
-    ctx.stroke();
-    ctx.setLineDash([]);
-    const [cx, cy] = this.toScreen(area.centre);
-    label(ctx, `?${index + 1}`, cx, cy, UNSURE_COLOUR);
-  }
-
-  private drawDraft(): void {
-    if (this.tool !== 'polygon' || !this.draft.length) return;
-    const ctx = this.context;
-    const colour = AXIS_COLOURS[this.newAxis];
-    const points = this.pointer ? [...this.draft, this.pointer] : this.draft;
-    this.path(points, false);
-    ctx.strokeStyle = colour;
-    ctx.lineWidth = 1.75;
-    ctx.setLineDash([6, 4]);
-    ctx.stroke();
-    ctx.setLineDash([]);
-    const closable = this.draft.length >= 3 && this.pointer !== null && this.screenDistance(this.pointer, this.draft[0]) <= SNAP;
-    this.draft.forEach((p, i) => {
-      const [sx, sy] = this.toScreen(p);
-      ctx.beginPath();
-      ctx.arc(sx, sy, i === 0 ? (closable ? 7 : 5) : 3.5, 0, 2 * Math.PI);
-      ctx.fillStyle = i === 0 ? '#fff' : colour;
-      ctx.fill();
-      ctx.strokeStyle = colour;
-      ctx.lineWidth = 2;
-      ctx.stroke();
-    });
-  }
-
-  private drawReferences(): void {
-    const ctx = this.context;
-    const isUser = (r: number, c: number) => this.userRefs.some(([ur, uc]) => ur === r && uc === c);
-    // automatic references (the brightest pixel of each part): a hollow diamond
-    for (const [r, c] of this.usedRefs) {
-      if (isUser(r, c)) continue;
-      const [sx, sy] = this.toScreen([c, r]);
-      ctx.save();
-      ctx.translate(sx, sy);
-      ctx.rotate(Math.PI / 4);
-      ctx.lineWidth = 3.5;
-      ctx.strokeStyle = 'rgba(0,0,0,0.65)';
-      ctx.strokeRect(-5, -5, 10, 10);
-      ctx.lineWidth = 1.75;
-      ctx.strokeStyle = '#fde047';
-      ctx.strokeRect(-5, -5, 10, 10);
-      ctx.restore();
-      label(ctx, 'auto', sx + 10, sy - 10, '#fde047');
-    }
-    // the user's: a filled dot with a ring, numbered (the first is the main one: z = 0 there)
-    this.userRefs.forEach(([r, c], i) => {
-      const [sx, sy] = this.toScreen([c, r]);
-      ctx.beginPath();
-      ctx.arc(sx, sy, 6, 0, 2 * Math.PI);
-      ctx.fillStyle = '#22d3ee';
-      ctx.fill();
-      ctx.lineWidth = 2;
-      ctx.strokeStyle = '#0b1220';
-      ctx.stroke();
-      label(ctx, String(i + 1), sx + 11, sy - 10, '#22d3ee');
-    });
-  }
-
-  private drawSplit(): void {
-    const ctx = this.context;
-    const x = this.offX + this.split * this.width * this.scale;
-    const top = this.offY;
-    const bottom = this.offY + this.height * this.scale;
-    ctx.strokeStyle = '#fff';
-    ctx.lineWidth = 2;
-    ctx.beginPath();
-    ctx.moveTo(x, top);
-    ctx.lineTo(x, bottom);
-    ctx.stroke();
-    ctx.beginPath();
-    ctx.arc(x, (top + bottom) / 2, 9, 0, 2 * Math.PI);
-    ctx.fillStyle = '#fff';
-    ctx.fill();
-    ctx.fillStyle = '#111';
-    ctx.font = '600 10px system-ui, sans-serif';
-    ctx.textAlign = 'center';
-    ctx.textBaseline = 'middle';
-    ctx.fillText('↔', x, (top + bottom) / 2 + 0.5);
-    label(ctx, 'before', x - 34, top + 14, '#e5e7eb');
-    label(ctx, 'after', x + 30, top + 14, '#e5e7eb');
-  }
-}
-
-/** A small text tag with a dark halo, readable on any photo. */
-function label(ctx: CanvasRenderingContext2D, text: string, x: number, y: number, colour: string): void {
-  const m = ctx.getTransform();
-  // drawn once into a sprite and copied at every frame after: the halo (strokeText) is the glyphs'
-  // outlines stroked anew at each call, 3-5 ms a frame of the page's thread for a relief's
-  // numbered unsure areas in a software canvas (Chromium traces of bench_app_large.py's page).
-  // Only where the tag is drawn upright at the pane's scale and without a dash (every caller now)
-  if (m.b !== 0 || m.c !== 0 || m.a !== m.d || m.a <= 0 || ctx.getLineDash().length) {
-    drawLabel(ctx, text, x, y, colour);
-    return;
-  }
-  const sprite = labelSprite(text, colour, m.a);
-  // at whole device pixels: the copy is the sprite's pixels, unscaled (at most half a pixel moved)
-  const left = Math.round(m.a * x + m.e - sprite.width / 2);
-  const top = Math.round(m.d * y + m.f - sprite.height / 2);
-  ctx.save();
-  ctx.setTransform(1, 0, 0, 1, 0, 0);
-  ctx.drawImage(sprite, left, top);
-  ctx.restore();
-}
-
-function drawLabel(ctx: CanvasRenderingContext2D | OffscreenCanvasRenderingContext2D, text: string, x: number, y: number, colour: string): void {
-  ctx.font = LABEL_FONT;
-  ctx.textAlign = 'center';
-  ctx.textBaseline = 'middle';
-  ctx.lineWidth = 3;
-  ctx.strokeStyle = 'rgba(0,0,0,0.75)';
-  ctx.strokeText(text, x, y);
-  ctx.fillStyle = colour;
-  ctx.fillText(text, x, y);
-}
-
-const LABEL_FONT = '600 11px system-ui, sans-serif';
-/** The tags drawn so far, by text, colour and device pixel ratio (a few dozen at most in use). */
-const labelSprites = new Map<string, HTMLCanvasElement>();
-
-function labelSprite(text: string, colour: string, ratio: number): HTMLCanvasElement {
-  const key = `${text}\u0000${colour}\u0000${ratio}`;
-  let sprite = labelSprites.get(key);
-  if (sprite) return sprite;
-  sprite = document.createElement('canvas');
-  const measure = sprite.getContext('2d')!;
-  measure.font = LABEL_FONT;
-  // the text's width, the halo (3 px wide) and a pixel to spare on each side; 11 px text in 24 px
-  const width = Math.ceil(measure.measureText(text).width) + 8;
-  const height = 24;
-  // even sizes: the middle, where the text is drawn, is a whole pixel in the sprite and the pane
-  sprite.width = 2 * Math.ceil((width * ratio) / 2);
-  sprite.height = 2 * Math.ceil((height * ratio) / 2);
-  const ctx = sprite.getContext('2d')!;
-  ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
-  drawLabel(ctx, text, sprite.width / ratio / 2, sprite.height / ratio / 2, colour);
-  if (labelSprites.size >= 256) labelSprites.delete(labelSprites.keys().next().value!);
-  labelSprites.set(key, sprite);
-  return sprite;
-}
-
-/** A picture of the pane: decoded, and its small copy where it is larger than SMALL_SIDE. */
-interface Picture {
-  full: ImageBitmap | null;
-  small: ImageBitmap | null;
-  failed: boolean;
-}
-
-let pictures: Worker | null = null;
-let pictureId = 0;
-const reading = new Map<number, (reply: PictureReply) => void>();
-
-/** Read ``url`` into ``picture`` in the picture worker (pictureWorker.ts). */
-async function loadPicture(url: string, picture: Picture): Promise<void> {
-  if (!pictures) {
-    pictures = new Worker(new URL('./pictureWorker.ts', import.meta.url), { type: 'module' });
-    pictures.onmessage = (event: MessageEvent<PictureReply>) => {
-      reading.get(event.data.id)?.(event.data);
-      reading.delete(event.data.id);
-    };
-  }
-  const id = ++pictureId;
-  const reply = await new Promise<PictureReply>((resolve) => {
-    reading.set(id, resolve);
-    pictures!.postMessage({ id, url: new URL(url, location.href).href } satisfies PictureRequest);
-  });
-  if (reply.ok) {
-    picture.small = reply.small;
-    picture.full = reply.full;
-  } else {
-    picture.failed = true; // tried again when the server answers (retryImages)
   }
 }

@@ -8,8 +8,9 @@
 // them current, and the zip is offered only then, so that what is downloaded is what is shown.
 import * as api from './api';
 import type { MapsResult, ReconstructRequest } from './api.gen';
+import { $, showMessage } from './dom';
 import { LatestRequest, ModelState, statusText } from './modelState';
-import { inputsKey } from './print';
+import { inputsKey } from './printPanel';
 import { download } from './state';
 import './print.css';
 
@@ -28,8 +29,6 @@ const TITLES: Record<string, string> = {
   ambient_occlusion: 'Ambient occlusion',
   curvature: 'Curvature',
 };
-
-const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
 export class MapsPanel {
   /** The previews' state: current only when they were made from the settings shown. */
@@ -156,8 +155,7 @@ export class MapsPanel {
   }
 
   private showError(message: string | null): void {
-    $('maps-error').hidden = message === null;
-    $('maps-error').textContent = message ?? '';
+    showMessage('maps-error', message);
   }
 
   private render(): void {

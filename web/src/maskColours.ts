@@ -1,4 +1,4 @@
-// The mask overlay's colours (RGBA), shared by the page (maskTool.ts paintMask) and the mask worker.
+// The mask overlay's colours (RGBA), shared by the page (maskBits.ts paintMask) and the mask worker.
 
 /** An object pixel inside the mask: a light tint. */
 export const MASK_FILL = [56, 189, 248, 46] as const;

@@ -5,8 +5,8 @@
 // milliseconds, and its bytes read there (fetched by the page) took 10-29 ms of the page's thread
 // a chunk (Chromium traces of bench_app_large.py). The arrays come back transferred (no copy);
 // the result comes back without its mesh strings.
-import { decodeMesh, errorLine, type DecodedMesh } from './api';
 import type { ReconstructResult } from './api.gen';
+import { decodeMesh, errorLine, type DecodedMesh } from './decode';
 
 /** Fetch ``url`` and decode its result (``id`` names the reply), or cancel request ``cancel``. */
 export type DecodeRequest =

@@ -100,20 +100,71 @@ export class ModelState {
 }
 
 /**
- * A panel's requests for its model, one at a time: a new one aborts the one out; only the latest
- * one's answer is applied (``apply``) and makes the model current; its failure fails the model
- * with the server's message, shown by ``showError`` unless the server could not be reached (the
+ * A session's requests for its model, one at a time: a new one aborts the one out, and only the
+ * latest one counts. ``run`` makes the model computing and turns the busy indicator on (``busy``:
+ * the App's "Solving…", where the session shows it), hands ``work`` the request's abort signal,
+ * the version of the inputs it is for and whether it is still the latest, hands its failure to
+ * ``failed`` (not an abort's, nor a superseded request's: a newer one is out), and turns the busy
+ * indicator off once the latest request has ended (then calls ``done``). The one photo's solves (solvePanel.ts), the
+ * photo set's (stereo.ts) and the views' fusions (views.ts) go through it, and the panels' (print,
+ * maps) through LatestRequest, its plain form.
+ */
+export class ModelRequest {
+  private inFlight: AbortController | null = null;
+
+  constructor(
+    private readonly model: ModelState,
+    private readonly busy: (on: boolean) => void = () => undefined,
+  ) {}
+
+  /** Abort the request out, if any (its answer is dropped; its end turns the busy indicator off). */
+  abort(): void {
+    this.inFlight?.abort();
+  }
+
+  async run(
+    work: (request: { signal: AbortSignal; version: number; latest: () => boolean }) => Promise<void>,
+    failed: (err: Error, version: number) => void | Promise<void>,
+    done: () => void = () => undefined,
+  ): Promise<void> {
+    this.inFlight?.abort();
+    const controller = new AbortController();
+    this.inFlight = controller;
+    const latest = () => controller === this.inFlight;
+    const version = this.model.computing();
+    this.busy(true);
+    try {
+      await work({ signal: controller.signal, version, latest });
+    } catch (err) {
+      if ((err as Error).name === 'AbortError' || !latest()) return;
+      await failed(err as Error, version);
+    } finally {
+      if (latest()) {
+        this.inFlight = null;
+        this.busy(false);
+        done();
+      }
+    }
+  }
+}
+
+/**
+ * A panel's requests for its model, one at a time (a ModelRequest): only the latest one's answer
+ * is applied (``apply``) and makes the model current; its failure fails the model with the
+ * server's message, shown by ``showError`` unless the server could not be reached (the
  * connection's banner says that). ``render`` redraws the panel when the request has ended.
  */
 export class LatestRequest {
-  private inFlight: AbortController | null = null;
+  private readonly requests: ModelRequest;
   private counter = 0;
 
   constructor(
     private readonly model: ModelState,
     private readonly showError: (message: string | null) => void,
     private readonly render: () => void,
-  ) {}
+  ) {
+    this.requests = new ModelRequest(model);
+  }
 
   /** The id of the next request (its ``request_id``). */
   nextId(): number {
@@ -122,27 +173,26 @@ export class LatestRequest {
 
   /** Abort the request out, if any (its answer is dropped). */
   abort(): void {
-    this.inFlight?.abort();
+    this.requests.abort();
   }
 
   async run<T>(send: (signal: AbortSignal) => Promise<T>, apply: (result: T) => void): Promise<void> {
-    this.inFlight?.abort();
-    const controller = new AbortController();
-    this.inFlight = controller;
-    const version = this.model.computing();
-    this.showError(null);
     try {
-      const result = await send(controller.signal);
-      if (controller !== this.inFlight) return;
-      apply(result);
-      this.model.arrived(version);
-    } catch (err) {
-      if ((err as Error).name === 'AbortError' || controller !== this.inFlight) return;
-      const message = err instanceof NetworkError ? UNREACHABLE : (err as Error).message;
-      this.model.failed(version, message);
-      if (!(err instanceof NetworkError)) this.showError(message);
+      await this.requests.run(
+        async ({ signal, version, latest }) => {
+          this.showError(null);
+          const result = await send(signal);
+          if (!latest()) return;
+          apply(result);
+          this.model.arrived(version);
+        },
+        (err, version) => {
+          const message = err instanceof NetworkError ? UNREACHABLE : err.message;
+          this.model.failed(version, message);
+          if (!(err instanceof NetworkError)) this.showError(message);
+        },
+      );
     } finally {
-      if (controller === this.inFlight) this.inFlight = null;
       this.render();
     }
   }

@@ -19,22 +19,10 @@ import type {
   ProjectInfo,
   ProjectList,
   ProjectSource,
-  ReconstructParams,
   StereoParams,
 } from './api.gen';
 import { NetworkError, onReconnect, send } from './connection';
-import type { ViewsSaved } from './views';
-
-export type Params = ReconstructParams;
-export type Region = Params['concave']['regions'][number];
-export type Axis = Region['axis'];
-
-/** Where the current image came from: a shipped example is reopened by name, an upload re-sent. */
-export type ImageSource =
-  | { kind: 'example'; name: string }
-  | { kind: 'upload'; name: string; type: string }
-  | { kind: 'initial'; name: string } // the image `shadeform app IMAGE` was started with
-  | { kind: 'viewset'; name: string; index: number }; // a photo of a shipped view set
+import type { ImageSource, Params, Region, ViewsSaved } from './sessionTypes';
 
 export interface ViewSettings {
   wireframe: boolean;

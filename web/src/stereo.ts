@@ -4,13 +4,14 @@
 // the panel group of its settings (their words: words.ts), and its requests; the App gives it the
 // 3D view and the busy/toast helpers.
 //
-// Relighting is done here, per pixel, from the normals and albedo the server sends as PNGs:
-// shown = encode(albedo * max(0, n . l) * brightness), linear albedo, sRGB on screen. A drag
-// redraws at most once per animation frame.
+// Relighting is done on the page, per pixel, from the normals and albedo the server sends as PNGs
+// (relight.ts). A drag redraws at most once per animation frame.
 import * as api from './api';
 import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
 import { NetworkError, send, UNREACHABLE } from './connection';
-import { ModelState } from './modelState';
+import { $, showMessage } from './dom';
+import { ModelRequest, ModelState } from './modelState';
+import { decodeMaps, lightFromDisc, relight, type Maps } from './relight';
 import { fillStereoChoices } from './words';
 
 export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
@@ -27,102 +28,6 @@ export interface StereoHost {
   modelChanged(): void;
 }
 
-const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
-
-/** sRGB decoding (8-bit code -> linear) and encoding (linear, 4096 steps -> 8-bit code). */
-const SRGB_TO_LINEAR = Float32Array.from({ length: 256 }, (_, i) => {
-  const v = i / 255;
-  return v <= 0.04045 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4;
-});
-const ENCODE_STEPS = 4096;
-const LINEAR_TO_SRGB = Uint8ClampedArray.from({ length: ENCODE_STEPS + 1 }, (_, i) => {
-  const v = i / ENCODE_STEPS;
-  return Math.round(255 * (v <= 0.0031308 ? 12.92 * v : 1.055 * v ** (1 / 2.4) - 0.055));
-});
-
-/** The decoded maps of one result, per pixel (row-major, the photos' size). */
-interface Maps {
-  width: number;
-  height: number;
-  mask: Uint8Array;
-  normals: Float32Array; // 3 per pixel, unit
-  albedo: Float32Array; // 3 per pixel, linear, 1 = the server's albedo_white
-  normalsImage: ImageData;
-  albedoImage: ImageData;
-  confidenceImage: ImageData;
-  /** The object's centre and half-size in pixels: where a drag over the image points the light. */
-  centre: [number, number];
-  radius: number;
-}
-
-async function decodePng(base64: string): Promise<ImageData> {
-  const image = new Image();
-  image.src = `data:image/png;base64,${base64}`;
-  await image.decode();
-  const canvas = document.createElement('canvas');
-  canvas.width = image.naturalWidth;
-  canvas.height = image.naturalHeight;
-  const context = canvas.getContext('2d', { willReadFrequently: true })!;
-  context.drawImage(image, 0, 0);
-  return context.getImageData(0, 0, canvas.width, canvas.height);
-}
-
-async function decodeMaps(result: StereoResult): Promise<Maps> {
-  const [maskImage, normalsImage, albedoImage, confidenceImage] = await Promise.all(
-    [result.mask_png, result.normals_png, result.albedo_png, result.confidence_png].map(decodePng),
-  );
-  const { width, height } = normalsImage;
-  const count = width * height;
-  const mask = new Uint8Array(count);
-  const normals = new Float32Array(3 * count);
-  const albedo = new Float32Array(3 * count);
-  let top = height, bottom = -1, left = width, right = -1;
-  for (let i = 0; i < count; i++) {
-    if (maskImage.data[4 * i] < 128) continue;
-    mask[i] = 1;
-    const nx = normalsImage.data[4 * i] / 127.5 - 1;
-    const ny = normalsImage.data[4 * i + 1] / 127.5 - 1;
-    const nz = normalsImage.data[4 * i + 2] / 127.5 - 1;
-    const length = Math.hypot(nx, ny, nz) || 1;
-    normals[3 * i] = nx / length;
-    normals[3 * i + 1] = ny / length;
-    normals[3 * i + 2] = nz / length;
-    for (let c = 0; c < 3; c++) albedo[3 * i + c] = SRGB_TO_LINEAR[albedoImage.data[4 * i + c]];
-    const row = Math.floor(i / width), col = i - row * width;
-    top = Math.min(top, row);
-    bottom = Math.max(bottom, row);
-    left = Math.min(left, col);
-    right = Math.max(right, col);
-  }
-  if (bottom < 0) [top, bottom, left, right] = [0, height - 1, 0, width - 1];
-  // the maps shown as they are, off the object dark
-  for (const shown of [normalsImage, albedoImage, confidenceImage]) {
-    for (let i = 0; i < count; i++) {
-      if (!mask[i]) shown.data.set([24, 26, 31, 255], 4 * i);
-    }
-  }
-  return {
-    width,
-    height,
-    mask,
-    normals,
-    albedo,
-    normalsImage,
-    albedoImage,
-    confidenceImage,
-    centre: [(left + right) / 2, (top + bottom) / 2],
-    radius: Math.max(right - left, bottom - top, 2) / 2,
-  };
-}
-
-/** A light direction from a point on the unit disc (the hemisphere seen from the camera). */
-export function lightFromDisc(x: number, y: number): [number, number, number] {
-  const r = Math.hypot(x, y);
-  const limit = 0.985; // at most 80 degrees from the camera: a grazing light shows nothing
-  if (r > limit) [x, y] = [(x / r) * limit, (y / r) * limit];
-  return [x, y, Math.sqrt(Math.max(0, 1 - x * x - y * y))];
-}
-
 export class StereoSession {
   info: PhotoSetInfo | null = null;
   params: StereoParams;
@@ -136,8 +41,9 @@ export class StereoSession {
   readonly model: ModelState;
   private maps: Maps | null = null;
   private photo: ImageData | null = null;
+  /** The solves, one at a time (the App's "Solving…" on while one is out). */
+  private readonly requests: ModelRequest;
   private requestCounter = 0;
-  private inFlight: AbortController | null = null;
   private frame = 0;
   private refitNext = true;
   private readonly canvas: HTMLCanvasElement;
@@ -149,6 +55,7 @@ export class StereoSession {
   ) {
     this.params = structuredClone(options.stereo_defaults);
     this.model = new ModelState(() => host.modelChanged());
+    this.requests = new ModelRequest(this.model, (on) => host.solving(on));
     this.canvas = $<HTMLCanvasElement>('stereo-canvas');
     this.dome = $<HTMLCanvasElement>('light-dome');
     this.buildPanel();
@@ -215,7 +122,7 @@ export class StereoSession {
 
   /** Back to one photo: nothing of the set is shown or solved any more. */
   close(): void {
-    this.inFlight?.abort();
+    this.requests.abort();
     this.info = null;
     this.result = null;
     this.maps = null;
@@ -259,43 +166,35 @@ export class StereoSession {
 
   async solve(): Promise<void> {
     if (!this.info) return;
-    this.inFlight?.abort();
-    const controller = new AbortController();
-    this.inFlight = controller;
     const body = this.request();
-    const version = this.model.computing();
-    this.host.solving(true);
-    try {
-      const result = await api.stereo(body, controller.signal);
-      if (!result || result.request_id !== this.requestCounter) return;
-      const mesh = api.decodeMesh(result.mesh);
-      const maps = await decodeMaps(result);
-      if (result.request_id !== this.requestCounter) return;
-      this.result = result;
-      this.maps = maps;
-      this.host.showMesh(result, mesh, this.refitNext);
-      this.model.arrived(version);
-      this.refitNext = false;
-      this.appliedCount += 1;
-      this.setError(null);
-      this.showNote(result);
-      this.draw();
-    } catch (err) {
-      if ((err as Error).name === 'AbortError') return;
-      const message =
-        err instanceof NetworkError
-          ? 'The server is not reachable (stopped or restarting): the photo set is solved again once it answers' // the App sends it again
-          : err instanceof api.ApiError && err.status === 404
-            ? 'The server no longer has these photos (it was restarted without its sessions, or let them go): open them again with Open photos'
-            : (err as Error).message;
-      this.setError(message);
-      this.model.failed(version, err instanceof NetworkError ? UNREACHABLE : message);
-    } finally {
-      if (this.inFlight === controller) {
-        this.inFlight = null;
-        this.host.solving(false);
-      }
-    }
+    await this.requests.run(
+      async ({ signal, version }) => {
+        const result = await api.stereo(body, signal);
+        if (!result || result.request_id !== this.requestCounter) return;
+        const mesh = api.decodeMesh(result.mesh);
+        const maps = await decodeMaps(result);
+        if (result.request_id !== this.requestCounter) return;
+        this.result = result;
+        this.maps = maps;
+        this.host.showMesh(result, mesh, this.refitNext);
+        this.model.arrived(version);
+        this.refitNext = false;
+        this.appliedCount += 1;
+        this.setError(null);
+        this.showNote(result);
+        this.draw();
+      },
+      (err, version) => {
+        const message =
+          err instanceof NetworkError
+            ? 'The server is not reachable (stopped or restarting): the photo set is solved again once it answers' // the App sends it again
+            : err instanceof api.ApiError && err.status === 404
+              ? 'The server no longer has these photos (it was restarted without its sessions, or let them go): open them again with Open photos'
+              : err.message;
+        this.setError(message);
+        this.model.failed(version, err instanceof NetworkError ? UNREACHABLE : message);
+      },
+    );
   }
 
   async exportFormat(suffix: string): Promise<{ blob: Blob; filename: string }> {
@@ -382,9 +281,7 @@ export class StereoSession {
 
   /** A message that stays until the next result (or the next error). */
   private setError(message: string | null): void {
-    const box = $('stereo-error');
-    box.hidden = message === null;
-    box.textContent = message ?? '';
+    showMessage('stereo-error', message);
   }
 
   // -------------------------------------------------------------------------- pane
@@ -585,26 +482,4 @@ export class StereoSession {
       },
     };
   }
-}
-
-/** The object under light ``l``: albedo * max(0, n . l) * brightness, sRGB-encoded. */
-export function relight(maps: Maps, light: [number, number, number], brightness: number): ImageData {
-  const { width, height, mask, normals, albedo } = maps;
-  const out = new ImageData(width, height);
-  const data = out.data;
-  const [lx, ly, lz] = light;
-  const scale = brightness * ENCODE_STEPS;
-  for (let i = 0, count = width * height; i < count; i++) {
-    const p = 4 * i;
-    data[p + 3] = 255;
-    if (!mask[i]) {
-      data[p] = 24;
-      data[p + 1] = 26;
-      data[p + 2] = 31;
-      continue;
-    }
-    const shade = Math.max(0, normals[3 * i] * lx + normals[3 * i + 1] * ly + normals[3 * i + 2] * lz) * scale;
-    for (let c = 0; c < 3; c++) data[p + c] = LINEAR_TO_SRGB[Math.min(ENCODE_STEPS, Math.round(albedo[3 * i + c] * shade))];
-  }
-  return out;
 }

@@ -1,9 +1,9 @@
 // Views: photos of one object from several sides, each reconstructed as one photo is (its own
 // mask, regions, light and method), placed in one frame and fused into one closed model on the
 // server. This module owns the list of views (the image pane shows them as cards: the photo with
-// the mask it was solved with, its name, its turntable angle, Edit and Remove), the panel group
-// of the fusion's settings, and the fuse requests; the App gives it the 3D view, single-photo
-// mode (where a view is edited) and the busy/toast helpers.
+// the mask it was solved with, its name, its turntable angle, Edit and Remove: viewCards.ts draws
+// them), the panel group of the fusion's settings, and the fuse requests; the App gives it the 3D
+// view, single-photo mode (where a view is edited) and the busy/toast helpers.
 //
 // A view's settings are the single-photo ones: "Edit" opens the view's photo in single-photo
 // mode with them, and what the user changes there is written back into the view (App calls
@@ -12,27 +12,10 @@
 import * as api from './api';
 import type { FuseRequest, FuseResult, ImageInfo, Options } from './api.gen';
 import { NetworkError, UNREACHABLE } from './connection';
-import { ModelState } from './modelState';
-import type { ImageSource, Params } from './state';
-
-/** One view: a stored photo, where it came from (to reopen it), its angle and its settings. */
-export interface View {
-  image: ImageInfo;
-  source: ImageSource;
-  angle: number;
-  params: Params;
-}
-
-/** What a reload needs to show the views again. */
-export interface ViewsSaved {
-  views: View[];
-  refine: boolean;
-  settle: boolean;
-  resolution: number | null;
-  showParts: boolean;
-  /** The view being edited in single-photo mode, if one is. */
-  editing: number | null;
-}
+import { $, showMessage } from './dom';
+import { ModelRequest, ModelState } from './modelState';
+import type { ImageSource, Params, View, ViewsSaved } from './sessionTypes';
+import { fusionNote, viewCard } from './viewCards';
 
 export interface ViewsHost {
   /** Show the fused model and the partial models (in PART_COLOURS order); refit the camera when asked. */
@@ -52,17 +35,9 @@ export interface ViewsHost {
   modelChanged(): void;
 }
 
-/** The partial models' colours, view by view (the cards' swatches show the same). */
-export const PART_COLOURS = ['#f59e0b', '#38bdf8', '#a3e635', '#f472b6', '#a78bfa', '#2dd4bf', '#fb7185', '#facc15'];
-
 /** A voxel of 2 px: a 256-pixel object fuses in about a second, where the library's finest
  * default (1 px) takes several; the user can ask for it. */
 export const DEFAULT_RESOLUTION = 2;
-
-/** Below this a view's outline is not kept (shadeform.fusion.outlines.OUTLINE_KEPT). */
-const OUTLINE_KEPT = 0.95;
-
-const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
 /**
  * A partial model as drawn over the fused one: each vertex lifted off the surface along its
@@ -106,8 +81,9 @@ export class ViewsSession {
   appliedCount = 0;
   /** What the fused model on screen is: current, computing, stale or failed. */
   readonly model: ModelState;
+  /** The fusions, one at a time (the App's "Solving…" on while one is out). */
+  private readonly requests: ModelRequest;
   private requestCounter = 0;
-  private inFlight: AbortController | null = null;
   private refitNext = true;
   private retried = false;
 
@@ -116,6 +92,7 @@ export class ViewsSession {
     private readonly host: ViewsHost,
   ) {
     this.model = new ModelState(() => host.modelChanged());
+    this.requests = new ModelRequest(this.model, (on) => host.solving(on));
     this.bindPanel();
   }
 
@@ -217,7 +194,7 @@ export class ViewsSession {
 
   /** The panel is left: nothing is fused any more. */
   close(): void {
-    this.inFlight?.abort();
+    this.requests.abort();
     this.model.reset();
   }
 
@@ -255,8 +232,7 @@ export class ViewsSession {
   }
 
   async solve(): Promise<void> {
-    this.inFlight?.abort();
-    this.inFlight = null;
+    this.requests.abort();
     if (this.views.length < 2) {
       this.result = null;
       this.setError(null);
@@ -268,44 +244,38 @@ export class ViewsSession {
         : '';
       return;
     }
-    const controller = new AbortController();
-    this.inFlight = controller;
     const body = this.request();
-    const version = this.model.computing();
-    this.host.solving(true);
-    try {
-      const result = await api.fuse(body, controller.signal);
-      if (result.request_id !== this.requestCounter) return;
-      const fused = api.decodeMesh(result.mesh);
-      // lifted by a voxel and a half at most: off the fused surface, never far from it
-      const lift = 1.5 * Number(result.info.resolution);
-      const parts = result.parts.map((part, i) => lifted(api.decodeMesh(part), result.views[i].transform, lift));
-      this.result = result;
-      this.retried = false;
-      this.host.showFused(result, fused, parts, this.refitNext);
-      this.model.arrived(version);
-      this.refitNext = false;
-      this.appliedCount += 1;
-      this.setError(null);
-      this.showNote(result);
-      this.render();
-    } catch (err) {
-      if ((err as Error).name === 'AbortError' || body.request_id !== this.requestCounter) return;
-      if (err instanceof NetworkError) {
-        // the App fuses again once the server answers
-        this.setError('The server is not reachable (stopped or restarting): the views are fused again once it answers');
-        this.model.failed(version, UNREACHABLE);
-        return;
-      }
-      if (err instanceof api.ApiError && err.status === 404 && (await this.reopenForgotten(err.message, version))) return;
-      this.setError((err as Error).message);
-      this.model.failed(version, (err as Error).message);
-    } finally {
-      if (this.inFlight === controller) {
-        this.inFlight = null;
-        this.host.solving(false);
-      }
-    }
+    await this.requests.run(
+      async ({ signal, version }) => {
+        const result = await api.fuse(body, signal);
+        if (result.request_id !== this.requestCounter) return;
+        const fused = api.decodeMesh(result.mesh);
+        // lifted by a voxel and a half at most: off the fused surface, never far from it
+        const lift = 1.5 * Number(result.info.resolution);
+        const parts = result.parts.map((part, i) => lifted(api.decodeMesh(part), result.views[i].transform, lift));
+        this.result = result;
+        this.retried = false;
+        this.host.showFused(result, fused, parts, this.refitNext);
+        this.model.arrived(version);
+        this.refitNext = false;
+        this.appliedCount += 1;
+        this.setError(null);
+        this.showNote(result);
+        this.render();
+      },
+      async (err, version) => {
+        if (body.request_id !== this.requestCounter) return;
+        if (err instanceof NetworkError) {
+          // the App fuses again once the server answers
+          this.setError('The server is not reachable (stopped or restarting): the views are fused again once it answers');
+          this.model.failed(version, UNREACHABLE);
+          return;
+        }
+        if (err instanceof api.ApiError && err.status === 404 && (await this.reopenForgotten(err.message, version))) return;
+        this.setError(err.message);
+        this.model.failed(version, err.message);
+      },
+    );
   }
 
   /** The server forgot a view's photo ("view N: unknown image id ..."): reopen it if it is an
@@ -346,41 +316,8 @@ export class ViewsSession {
   }
 
   private showNote(result: FuseResult): void {
-    const solved = result.views.filter((view) => !view.cached).length;
-    const seconds = ((result.timings.place ?? 0) + (result.timings.solid ?? 0)).toFixed(1);
-    const parts = [
-      `Volume ${Math.round(result.volume).toLocaleString()} cubic px, ${result.watertight ? 'closed' : 'NOT closed'}.`,
-      `Turntable axis at column ${result.axis.toFixed(1)}; voxel ${Number(result.info.resolution).toFixed(2)} px.`,
-      result.info.cached ? 'Fused model reused.' : `Fused in ${seconds} s.`,
-    ];
-    if (solved) parts.push(`${solved} of ${result.views.length} views solved anew.`);
-    const outlines = result.views.map((view) => view.outline_iou);
-    parts.push(`Outlines kept: ${outlines.map((value, i) => `view ${i + 1} ${(100 * value).toFixed(0)}%`).join(', ')}.`);
-    $('views-note').textContent = parts.join(' ');
-    // photos that fit another placement about as well: said apart, in the colour of unsure areas
-    const rivals = result.rivals.map((turns) =>
-      turns.flatMap((turn, i) => (turn > 0 ? [`view ${i + 1} turned ${Math.round(turn)}°`] : [])).join(', '),
-    );
-    const warnings = [];
-    if (!result.depth_fixed) {
-      warnings.push(
-        'The views look along one line only (from opposite sides), so they cannot tell how deep the object is: ' +
-          "the model's depth rests on each photo's shading alone, the two joined at their shared outline; add a photo from the side (e.g. at 90°).",
-      );
-    }
-    const poor = outlines.flatMap((value, i) => (value < OUTLINE_KEPT ? [`view ${i + 1} (${(100 * value).toFixed(0)}%)`] : []));
-    if (poor.length) {
-      warnings.push(
-        `The model covers the outline of ${poor.join(', ')} poorly: parts the photo shows are missing or the model ` +
-          "reaches past them; check that view's mask and angle.",
-      );
-    }
-    if (rivals.length) {
-      warnings.push(
-        `The photos fit another placement about as well (${rivals.join('; or ')}), so the model may be wrong there: ` +
-          'add a photo between two views (e.g. at 45°), or give the angles exactly and untick Refine the poses.',
-      );
-    }
+    const { note, warnings } = fusionNote(result);
+    $('views-note').textContent = note;
     const rival = $('views-rival');
     rival.hidden = warnings.length === 0;
     rival.textContent = warnings.join(' ');
@@ -388,9 +325,7 @@ export class ViewsSession {
 
   /** A message that stays until the next result (or the next error). */
   setError(message: string | null): void {
-    const box = $('views-error');
-    box.hidden = message === null;
-    box.textContent = message ?? '';
+    showMessage('views-error', message);
   }
 
   // ------------------------------------------------------------------------- panel
@@ -434,7 +369,7 @@ export class ViewsSession {
   }
 
   private edit(index: number): void {
-    this.inFlight?.abort();
+    this.requests.abort();
     this.model.changed('a view is being edited');
     this.editing = index;
     this.host.edit(index);
@@ -476,7 +411,9 @@ export class ViewsSession {
   /** The cards, the panel's settings and the summary, from the current state. */
   render(): void {
     const list = $('views-list');
-    const cards = this.views.map((view, index) => this.card(view, index));
+    // what the fusion found of each view, where the result is the views' own
+    const current = this.result && this.result.views.length === this.views.length ? this.result.views : null;
+    const cards = this.views.map((view, index) => viewCard(view, index, current?.[index] ?? null));
     list.replaceChildren(...cards);
     $('views-empty').hidden = this.views.length > 0;
     $<HTMLSelectElement>('views-resolution').value = this.resolution === null ? 'auto' : String(this.resolution);
@@ -490,58 +427,6 @@ export class ViewsSession {
     const count = $('views-count');
     count.textContent = this.views.length ? String(this.views.length) : '';
     count.hidden = !this.views.length;
-  }
-
-  private card(view: View, index: number): HTMLElement {
-    const card = document.createElement('li');
-    card.className = 'view-card';
-    card.dataset.index = String(index);
-    const colour = PART_COLOURS[index % PART_COLOURS.length];
-    card.innerHTML = `
-      <div class="thumb"><img alt="" /><div class="tint"></div><span class="swatch"></span></div>
-      <div class="about">
-        <b class="name"></b>
-        <label class="angle" title="Turntable angle in degrees: how far the object was turned about the vertical axis (right-handed about +y) for this photo">
-          Angle <input type="text" inputmode="decimal" spellcheck="false" /> °
-        </label>
-        <small class="settings"></small>
-        <div class="settled" hidden>
-          <span></span>
-          <button class="btn small" data-act="keep" title="Make these areas the view's own concave regions: they stay when you edit it">Keep as regions</button>
-        </div>
-        <div class="buttons">
-          <button class="btn small" data-act="edit" title="Open this photo with its settings (mask, regions, light, method) to change them; the fused model follows">Edit</button>
-          <button class="btn small danger" data-act="remove" title="Leave this photo out of the fused model">Remove</button>
-        </div>
-      </div>`;
-    card.querySelector('img')!.src = api.photoUrl(view.image.image_id);
-    card.querySelector<HTMLElement>('.swatch')!.style.background = colour;
-    card.querySelector<HTMLElement>('.swatch')!.textContent = String(index + 1);
-    card.querySelector('.name')!.textContent = view.image.name;
-    card.querySelector<HTMLElement>('.name')!.title = view.image.name;
-    const input = card.querySelector('input')!;
-    input.value = String(view.angle);
-    input.dataset.angle = String(index);
-    input.setAttribute('aria-label', `View ${index + 1} angle in degrees`);
-    card.querySelector('.settings')!.textContent = settingsText(view.params);
-    // what the fusion read as concave in this view's photo, from the other views
-    const current = this.result && this.result.views.length === this.views.length ? this.result.views[index] : null;
-    const settled = current?.settled.length ?? 0;
-    if (settled) {
-      card.querySelector<HTMLElement>('.settled')!.hidden = false;
-      card.querySelector('.settled span')!.textContent =
-        `${settled} unsure area${settled === 1 ? '' : 's'} read as concave from the other views`;
-    }
-    // the mask the view was solved with, tinted in its model's colour
-    const mask = current?.mask_png;
-    const tint = card.querySelector<HTMLElement>('.tint')!;
-    if (mask) {
-      tint.style.background = colour;
-      tint.style.maskImage = `url(data:image/png;base64,${mask})`;
-    } else {
-      tint.hidden = true;
-    }
-    return card;
   }
 
   // ------------------------------------------------------------------------ hook
@@ -577,15 +462,4 @@ export class ViewsSession {
       },
     };
   }
-}
-
-/** What a view's settings say in a few words: mask, regions, light, method. */
-function settingsText(params: Params): string {
-  const parts = [params.mask ? 'your mask' : 'automatic mask'];
-  const regions = params.concave.regions.length;
-  if (regions) parts.push(`${regions} concave region${regions === 1 ? '' : 's'}`);
-  const light = params.light;
-  parts.push(light.mode === 'z' ? 'frontal light' : light.mode === 'estimate' ? 'light estimated' : `light ${light.slant.toFixed(0)}° / ${light.tilt.toFixed(0)}°`);
-  if (params.method !== 'auto') parts.push(params.method);
-  return parts.join(' · ');
 }

@@ -13,6 +13,7 @@
 import * as THREE from 'three';
 import * as api from './api';
 import type { Options, ReconstructRequest, ReliefParams, ReliefRequest, ReliefResult } from './api.gen';
+import { $, showMessage } from './dom';
 import { LatestRequest, ModelState, statusText } from './modelState';
 import { download } from './state';
 import type { Viewer } from './viewer';
@@ -37,8 +38,6 @@ const VIEW_YAW = 30;
 const VIEW_PITCH = -25;
 // the share of the view's width and height the solid's box may take: room for the labels beside it
 const VIEW_FILL = 0.75;
-
-const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 
 /** The numeric options typed into the panel; the triangle budget may be empty (no budget). */
 const NUMBERS = [
@@ -285,8 +284,7 @@ export class PrintPanel {
   }
 
   private showError(message: string | null): void {
-    $('print-error').hidden = message === null;
-    $('print-error').textContent = message ?? '';
+    showMessage('print-error', message);
   }
 
   /** Everything drawn from the solid's state: the status line, the buttons, the measures. */

@@ -1,0 +1,34 @@
+// What a session holds of a photo, shared by what keeps it (state.ts: a reload, the project files,
+// the server's projects) and what works on it (the App the open photo's, views.ts each view's):
+// its settings with the regions, where the image came from; and the views with their settings.
+import type { ImageInfo, ReconstructParams } from './api.gen';
+
+export type Params = ReconstructParams;
+export type Region = Params['concave']['regions'][number];
+export type Axis = Region['axis'];
+
+/** Where the current image came from: a shipped example is reopened by name, an upload re-sent. */
+export type ImageSource =
+  | { kind: 'example'; name: string }
+  | { kind: 'upload'; name: string; type: string }
+  | { kind: 'initial'; name: string } // the image `shadeform app IMAGE` was started with
+  | { kind: 'viewset'; name: string; index: number }; // a photo of a shipped view set
+
+/** One view: a stored photo, where it came from (to reopen it), its angle and its settings. */
+export interface View {
+  image: ImageInfo;
+  source: ImageSource;
+  angle: number;
+  params: Params;
+}
+
+/** What a reload needs to show the views again. */
+export interface ViewsSaved {
+  views: View[];
+  refine: boolean;
+  settle: boolean;
+  resolution: number | null;
+  showParts: boolean;
+  /** The view being edited in single-photo mode, if one is. */
+  editing: number | null;
+}
