@@ -23,6 +23,7 @@ from PIL import Image
 
 import shadeform
 from shadeform import metrics, synth
+from shadeform.app import reconstruct as reconstruct_routes
 from shadeform.app import schema, server
 from shadeform.app.large import FIT_FACTOR, LARGE_PIXELS
 from shadeform.app.server import AppLimits, create_app
@@ -526,7 +527,7 @@ class TestSuperseded:
     def test_no_solve_for_a_client_that_left(self, monkeypatch):
         """A request whose client disconnected (the app aborts superseded requests) is not solved."""
         calls = []
-        monkeypatch.setattr(server, "_reconstruct_result", lambda *args: calls.append(args))
+        monkeypatch.setattr(reconstruct_routes, "reconstruct_result", lambda *args: calls.append(args))
         app = create_app()
         with TestClient(app, base_url=LOCAL) as test_client:
             image_id = test_client.post(f"/api/examples/synth:bowl?size={SIZE}").json()["image_id"]

@@ -42,6 +42,8 @@ from shadeform.app.encoding import (
     safe_stem,
 )
 from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
+from shadeform.app.solving import solve
+from shadeform.app.state import image_info, suggested_params
 from shadeform.errors import InputError
 
 __all__ = ["PART_VERTICES", "add_fusion_routes"]
@@ -75,7 +77,7 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
     ----------
     app : fastapi.FastAPI
         The app :func:`shadeform.app.server.create_app` builds.
-    state : shadeform.app.server._State
+    state : shadeform.app.state.State
         The app's store: its images, its reconstructions (each view's is kept there) and fusions.
     """
     router = APIRouter()
@@ -104,7 +106,6 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
 
     @router.post("/api/viewsets/examples/{name}", response_model=ViewSetInfo, status_code=201)
     def post_view_set_example(name: str) -> Response:
-        from shadeform.app.server import _image_info
         from shadeform.examples import VIEW_SET_EXAMPLES
 
         if name not in VIEW_SET_EXAMPLES:
@@ -120,7 +121,7 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
                 state.images.put(entry.image_id, entry, entry.nbytes)
                 state.remember(entry.image_id, "view", {"name": name, "index": index})
             view_sets[name] = (tuple(entry.image_id for entry in known), angles)
-        info = ViewSetInfo(name=name, images=[_image_info(entry) for entry in known], angles=list(angles))
+        info = ViewSetInfo(name=name, images=[image_info(entry) for entry in known], angles=list(angles))
         return json_response(info, status_code=201)
 
     app.include_router(router)
@@ -148,10 +149,8 @@ def _solved(state, entries: list, body: FuseRequest) -> list[tuple[Any, bool]]:
 def _view_solve(state, entries: list, i: int, params) -> tuple[Any, bool]:
     """View ``i`` solved with ``params`` by the server's own solve (and cache); a failure says
     which view."""
-    from shadeform.app.server import _solve
-
     try:
-        return _solve(state, entries[i], params)
+        return solve(state, entries[i], params)
     except InputError as err:
         raise InputError(f"view {i + 1} ({entries[i].name}): {err}") from None
 
@@ -277,12 +276,11 @@ def _moved(mesh, transform: np.ndarray):
 def _example_views(name: str, key: str | None = None, index: int | None = None):
     """A view-set example's views as stored images with new ids and their angles; or, given
     ``key`` and ``index``, that one view under that id (made again from the session store)."""
-    from shadeform.app.server import _suggested
     from shadeform.app.store import StoredImage, new_image_id
     from shadeform.examples import load_view_set_example
 
     images, masks, angles, settings = load_view_set_example(name)
-    suggested = _suggested(settings)
+    suggested = suggested_params(settings)
     stem = name.split(":")[-1]
     views = [
         StoredImage(new_image_id(), f"{stem} {angle:g}°", image[:, :, None], mask, suggested)

@@ -11,17 +11,14 @@ mask file checked; and the user's mask that every solve and export then uses.
 A mask travels as base64 of a PNG, 255 (any non-zero value) on the object, the image's size: in
 every :class:`~shadeform.app.schema.MaskResult` (with its confidence, and a doubtful mask's
 warning in its note), and from the client in
-``ReconstructParams.mask``, which :func:`user_mask` reads for the solve (decoded once per mask
-and kept). Brush, polygon, invert and fill holes are edits the client makes on its own copy.
+``ReconstructParams.mask``, which :func:`~shadeform.app.mask_files.user_mask` reads for the solve
+(decoded once per mask and kept). Brush, polygon, invert and fill holes are edits the client makes on its own copy.
 Errors are the library's one-line :class:`~shadeform.InputError` messages (422): a mask of
 another size, an empty one, a file that is not an image.
 """
 
 from __future__ import annotations
 
-import base64
-import binascii
-import hashlib
 from typing import Any
 
 import numpy as np
@@ -30,8 +27,9 @@ from fastapi.responses import Response
 
 from shadeform.app.encoding import png_base64
 from shadeform.app.guard import ERROR_RESPONSES
+from shadeform.app.mask_files import decode_mask, mask_from_file, user_mask
 from shadeform.app.schema import AutoMaskRequest, BoxMaskRequest, MaskFileRequest, MaskResult, SeedMaskRequest
-from shadeform.errors import InputError
+from shadeform.app.solving import channel_of
 
 __all__ = ["add_mask_routes", "mask_from_file", "user_mask"]
 
@@ -44,7 +42,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
     ----------
     app : fastapi.FastAPI
         The app :func:`shadeform.app.server.create_app` builds.
-    state : shadeform.app.server._State
+    state : shadeform.app.state.State
         The app's store: its images (``state.image(id)``), limits and mask cache.
     """
     router = APIRouter(prefix="/api/images/{image_id}/mask", responses=ERROR_RESPONSES)
@@ -54,7 +52,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
         from shadeform.masks import find_object, threshold_object
 
         entry = state.image(image_id)
-        image, automatic, _ = _channel(state, entry, body.channel)
+        image, automatic, _ = channel_of(state, entry, body.channel)
         if body.threshold is not None:
             dark = bool(body.dark)
             mask = threshold_object(image, body.threshold, dark=dark)
@@ -74,7 +72,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
         from shadeform.masks import segment_from_seeds
 
         entry = state.image(image_id)
-        image, _, _ = _channel(state, entry, body.channel)
+        image, _, _ = channel_of(state, entry, body.channel)
         mask, confidence = segment_from_seeds(  # cut on the photo's colours
             entry.pixels, body.inside, body.outside, radius=body.radius, return_confidence=True
         )
@@ -89,7 +87,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
         from shadeform.masks import segment_from_box
 
         entry = state.image(image_id)
-        image, _, _ = _channel(state, entry, body.channel)
+        image, _, _ = channel_of(state, entry, body.channel)
         mask, confidence = segment_from_box(entry.pixels, body.box, return_confidence=True)
         note = "found inside the box drawn round the object"
         return _result(mask, threshold=None, dark=_darker(image, mask), note=note, confidence=confidence)
@@ -97,7 +95,7 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
     @router.post("/file", response_model=MaskResult)
     def post_file(image_id: str, body: MaskFileRequest) -> Response:
         entry = state.image(image_id)
-        mask = _decode(body.data, entry.pixels.shape[:2], state.limits.max_pixels)
+        mask = decode_mask(body.data, entry.pixels.shape[:2], state.limits.max_pixels)
         return _result(mask, threshold=None, dark=False, note="loaded from a file")
 
     # the app's own routes (FastAPI's include_router would nest them out of the 405 check)
@@ -105,110 +103,9 @@ def add_mask_routes(app: FastAPI, state: Any) -> None:
         app.router.routes.append(route)
 
 
-def user_mask(state: Any, text: str, shape: tuple[int, ...]) -> tuple[np.ndarray, str]:
-    """The user's mask (``ReconstructParams.mask``) for a solve, checked, and as the app's PNG.
-
-    Parameters
-    ----------
-    state : shadeform.app.server._State
-        Holds the decoded masks (``state.masks``), keyed by the text's hash.
-    text : str
-        base64 of an image file, non-zero = object.
-    shape : tuple of int
-        The image's ``(H, W)``.
-
-    Returns
-    -------
-    mask : (H, W) bool
-    png : str
-        base64 of the mask as an 8-bit grey PNG, 255 on the object.
-
-    Raises
-    ------
-    InputError
-        If the text is not base64 of an image file, or the mask has another size or is empty.
-    """
-    key = ("user mask", hashlib.sha256(text.encode("ascii", "replace")).hexdigest())
-    known = state.masks.get(key)
-    if known is None:
-        mask = _decode(text, shape, state.limits.max_pixels)
-        known = (mask, png_base64(mask.astype(np.float32)))
-        state.masks.put(key, known, mask.nbytes)
-    mask, png = known
-    _check_shape(mask, shape)
-    return mask, png
-
-
-def _channel(state: Any, entry: Any, channel: str) -> tuple[np.ndarray, np.ndarray, str]:
-    # the very image and automatic mask a solve uses (the server keeps them per channel)
-    from shadeform.app.server import _channel as channel_of
-
-    return channel_of(state, entry, channel)
-
-
-def _decode(text: str, shape: tuple[int, ...], max_pixels: int) -> np.ndarray:
-    try:
-        data = base64.b64decode(text, validate=True)
-    except (binascii.Error, ValueError):
-        raise InputError(
-            "mask is not base64 text of an image file; send the file's bytes in base64"
-        ) from None
-    return mask_from_file(data, shape, max_pixels)
-
-
-def mask_from_file(data: bytes, shape: tuple[int, ...], max_pixels: int) -> np.ndarray:
-    """A mask file a client sent, read from memory and checked.
-
-    Parameters
-    ----------
-    data : bytes
-        The file's content (PNG, TIFF, BMP, ...); non-zero in any channel = object.
-    shape : tuple of int
-        The image's ``(H, W)``: the mask must have it.
-    max_pixels : int
-        The server's pixel limit, checked from the file's header before anything is decoded.
-
-    Returns
-    -------
-    (H, W) bool
-
-    Raises
-    ------
-    InputError
-        If the file is empty or not an image, has another size or no non-zero pixel;
-        :class:`~shadeform.io.images.ImageTooLargeError` if its header declares more than
-        ``max_pixels``.
-    """
-    from shadeform.io.images import load_pixels
-
-    if not data:
-        raise InputError("mask is an empty file; send a PNG of the image's size")
-    try:
-        pixels = load_pixels(data, max_pixels=max_pixels)
-    except InputError as err:
-        raise type(err)(f"mask: {err}") from None
-    mask = (pixels > 0).any(axis=2)
-    _check_shape(mask, shape)
-    if not mask.any():
-        raise InputError(
-            "mask is empty (no non-zero pixel); paint the object in a non-zero colour, or use the "
-            "automatic mask"
-        )
-    return mask
-
-
 def _darker(image: np.ndarray, mask: np.ndarray) -> bool:
     """Whether the object is darker than the rest of the image (by their medians)."""
     return bool(mask.any() and (~mask).any() and np.median(image[mask]) < np.median(image[~mask]))
-
-
-def _check_shape(mask: np.ndarray, shape: tuple[int, ...]) -> None:
-    height, width = (int(n) for n in tuple(shape)[:2])
-    if mask.shape != (height, width):
-        raise InputError(
-            f"mask is {mask.shape[1]}x{mask.shape[0]} but the image is {width}x{height} "
-            "(width x height); give a mask of the image's size"
-        )
 
 
 def _result(

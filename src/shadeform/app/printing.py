@@ -13,7 +13,7 @@ and as texture maps.
 ==============================================  =================================================
 
 As elsewhere, input checking, a library call (:func:`shadeform.relief`, :func:`shadeform.maps`)
-and encoding. The reconstruction is the one :func:`shadeform.app.server._solve` keeps for
+and encoding. The reconstruction is the one :func:`shadeform.app.solving.solve` keeps for
 ``/api/reconstruct`` and ``/api/export``: a model that is current is not solved again. Solids and
 maps are kept in the same results cache, so that a download after a preview is not made again.
 The maps' files are those of ``shadeform maps`` (:data:`shadeform.cli.maps.LEGEND`, written by
@@ -53,6 +53,7 @@ from shadeform.app.schema import (
     ReliefRequest,
     ReliefResult,
 )
+from shadeform.app.solving import solve
 
 __all__ = ["PREVIEW_SIDE", "add_print_routes", "relief_options"]
 
@@ -84,7 +85,7 @@ def add_print_routes(app: FastAPI, state: Any) -> None:
     ----------
     app : fastapi.FastAPI
         The app :func:`shadeform.app.server.create_app` builds.
-    state : shadeform.app.server._State
+    state : shadeform.app.state.State
         The app's store: its images, its reconstructions, and (in the same cache) the solids and
         maps made of them.
     """
@@ -155,13 +156,12 @@ def _relief(state, entry, params: ReconstructParams, options: dict) -> tuple[Any
     """The solid for these parameters and print options, from the cache when known; with the
     seconds spent and whether the reconstruction and the solid were reused."""
     from shadeform import relief
-    from shadeform.app.server import _solve
 
     key = _key("relief", entry, params, tuple(sorted(options.items())))
     known = state.results.get(key)
     if known is not None:
         return known, {"timings": {}, "cached": True, "reused": True}
-    solved, cached = _solve(state, entry, params)
+    solved, cached = solve(state, entry, params)
     timings = {} if cached else {"reconstruct": _solve_seconds(solved.reconstruction)}
     start = time.perf_counter()
     solid = relief(solved.reconstruction, **options)
@@ -195,13 +195,12 @@ def _maps(state, entry, params: ReconstructParams) -> tuple[dict[str, np.ndarray
     """Every map of the reconstruction (float32, full resolution), from the cache when known;
     with the seconds spent, whether anything was reused, and the height map's range in pixels."""
     from shadeform import maps
-    from shadeform.app.server import _solve
 
     key = _key("maps", entry, params)
     known = state.results.get(key)
     if known is not None:
         return known[0], {"timings": {}, "cached": True, "reused": True, "range": known[1]}
-    solved, cached = _solve(state, entry, params)
+    solved, cached = solve(state, entry, params)
     timings = {} if cached else {"reconstruct": _solve_seconds(solved.reconstruction)}
     start = time.perf_counter()
     # float32 keeps 24 bits, more than the 16-bit files need, at half the cache's memory

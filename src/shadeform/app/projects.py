@@ -52,7 +52,7 @@ def add_project_routes(app: FastAPI, state: Any) -> None:
     ----------
     app : fastapi.FastAPI
         The app :func:`shadeform.app.server.create_app` builds.
-    state : shadeform.app.server._State
+    state : shadeform.app.state.State
         The app's state: its ``sessions`` (a :class:`~shadeform.app.sessions.SessionStore`, or
         None) keeps the projects, and its ``limits`` bound a document's size.
     """

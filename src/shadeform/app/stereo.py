@@ -47,7 +47,7 @@ from shadeform.app.encoding import (
     shown_photo,
 )
 from shadeform.app.guard import size_text
-from shadeform.app.masks import mask_from_file
+from shadeform.app.mask_files import mask_from_file
 from shadeform.app.schema import PhotoSetInfo, StereoParams, StereoRequest, StereoResult
 from shadeform.app.store import new_image_id
 from shadeform.errors import InputError
@@ -110,7 +110,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
     ----------
     app : fastapi.FastAPI
         The app :func:`shadeform.app.server.create_app` builds.
-    state : shadeform.app.server._State
+    state : shadeform.app.state.State
         The app's store: it keeps photo sets beside images, and their results.
     """
     router = APIRouter()
