@@ -58,10 +58,12 @@ system:
 test: system lint $(STAMP) $(JSSTAMP) $(WEBSTAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
 
-# ruff: lint and formatting, checked (CI runs this through `make test`); `make format` fixes both
+# ruff: lint and formatting, checked (CI runs this through `make test`); `make format` fixes both.
+# import-linter: the layers of docs/architecture.md and no import cycle (.importlinter)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks setup.py
 	$(VENV)/bin/ruff format --check src tests benchmarks setup.py
+	$(VENV)/bin/lint-imports --no-cache
 
 format: $(STAMP)
 	$(VENV)/bin/ruff check --fix src tests benchmarks setup.py

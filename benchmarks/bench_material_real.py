@@ -22,7 +22,7 @@ from scipy import ndimage
 
 from shadeform import texture
 from shadeform.io.atomic import atomic_write
-from shadeform.io.photoset import load_photo_set
+from shadeform.photoset import load_photo_set
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real" / "diligent"

@@ -151,7 +151,7 @@ def real_rows(repeats):
     median and worst seconds, peak MiB, object pixels."""
     import scipy.io
 
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     rows, light_errors = [], {}
     for name in OBJECTS:
@@ -177,7 +177,7 @@ def real_rows(repeats):
 def ball_rows(repeats):
     import scipy.io
 
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     ball = load_photo_set([BALL])
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]

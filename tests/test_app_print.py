@@ -21,7 +21,7 @@ from fastapi.testclient import TestClient
 
 from shadeform.app.printing import PREVIEW_SIDE, _shrink
 from shadeform.app.server import create_app
-from shadeform.cli.maps import LEGEND
+from shadeform.texture import LEGEND
 
 trimesh = pytest.importorskip("trimesh")
 

@@ -20,9 +20,9 @@ from shadeform import synth
 from shadeform.app.server import AppLimits, create_app
 from shadeform.examples import load_photo_set_example
 from shadeform.io.images import srgb_encode
-from shadeform.io.photoset import write_lights
 from shadeform.light import light_from_slant_tilt
 from shadeform.photometric import reconstruct_stereo
+from shadeform.photoset import write_lights
 from test_light_sphere import angles, sphere_rig
 
 LOCAL = "http://127.0.0.1:8000"

@@ -39,7 +39,9 @@ def test_no_web_file_is_over_the_limit():
     assert over == {}
 
 
-_WEB_IMPORT = re.compile(r"""(?:^|\n)\s*(?:import|export)\b[^'"]*?\bfrom\s*['"]\./([\w.]+?)(?:\.ts|\.js)?['"]""")
+_WEB_IMPORT = re.compile(
+    r"""(?:^|\n)\s*(?:import|export)\b[^'"]*?\bfrom\s*['"]\./([\w.]+?)(?:\.ts|\.js)?['"]"""
+)
 
 
 def web_imports(text: str) -> set[str]:
@@ -73,7 +75,10 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 def test_the_cycle_finder_finds_a_cycle_and_only_one_that_exists():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
-    assert web_imports("import { x } from './api';\nexport { y } from \"./decode.ts\";\n") == {"api", "decode"}
+    assert web_imports("import { x } from './api';\nexport { y } from \"./decode.ts\";\n") == {
+        "api",
+        "decode",
+    }
     assert web_imports("import * as THREE from 'three';") == set()
 
 
@@ -114,3 +119,15 @@ def test_architecture_names_every_module_and_no_missing_one():
     assert len(paths) > 100
     stale = sorted(p for p in paths if not list(SRC.rglob(Path(p).name)))
     assert stale == []
+
+
+def test_the_moved_photo_set_reader_is_still_reachable_from_io_with_a_warning():
+    import pytest
+
+    from shadeform import photoset
+
+    with pytest.warns(DeprecationWarning, match="shadeform.photoset.load_photo_set"):
+        from shadeform.io.photoset import load_photo_set
+    assert load_photo_set is photoset.load_photo_set
+    with pytest.raises(ImportError, match="no_such_name"):
+        from shadeform.io.photoset import no_such_name  # noqa: F401

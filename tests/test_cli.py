@@ -871,7 +871,7 @@ class TestStereo:
         "option, value", [("--method", "magic"), ("--integrator", "magic"), ("--channel", "magic")]
     )
     def test_unknown_choice_before_any_work(self, photo_set, out, monkeypatch, option, value):
-        from shadeform.io import photoset
+        from shadeform import photoset
 
         monkeypatch.setattr(photoset, "read_photo", lambda *a, **k: pytest.fail("photos read"))
         result = invoke("stereo", photo_set["folder"], "-o", out / "m.glb", option, value)

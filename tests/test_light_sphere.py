@@ -102,7 +102,7 @@ def test_real_glossy_ball():
     """DiLiGenT's ball is a glossy painted sphere photographed under 96 calibrated lights: its
     specular peak gives the lights to about a degree (1.07 mean, 2.22 worst measured) although the
     camera is a perspective one and the ball not a mirror."""
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     ball = load_photo_set([BALL])
     found = calibrate_lights(ball.images)
@@ -116,7 +116,7 @@ def test_real_glossy_ball():
 
 class TestLightFiles:
     def test_lp_round_trip_and_names(self, tmp_path):
-        from shadeform.io.photoset import read_lp, write_lights
+        from shadeform.photoset import read_lp, write_lights
 
         directions = np.array([[0.1, 0.2, 0.97], [-0.3, 0.1, 0.95], [0.0, -0.4, 0.92]])
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
@@ -139,14 +139,14 @@ class TestLightFiles:
         ],
     )
     def test_bad_lp(self, tmp_path, text, match):
-        from shadeform.io.photoset import read_lp
+        from shadeform.photoset import read_lp
 
         (tmp_path / "l.lp").write_text(text)
         with pytest.raises(InputError, match=match):
             read_lp(tmp_path / "l.lp")
 
     def test_photo_set_takes_an_lp_file_in_any_order(self, tmp_path):
-        from shadeform.io.photoset import load_photo_set, write_lights
+        from shadeform.photoset import load_photo_set, write_lights
 
         paths, lights = four_photos(tmp_path, size=48, prefix="p")
         order = [2, 0, 3, 1]
@@ -179,7 +179,7 @@ def test_cli_lights_then_stereo(scene_with_sphere, tmp_path):
     from typer.testing import CliRunner
 
     from shadeform.cli import app
-    from shadeform.io.photoset import read_lp
+    from shadeform.photoset import read_lp
 
     folder, lights, obj = scene_with_sphere
     runner = CliRunner()

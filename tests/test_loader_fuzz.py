@@ -39,7 +39,7 @@ from shadeform.io.images import (
     load_pixels,
     read_photo,
 )
-from shadeform.io.photoset import read_photos
+from shadeform.photoset import read_photos
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_loader.py"
 MASTER_SEED = 2002  # not the benchmark's (14): the tests try other files than its table

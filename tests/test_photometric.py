@@ -430,7 +430,7 @@ def test_diligent_ball():
     classical robust method of the benchmark."""
     import scipy.io
 
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     ball = load_photo_set([BALL])
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
@@ -458,7 +458,7 @@ def test_diligent_ball():
 def _real(name):
     import scipy.io
 
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     photos = load_photo_set([REAL / name])
     return photos, scipy.io.loadmat(REAL / name / "Normal_gt.mat")["Normal_gt"]
@@ -506,7 +506,7 @@ def test_real_diligent_sets_are_linear():
     import scipy.io
 
     from shadeform.io.images import CALIBRATED_SET_FILE, load_image_rgb
-    from shadeform.io.photoset import load_photo_set
+    from shadeform.photoset import load_photo_set
 
     folders = sorted(p for p in REAL.iterdir() if p.is_dir())
     assert len(folders) == 7 and all((folder / CALIBRATED_SET_FILE).is_file() for folder in folders)
@@ -540,14 +540,14 @@ class TestPhotoSet:
         return tmp_path
 
     def test_colour_by_default(self, folder):
-        from shadeform.io.photoset import load_photo_set
+        from shadeform.photoset import load_photo_set
 
         photos = load_photo_set([folder])
         assert photos.images.shape == (4, 96, 96, 3) and photos.intensities.shape == (4, 3)
         assert photos.info["channel"] == "rgb" and photos.info["encoding_from"] == "set"
 
     def test_one_channel_after_the_strengths(self, folder, sphere):
-        from shadeform.io.photoset import load_photo_set
+        from shadeform.photoset import load_photo_set
 
         colour = load_photo_set([folder])
         for channel in ("g", "luma"):
@@ -562,7 +562,7 @@ class TestPhotoSet:
             assert angles(result.normals, sphere.normals, inner).mean() < 0.5
 
     def test_linear_override_and_errors(self, folder):
-        from shadeform.io.photoset import load_photo_set
+        from shadeform.photoset import load_photo_set
 
         photos = load_photo_set([folder], linear=False)
         assert (photos.encoding, photos.encoding_from) == ("srgb", "user")
@@ -667,7 +667,7 @@ def test_cli_writes_a_colour_albedo_for_colour_photos(tmp_path, sphere):
 
     from shadeform.cli import app
     from shadeform.io.maps import save_gray
-    from shadeform.io.photoset import write_lights
+    from shadeform.photoset import write_lights
 
     lights = ring(6, 30)
     paint = np.array([0.3, 0.6, 0.9])

@@ -296,12 +296,14 @@ class TestEstimatedLight:
 class TestPreview:
     """reconstruct_preview: the quick look at the mesh's grid that the app shows first."""
 
-    def test_still_importable_from_pipeline(self):
-        from shadeform.pipeline import preview_step as from_pipeline
-
+    def test_still_importable_from_pipeline_with_a_deprecation_warning(self):
+        with pytest.warns(DeprecationWarning, match="shadeform.coarse.preview_step"):
+            from shadeform.pipeline import preview_step as from_pipeline
         assert from_pipeline is preview_step
-        assert pipeline.reconstruct_preview is reconstruct_preview
-        assert pipeline.reconstruct_on_grid is coarse.reconstruct_on_grid
+        with pytest.warns(DeprecationWarning, match="moved to shadeform.coarse"):
+            assert pipeline.reconstruct_preview is reconstruct_preview
+        with pytest.warns(DeprecationWarning, match="moved to shadeform.coarse"):
+            assert pipeline.reconstruct_on_grid is coarse.reconstruct_on_grid
         with pytest.raises(AttributeError, match="no_such_name"):
             pipeline.no_such_name  # noqa: B018
 

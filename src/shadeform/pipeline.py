@@ -456,14 +456,21 @@ def warm() -> dict[str, float]:
     return seconds
 
 
-# moved to shadeform.coarse, which imports this module: still importable from here, imported
-# when first asked for (no import at load, so no cycle)
+# moved to shadeform.coarse, which imports this module: still importable from here for one
+# release, with a DeprecationWarning; imported when first asked for (no import at load, no cycle)
 _MOVED = ("preview_step", "reconstruct_on_grid", "reconstruct_preview")
 
 
 def __getattr__(name: str):
     if name in _MOVED:
+        import warnings
+
         from shadeform import coarse
 
+        warnings.warn(
+            f"shadeform.pipeline.{name} moved to shadeform.coarse.{name}; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         return getattr(coarse, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

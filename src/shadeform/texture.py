@@ -57,7 +57,38 @@ from scipy import ndimage
 
 from shadeform.errors import InputError
 
-__all__ = ["DIRECTIONS", "MAPS", "Material", "ambient_occlusion", "curvature", "maps", "material"]
+__all__ = [
+    "ALBEDO",
+    "DIRECTIONS",
+    "LEGEND",
+    "MAPS",
+    "Material",
+    "ambient_occlusion",
+    "curvature",
+    "legend",
+    "maps",
+    "material",
+]
+
+#: Each map's bits per sample and legend (what its values mean): the files' README and the app's captions.
+LEGEND = {
+    "normal_opengl": (16, "normal map, OpenGL convention (green up): Blender, Unity, glTF"),
+    "normal_directx": (16, "normal map, DirectX convention (green down): Unreal, 3ds Max"),
+    "height": (16, "height / displacement: black lowest, white highest{range}"),
+    "ambient_occlusion": (8, "ambient occlusion: white open sky, dark cavities"),
+    "curvature": (8, "curvature: mid-grey flat, brighter convex edges, darker cavities"),
+}
+ALBEDO = (8, "albedo: the photo with its shading and uneven lighting divided out")
+
+
+def legend(relief_px: float | None = None, *, material: bool = False) -> dict[str, tuple[int, str]]:
+    """Each map's bits per sample and legend line (:data:`LEGEND`, and :data:`ALBEDO` for the
+    material mode); the height's with its range in pixels when known: ``shadeform maps`` and the app
+    write it beside the maps."""
+    shown = "" if relief_px is None else f" ({relief_px:.3g} px of relief)"
+    every = {**LEGEND, "albedo": ALBEDO} if material else LEGEND
+    return {name: (bits, text.format(range=shown)) for name, (bits, text) in every.items()}
+
 
 #: Azimuths the occlusion is averaged over (every 22.5 degrees); not swept.
 DIRECTIONS = 16

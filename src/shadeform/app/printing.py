@@ -54,6 +54,7 @@ from shadeform.app.schema import (
     ReliefResult,
 )
 from shadeform.app.solving import solve
+from shadeform.texture import legend
 
 __all__ = ["PREVIEW_SIDE", "add_print_routes", "relief_options"]
 
@@ -216,22 +217,14 @@ def _solve_seconds(reconstruction) -> float:
     return float(sum(reconstruction.info["timings"].values()))
 
 
-def _legend(relief_px: float) -> dict[str, tuple[int, str]]:
-    """The CLI's legend of each map: bits per sample and what its values mean."""
-    from shadeform.cli.maps import legend
-
-    return legend(relief_px)
-
-
 def _maps_result(state, entry, body: ReconstructRequest) -> MapsResult:
     start = time.perf_counter()
     made, how = _maps(state, entry, body.params)
     timings = how["timings"]
     lap = time.perf_counter()
-    legend = _legend(how["range"])
     previews = [
         MapPreview(name=name, png=png_base64(_shrink(made[name])), bits=bits, legend=text)
-        for name, (bits, text) in legend.items()
+        for name, (bits, text) in legend(how["range"]).items()
     ]
     timings["encode"] = time.perf_counter() - lap
     timings["total"] = time.perf_counter() - start
@@ -264,7 +257,7 @@ def _zip(made: dict[str, np.ndarray], stem: str, relief_px: float) -> bytes:
         tempfile.TemporaryDirectory(prefix="shadeform-maps-") as folder,
         zipfile.ZipFile(buffer, "w") as archive,
     ):
-        for name, (bits, text) in _legend(relief_px).items():
+        for name, (bits, text) in legend(relief_px).items():
             filename = f"{stem}_{name}.png"
             # the file name is ours: a sanitised stem and a map's name
             path = save_gray(made[name], Path(folder) / filename, bitdepth=bits)

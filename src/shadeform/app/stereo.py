@@ -193,7 +193,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
 def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
     """The uploads as a :class:`StoredPhotoSet`; every failure a one-line 4xx."""
     from shadeform.io.images import ImageTooLargeError
-    from shadeform.io.photoset import match_lp, parse_lp, parse_rows, read_photos
+    from shadeform.photoset import match_lp, parse_lp, parse_rows, read_photos
 
     limits = state.limits
     if not 3 <= len(photos) <= MAX_PHOTOS:
@@ -216,7 +216,7 @@ def _read_set(state, photos, lights, intensities, mask) -> StoredPhotoSet:
             text = _text(intensities, label, "intensities")
             strengths = parse_rows(text, "intensities", label, len(names), (1, 3))
         # light strengths divide only linear values: a set that has them is radiometrically
-        # calibrated whatever its bit depth (as for a folder, shadeform.io.photoset)
+        # calibrated whatever its bit depth (as for a folder, shadeform.photoset)
         linear = True if strengths is not None else None
         try:
             images, _, encoding, _, _ = read_photos(

@@ -38,24 +38,7 @@ from shadeform.cli._shell import (
 )
 from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
-
-#: Each map's file ending, bits per sample and legend (what its values mean).
-LEGEND = {
-    "normal_opengl": (16, "normal map, OpenGL convention (green up): Blender, Unity, glTF"),
-    "normal_directx": (16, "normal map, DirectX convention (green down): Unreal, 3ds Max"),
-    "height": (16, "height / displacement: black lowest, white highest{range}"),
-    "ambient_occlusion": (8, "ambient occlusion: white open sky, dark cavities"),
-    "curvature": (8, "curvature: mid-grey flat, brighter convex edges, darker cavities"),
-}
-ALBEDO = (8, "albedo: the photo with its shading and uneven lighting divided out")
-
-
-def legend(relief_px: float | None = None, *, material: bool = False) -> dict[str, tuple[int, str]]:
-    """Each map's bits per sample and legend line (:data:`LEGEND`, and :data:`ALBEDO` for the
-    material mode); the height's with its range in pixels when known. The app's zip uses it too."""
-    shown = "" if relief_px is None else f" ({relief_px:.3g} px of relief)"
-    every = {**LEGEND, "albedo": ALBEDO} if material else LEGEND
-    return {name: (bits, text.format(range=shown)) for name, (bits, text) in every.items()}
+from shadeform.texture import LEGEND, legend
 
 
 @app.command()

@@ -131,8 +131,8 @@ def stereo(
     The lights come from a light file (``--lights``, also RTI ``.lp``), a shiny sphere in the
     photos (``--sphere``), or are found from the photos themselves (``--unknown-lights``)."""
     from shadeform._checks import check_choice
-    from shadeform.io.photoset import load_photo_set
     from shadeform.photometric import METHODS, reconstruct_stereo
+    from shadeform.photoset import load_photo_set
 
     # everything the user typed is checked before the photos are read
     check_outputs(output, depth, normals)
@@ -243,7 +243,7 @@ def _stereo_maps(rec, temps, albedo, confidence, *, gray):
 
 
 def parse_sphere(text: str):
-    """``"X,Y,R"`` or ``"auto"`` -> what :func:`shadeform.io.photoset.load_photo_set` takes."""
+    """``"X,Y,R"`` or ``"auto"`` -> what :func:`shadeform.photoset.load_photo_set` takes."""
     if text.strip().lower() == "auto":
         return "auto"
     try:
@@ -294,9 +294,9 @@ def lights(
 ) -> None:
     """Read each photo's light direction and strength from the highlight on a shiny sphere (light calibration, as for RTI)."""
     from shadeform.io.atomic import atomic_write
-    from shadeform.io.photoset import photo_files, read_photos, write_lights
     from shadeform.light import slant_tilt
     from shadeform.light.sphere import calibrate_lights
+    from shadeform.photoset import photo_files, read_photos, write_lights
 
     check_suffix(output, (".lp", ".txt"), "lights to")
     circle = parse_sphere(sphere)

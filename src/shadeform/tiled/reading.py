@@ -143,8 +143,6 @@ def open_image(path: str | os.PathLike[str]):
     InputError
         As :class:`TiffWindows`; also if Dask is not installed.
     """
-    from shadeform.tiled.tasks import require_dask
-
     da = require_dask().array
     windows = TiffWindows(path)
     chunks = (1024, 1024) + windows.shape[2:]
@@ -166,3 +164,15 @@ def shading(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
     if image.ndim == 3:
         image = image[..., 0] if image.shape[2] == 1 else select_channel(image[..., :3], "luma")
     return image
+
+
+def require_dask():
+    """The ``dask`` module, or an InputError naming the extra to install."""
+    try:
+        import dask
+        import dask.array
+    except ImportError:
+        raise InputError(
+            "tiled reconstruction needs Dask; install it with pip install 'shadeform[dask]'"
+        ) from None
+    return dask

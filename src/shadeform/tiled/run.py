@@ -18,8 +18,8 @@ from shadeform.errors import InputError
 from shadeform.tiled.join import _disagreement, _Grid, _offsets
 from shadeform.tiled.objects import object_mask
 from shadeform.tiled.output import _mesh_step, _write, _write_mesh
-from shadeform.tiled.reading import TiffWindows
-from shadeform.tiled.tasks import Runner, require_dask, solve_tile
+from shadeform.tiled.reading import TiffWindows, require_dask
+from shadeform.tiled.tasks import Runner, solve_tile
 
 #: Tile side in pixels by default: a 512-pixel tile with its default halo (768 pixels a side,
 #: 0.6 Mpx) solves in a few seconds and about 120 MB (``benchmarks/results/tiled.md``).

@@ -27,18 +27,6 @@ STOPPED = threading.Event()
 _LOCAL = ("processes", "threads", "synchronous")
 
 
-def require_dask():
-    """The ``dask`` module, or an InputError naming the extra to install."""
-    try:
-        import dask
-        import dask.array
-    except ImportError:
-        raise InputError(
-            "tiled reconstruction needs Dask; install it with pip install 'shadeform[dask]'"
-        ) from None
-    return dask
-
-
 def solve_tile(source, window, dtype, mask_part, options: dict, target: str) -> dict:
     """One tile: read, solve, save its depth (float32 ``.npy``) atomically; a Dask task.
 
