@@ -28,6 +28,7 @@ from shadeform.io.images import (
     MAX_PIXELS,
     load_mask,
     read_photo,
+    reading_info,
     select_channel,
 )
 
@@ -80,13 +81,7 @@ class PhotoSet:
     @property
     def info(self) -> dict:
         """The decisions made in reading the photos, as plain values (``Reconstruction.info``)."""
-        return {
-            "bits": self.bits,
-            "encoding": self.encoding,
-            "encoding_from": self.encoding_from,
-            "channel": self.channel,
-            "channel_from": "auto" if self.channel in ("rgb", "gray") else "user",
-        }
+        return reading_info(self, "auto" if self.channel in ("rgb", "gray") else "user")
 
 
 def load_photo_set(

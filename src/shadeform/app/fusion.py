@@ -41,6 +41,7 @@ from shadeform.app.encoding import (
     mesh_data,
     safe_stem,
 )
+from shadeform.app.guard import check_known
 from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
 from shadeform.app.solving import solve
 from shadeform.app.state import image_info, suggested_params
@@ -108,11 +109,7 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
     def post_view_set_example(name: str) -> Response:
         from shadeform.examples import VIEW_SET_EXAMPLES
 
-        if name not in VIEW_SET_EXAMPLES:
-            shown = name if len(name) <= 40 else name[:37] + "..."
-            raise HTTPException(
-                404, f"unknown view set {shown!r}; choose one of: {', '.join(VIEW_SET_EXAMPLES)}"
-            )
+        check_known(name, VIEW_SET_EXAMPLES, "view set")
         ids, angles = view_sets.get(name, ((), ()))
         known = [state.images.get(image_id) for image_id in ids]
         if not known or any(entry is None for entry in known):

@@ -67,6 +67,17 @@ def file_too_large(limits: AppLimits) -> str:
     return f"the file is larger than {size_text(limits.max_upload_bytes)}; open a smaller image (crop or downscale it)"
 
 
+def shorten(name: str) -> str:
+    """A name the user sent, cut to 40 characters for a one-line message."""
+    return name if len(name) <= 40 else name[:37] + "..."
+
+
+def check_known(name: str, choices, what: str) -> None:
+    """A 404 unless ``name`` is one of ``choices`` (an example's name, say), naming them all."""
+    if name not in choices:
+        raise HTTPException(404, f"unknown {what} {shorten(name)!r}; choose one of: {', '.join(choices)}")
+
+
 # --- errors ------------------------------------------------------------------------------------
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from starlette.exceptions import HTTPException
 
 from shadeform.app.encoding import mesh_data, mesh_file, plain, png_base64
+from shadeform.app.guard import shorten
 from shadeform.app.jobs import STAGE_WORDS
 from shadeform.app.large import downsample, level_factor
 from shadeform.app.mask_files import user_mask
@@ -313,9 +314,8 @@ def find_job(state: State, job_id: str):
     """The background solve ``job_id``; an unknown one is a 404 that says what to do."""
     job = state.jobs.get(job_id)
     if job is None:
-        shown = job_id if len(job_id) <= 40 else job_id[:37] + "..."
         raise HTTPException(
-            404, f"unknown solve {shown!r}: it ended long ago or the server restarted; solve again"
+            404, f"unknown solve {shorten(job_id)!r}: it ended long ago or the server restarted; solve again"
         )
     return job
 

@@ -21,7 +21,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
 from shadeform.app.encoding import display_name
-from shadeform.app.guard import AppLimits
+from shadeform.app.guard import AppLimits, check_known, shorten
 from shadeform.app.jobs import SolveJobs
 from shadeform.app.large import FIT_FACTOR, LARGE_PIXELS, TILED_COMMAND, downsample, fit_factor
 from shadeform.app.schema import (
@@ -120,22 +120,26 @@ class State:
         return replace(self._example_entry(recipe["name"], recipe["size"]), image_id=key)
 
     def image(self, image_id: str) -> StoredImage:
-        entry = self.recall(image_id)
-        if not isinstance(entry, StoredImage):
-            shown = image_id if len(image_id) <= 40 else image_id[:37] + "..."
+        return self.recall_kind(
+            image_id, StoredImage, "image id", "images", "reload the page or open the image again"
+        )
+
+    def recall_kind(self, key: str, kind: type, what: str, forgot: str, advice: str):
+        """:meth:`recall` of an entry that must be a ``kind``; else a 404 that says what it is
+        (``what``), what the server forgets (``forgot``) and what to do (``advice``)."""
+        entry = self.recall(key)
+        if not isinstance(entry, kind):
             raise HTTPException(
                 404,
-                f"unknown image id {shown!r}: the server does not have it (it was "
-                "restarted or forgot older images); reload the page or open the image again",
+                f"unknown {what} {shorten(key)!r}: the server does not have it (it was "
+                f"restarted or forgot older {forgot}); {advice}",
             )
         return entry
 
     def example(self, name: str, size: int | None, *, pinned: bool = False) -> StoredImage:
         from shadeform.examples import EXAMPLES
 
-        if name not in EXAMPLES:
-            shown = name if len(name) <= 40 else name[:37] + "..."
-            raise HTTPException(404, f"unknown example {shown!r}; choose one of: {', '.join(EXAMPLES)}")
+        check_known(name, EXAMPLES, "example")
         if size is not None and size * size > self.limits.max_pixels:
             raise HTTPException(
                 413,

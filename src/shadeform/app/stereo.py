@@ -46,7 +46,7 @@ from shadeform.app.encoding import (
     set_stem,
     shown_photo,
 )
-from shadeform.app.guard import size_text
+from shadeform.app.guard import check_known, size_text
 from shadeform.app.mask_files import mask_from_file
 from shadeform.app.schema import PhotoSetInfo, StereoParams, StereoRequest, StereoResult
 from shadeform.app.store import new_image_id
@@ -144,11 +144,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
     def post_photoset_example(name: str) -> Response:
         from shadeform.examples import PHOTO_SET_EXAMPLES
 
-        if name not in PHOTO_SET_EXAMPLES:
-            shown = name if len(name) <= 40 else name[:37] + "..."
-            raise HTTPException(
-                404, f"unknown photo set {shown!r}; choose one of: {', '.join(PHOTO_SET_EXAMPLES)}"
-            )
+        check_known(name, PHOTO_SET_EXAMPLES, "photo set")
         entry = _example_set(new_image_id(), name)
         state.images.put(entry.photoset_id, entry, entry.nbytes)
         state.remember(entry.photoset_id, "photoset-example", {"name": name})
@@ -311,15 +307,7 @@ def _replace(entry: StoredPhotoSet, key: str) -> StoredPhotoSet:
 
 
 def _photoset(state, photoset_id: str) -> StoredPhotoSet:
-    entry = state.recall(photoset_id)
-    if not isinstance(entry, StoredPhotoSet):
-        shown = photoset_id if len(photoset_id) <= 40 else photoset_id[:37] + "..."
-        raise HTTPException(
-            404,
-            f"unknown photo set {shown!r}: the server does not have it (it was restarted or "
-            "forgot older sets); open the photos again",
-        )
-    return entry
+    return state.recall_kind(photoset_id, StoredPhotoSet, "photo set", "sets", "open the photos again")
 
 
 def _info(entry: StoredPhotoSet) -> PhotoSetInfo:

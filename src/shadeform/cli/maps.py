@@ -13,20 +13,8 @@ from rich.markup import escape
 
 from shadeform.cli._shell import (
     MAX_PIXELS,
-    ChannelOption,
-    ConcaveOption,
-    FilterOption,
-    IntegratorOption,
     JsonOption,
-    LightOption,
-    LinearOption,
-    MaskFileOption,
     MaxPixelsOption,
-    MethodOption,
-    ReferenceOption,
-    RefineOption,
-    SlantOption,
-    TiltOption,
     app,
     format_seconds,
     print_files,
@@ -36,12 +24,13 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import reconstruct_options, reconstruct_photo
+from shadeform.cli.photos import photo_command, reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
 from shadeform.texture import LEGEND, legend
 
 
 @app.command()
+@photo_command
 def maps(
     image: Annotated[
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
@@ -76,18 +65,8 @@ def maps(
     tile: Annotated[
         bool, typer.Option("--tile", help="With --material: make the albedo map tile seamlessly too.")
     ] = False,
-    filter: FilterOption = None,
-    light: LightOption = None,
-    slant: SlantOption = None,
-    tilt: TiltOption = None,
-    channel: ChannelOption = "auto",
-    linear: LinearOption = None,
-    concave: ConcaveOption = None,
-    reference: ReferenceOption = None,
-    mask: MaskFileOption = None,
-    method: MethodOption = "auto",
-    integrator: IntegratorOption = None,
-    refine: RefineOption = 3,
+    photo_options: dict = None,
+    solver_options: dict = None,
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
@@ -104,12 +83,11 @@ def maps(
         )
     wanted = _wanted(only, [*LEGEND, "albedo"] if material else list(LEGEND))
     if material:
-        return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
-                         channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
-    options = reconstruct_options(
-        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        method=method, filter=filter, integrator=integrator, refine=refine,
-    )  # fmt: skip
+        given = {name: photo_options[name] for name in ("light", "slant", "tilt", "channel", "linear")}
+        return _material(
+            image, out, wanted, reach=reach, tile=tile, as_json=as_json, max_pixels=max_pixels, **given
+        )
+    options = reconstruct_options(photo_options, solver_options)
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -118,9 +96,7 @@ def maps(
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
-        photo, rec = reconstruct_photo(
-            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
-        )
+        photo, rec = reconstruct_photo(err, timings, image, photo_options, options, max_pixels=max_pixels)
         start = time.perf_counter()
         with err.status("making the maps", spinner="dots"):
             made = shadeform.maps(rec, reach=reach)

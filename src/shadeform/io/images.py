@@ -64,6 +64,7 @@ __all__ = [
     "Photo",
     "TIFF_MAGICS",
     "read_photo",
+    "reading_info",
     "load_image",
     "load_image_rgb",
     "load_mask",
@@ -134,14 +135,31 @@ class Photo:
     @property
     def info(self) -> dict:
         """The decisions as plain JSON-ready values (everything but the arrays)."""
-        return {
-            "bits": self.bits,
-            "encoding": self.encoding,
-            "encoding_from": self.encoding_from,
-            "channel": self.channel,
-            "channel_from": self.channel_from,
-            "clipped": dict(self.clipped),
-        }
+        return {**reading_info(self, self.channel_from), "clipped": dict(self.clipped)}
+
+
+def reading_info(read, channel_from: str) -> dict:
+    """How a photo (or a photo set) was read, as plain JSON-ready values.
+
+    Parameters
+    ----------
+    read : Photo or PhotoSet
+        Anything with the attributes ``bits``, ``encoding``, ``encoding_from`` and ``channel``.
+    channel_from : {"auto", "user"}
+        Whether the channel was chosen or given.
+
+    Returns
+    -------
+    dict
+        ``bits``, ``encoding``, ``encoding_from``, ``channel`` and ``channel_from``, in this order.
+    """
+    return {
+        "bits": read.bits,
+        "encoding": read.encoding,
+        "encoding_from": read.encoding_from,
+        "channel": read.channel,
+        "channel_from": channel_from,
+    }
 
 
 def read_photo(

@@ -7,13 +7,15 @@ from __future__ import annotations
 
 from typing import BinaryIO
 
-from shadeform.io.vrml import DIFFUSE_COLOR, format_rows, write_rows
+from shadeform.io.vrml import DIFFUSE_COLOR, format_rows, write_vertex_nodes
 from shadeform.mesh import Mesh
 
 __all__ = ["write_inventor"]
 
 # Normals are given per vertex, so the crease angle only matters to viewers that recompute them.
 CREASE_ANGLE = 1.5708
+# the nodes whose values are bound per vertex through the face set's indices
+_BOUND = ("Normal", "TextureCoordinate")
 
 
 def write_inventor(mesh: Mesh, file_obj: BinaryIO) -> None:
@@ -51,18 +53,18 @@ def write_inventor(mesh: Mesh, file_obj: BinaryIO) -> None:
         "  Material {\n"
         f"    diffuseColor {DIFFUSE_COLOR[0]} {DIFFUSE_COLOR[1]} {DIFFUSE_COLOR[2]}\n"
         "  }\n"
-        "  Coordinate3 {\n"
-        "    point [\n"
     )
     file_obj.write(head.encode("ascii"))
-    write_rows(file_obj, mesh.vertices, "%.6g %.6g %.6g,\n")
-    file_obj.write(b"    ]\n  }\n  Normal {\n    vector [\n")
-    write_rows(file_obj, mesh.normals, "%.6g %.6g %.6g,\n")
-    file_obj.write(b"    ]\n  }\n  NormalBinding {\n    value PER_VERTEX_INDEXED\n  }\n")
-    if has_uv:
-        file_obj.write(b"  TextureCoordinate2 {\n    point [\n")
-        write_rows(file_obj, mesh.uv, "%.6g %.6g,\n")
-        file_obj.write(b"    ]\n  }\n  TextureCoordinateBinding {\n    value PER_VERTEX_INDEXED\n  }\n")
+    write_vertex_nodes(
+        file_obj,
+        mesh,
+        2,
+        ("Coordinate3", "Normal", "TextureCoordinate2"),
+        after=(
+            b"",
+            *(f"  {name}Binding {{\n    value PER_VERTEX_INDEXED\n  }}\n".encode() for name in _BOUND),
+        ),
+    )
 
     # format the indices once, write them two or three times
     index_parts = list(format_rows(mesh.faces, "%d, %d, %d, -1,\n"))

@@ -13,7 +13,7 @@ import numpy as np
 
 from shadeform.mesh import Mesh
 
-__all__ = ["write_vrml", "format_rows", "write_rows"]
+__all__ = ["write_vrml", "format_rows", "write_rows", "write_vertex_nodes"]
 
 # neutral light grey, the usual default for untextured scans
 DIFFUSE_COLOR = (0.8, 0.8, 0.8)
@@ -54,6 +54,37 @@ def write_rows(file_obj: BinaryIO, array: np.ndarray, row_format: str) -> None:
     file_obj.writelines(format_rows(array, row_format))
 
 
+def write_vertex_nodes(
+    file_obj: BinaryIO, mesh: Mesh, indent: int, nodes: tuple[str, str, str], after: tuple[bytes, ...] = ()
+) -> None:
+    """Write the mesh's per-vertex arrays, each as ``node { field [ rows ] }`` (VRML and Inventor).
+
+    Parameters
+    ----------
+    file_obj : binary file
+        Open for writing.
+    mesh : Mesh
+        Its vertices (field ``point``), normals (``vector``) and uv (``point``; none when
+        ``mesh.uv`` is None) are written, ``%.6g`` each.
+    indent : int
+        Spaces before each node; its field is two more in.
+    nodes : tuple of 3 str
+        The nodes (with their field name in VRML) of vertices, normals and uv.
+    after : tuple of bytes
+        Written after the node of the same index (Inventor's bindings); none by default.
+    """
+    pad = " " * indent
+    arrays = [(mesh.vertices, "point", "%.6g %.6g %.6g,\n"), (mesh.normals, "vector", "%.6g %.6g %.6g,\n")]
+    if mesh.uv is not None:
+        arrays.append((mesh.uv, "point", "%.6g %.6g,\n"))
+    for k, (array, field, row_format) in enumerate(arrays):
+        file_obj.write(f"{pad}{nodes[k]} {{\n{pad}  {field} [\n".encode("ascii"))
+        write_rows(file_obj, array, row_format)
+        file_obj.write(f"{pad}  ]\n{pad}}}\n".encode("ascii"))
+        if k < len(after):
+            file_obj.write(after[k])
+
+
 def write_vrml(mesh: Mesh, file_obj: BinaryIO) -> None:
     """Write ``mesh`` as a VRML 2.0 file (``.wrl``).
 
@@ -88,18 +119,9 @@ def write_vrml(mesh: Mesh, file_obj: BinaryIO) -> None:
         "    convex TRUE\n"
         f"    creaseAngle {CREASE_ANGLE}\n"
         "    normalPerVertex TRUE\n"
-        "    coord Coordinate {\n"
-        "      point [\n"
     )
     file_obj.write(head.encode("ascii"))
-    write_rows(file_obj, mesh.vertices, "%.6g %.6g %.6g,\n")
-    file_obj.write(b"      ]\n    }\n    normal Normal {\n      vector [\n")
-    write_rows(file_obj, mesh.normals, "%.6g %.6g %.6g,\n")
-    file_obj.write(b"      ]\n    }\n")
-    if mesh.uv is not None:
-        file_obj.write(b"    texCoord TextureCoordinate {\n      point [\n")
-        write_rows(file_obj, mesh.uv, "%.6g %.6g,\n")
-        file_obj.write(b"      ]\n    }\n")
+    write_vertex_nodes(file_obj, mesh, 4, ("coord Coordinate", "normal Normal", "texCoord TextureCoordinate"))
     file_obj.write(b"    coordIndex [\n")
     write_rows(file_obj, mesh.faces, "%d %d %d -1,\n")
     file_obj.write(b"    ]\n  }\n}\n")

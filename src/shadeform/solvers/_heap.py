@@ -24,6 +24,14 @@ def _before(key_a, item_a, key_b, item_b) -> bool:
 
 
 @numba.njit(cache=True, inline="always")
+def _place(keys, items, where, i, key, item):
+    """Put ``(key, item)`` at position ``i`` and note where the item is: the one step of both sifts."""
+    keys[i] = key
+    items[i] = item
+    where[item] = i
+
+
+@numba.njit(cache=True, inline="always")
 def heap_update(keys, items, where, size, key, item):
     """Queue ``item`` with ``key``, or lower its key if it is queued with a larger one.
 
@@ -39,13 +47,9 @@ def heap_update(keys, items, where, size, key, item):
         parent = (i - 1) // 2
         if not _before(key, item, keys[parent], items[parent]):
             break
-        keys[i] = keys[parent]
-        items[i] = items[parent]
-        where[items[i]] = i
+        _place(keys, items, where, i, keys[parent], items[parent])
         i = parent
-    keys[i] = key
-    items[i] = item
-    where[item] = i
+    _place(keys, items, where, i, key, item)
     return size
 
 
@@ -69,13 +73,9 @@ def heap_pop(keys, items, where, size):
             child += 1
         if not _before(keys[child], items[child], last_key, last_item):
             break
-        keys[i] = keys[child]
-        items[i] = items[child]
-        where[items[i]] = i
+        _place(keys, items, where, i, keys[child], items[child])
         i = child
-    keys[i] = last_key
-    items[i] = last_item
-    where[last_item] = i
+    _place(keys, items, where, i, last_key, last_item)
     return key, item, size
 
 

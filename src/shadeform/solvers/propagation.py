@@ -28,6 +28,7 @@ References
 
 from __future__ import annotations
 
+import inspect
 from collections import deque
 
 import numba
@@ -187,18 +188,7 @@ def _propagate_kernel(
             tail += 1
 
 
-def _prepare(
-    image,
-    mask,
-    *,
-    light,
-    reference,
-    reference_normal=None,
-    albedo,
-    concave_x=None,
-    concave_y=None,
-    gradient_floor=1e-6,
-):
+def _prepare(image, mask, light, reference, reference_normal, albedo, concave_x, concave_y, gradient_floor):
     """The arguments of :func:`propagate_normals`, checked, and what both versions compute first."""
     image = np.asarray(image, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool)
@@ -275,15 +265,7 @@ def propagate_normals(
         Unit normals; NaN outside the mask and on mask pixels not connected to the reference.
     """
     image, mask, light, (r, c), reference_normal, cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image,
-        mask,
-        light=light,
-        reference=reference,
-        reference_normal=reference_normal,
-        albedo=albedo,
-        concave_x=concave_x,
-        concave_y=concave_y,
-        gradient_floor=gradient_floor,
+        image, mask, light, reference, reference_normal, albedo, concave_x, concave_y, gradient_floor
     )
     seed = np.empty(3)
     if reference_normal is None:
@@ -304,9 +286,10 @@ def propagate_normals_reference(image, mask, **options):
 
     Written for clarity, to test the compiled kernel against; use only on small images.
     """
-    image, mask, light, (r, c), reference_normal, cos_t, gx, gy, cx, cy, g_min = _prepare(
-        image, mask, **options
-    )
+    # the compiled version's signature checks the arguments and gives the defaults
+    given = inspect.signature(propagate_normals).bind(image, mask, **options)
+    given.apply_defaults()
+    image, mask, light, (r, c), reference_normal, cos_t, gx, gy, cx, cy, g_min = _prepare(**given.arguments)
     choose = _choose_normal.py_func
     h, w = mask.shape
     normals = np.full((h, w, 3), np.nan)
