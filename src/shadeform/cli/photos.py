@@ -54,6 +54,30 @@ from shadeform.cli.tiles import tile_size, tiled_reconstruct
 from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 
+# a solver's own options (its registry entry's): the solver is chosen by --method, so these are read
+# by name and type only once it is known (shadeform.reconstruct(method_options=...))
+MethodOptionsOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--option",
+        metavar="NAME=VALUE",
+        help="An option of the solver's own (`shadeform methods` lists them); repeat for several.",
+        show_default=False,
+    ),
+]
+
+
+def parse_method_options(texts: list[str] | None) -> dict[str, str] | None:
+    """``--option NAME=VALUE`` texts as ``{NAME: VALUE}`` (the values still text: the solver's
+    registry entry reads them as their types); None when none were given."""
+    options = {}
+    for text in texts or ():
+        name, equals, value = text.partition("=")
+        if not equals or not name.strip():
+            raise InputError(f"--option takes NAME=VALUE, got {text!r}")
+        options[name.strip()] = value.strip()
+    return options or None
+
 
 @app.command()
 def reconstruct(
@@ -82,6 +106,7 @@ def reconstruct(
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: JsonOption = False,
     method: MethodOption = "auto",
+    option: MethodOptionsOption = None,
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
@@ -120,7 +145,7 @@ def reconstruct(
         tiled_reconstruct(
             image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
             keep_tiles=keep_tiles,
-            refused={"--reference": reference, "--concave": concave, "--normals": normals},
+            refused={"--reference": reference, "--concave": concave, "--normals": normals, "--option": option},
             light=resolve_light(light, slant, tilt), method=method, filter=filter, integrator=integrator,
             refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
         )  # fmt: skip
@@ -134,6 +159,7 @@ def reconstruct(
     options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
         method=method, filter=filter, integrator=integrator, refine=refine,
+        method_options=parse_method_options(option),
     )  # fmt: skip
 
     err = stderr_console()
@@ -195,10 +221,15 @@ def reconstruct(
 def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
     """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the light
     as ``--light`` or ``--slant``/``--tilt``, references, a regions file), checked before any
-    work; ``rest`` (method, filter, integrator, refine) passes through."""
+    work; ``rest`` (method, filter, integrator, refine, method_options) passes through."""
     from shadeform.regions import parse_regions
 
     references = [parse_reference(text) for text in reference or ()]
+    method, given = rest.get("method", "auto"), rest.get("method_options")
+    if given and method != "auto":  # a named solver's options are checked before the photo is read
+        from shadeform.solvers import SOLVERS
+
+        SOLVERS.settle(method, given)
     return {
         "light": resolve_light(light, slant, tilt),
         "references": references or None,
