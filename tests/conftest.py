@@ -58,11 +58,10 @@ def out(tmp_path) -> Path:
 
 
 @pytest.fixture
-def registries(monkeypatch):
+def registries():
     """The solver and integrator registries, restored after the test: register freely in it."""
-    monkeypatch.setattr(solvers, "_SOLVERS", dict(solvers._SOLVERS))
-    monkeypatch.setattr(integration, "_INTEGRATORS", dict(integration._INTEGRATORS))
-    return solvers, integration
+    with solvers.SOLVERS.restored(), integration.INTEGRATORS.restored():
+        yield solvers, integration
 
 
 @pytest.fixture(scope="session")

@@ -275,3 +275,17 @@ class TestNamesAndLooks:
         # mid-grey light, 0.2 linear, shows as 124 of 255 (not 51: as dark as raw numbers read as sRGB)
         lit = (linear > 0.15) & (linear < 0.25)
         assert lit.any() and np.all(shown[lit] > 105)
+
+
+def test_a_method_registered_after_the_server_started_is_taken(client, lit_sphere):
+    from shadeform.photometric import STEREO_METHODS, StereoMethod, register
+
+    files, lights, scene = lit_sphere
+    photoset = post_set(client, files, lights=("lights.txt", light_text(lights), "text/plain"))
+    assert photoset.status_code == 201, photoset.text
+    body = {"photoset_id": photoset.json()["photoset_id"], "params": {"method": "woodham"}}
+    assert "bivariate" in one_line_error(client.post("/api/stereo", json=body), 422)
+    with STEREO_METHODS.restored():
+        register(StereoMethod("woodham", "shadeform.photometric.lambertian:least_squares", "a copy"))
+        result = client.post("/api/stereo", json=body)
+    assert result.status_code == 200, result.text

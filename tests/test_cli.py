@@ -672,14 +672,25 @@ def test_formats_lists_the_registry():
 
 class TestEvaluate:
     def test_table_has_every_scene(self):
-        result = invoke("evaluate", "--size", "64")
+        result = invoke("evaluate", "--size", "64", "--methods", "propagation,eikonal")
         assert result.exit_code == 0, result.output
         for name in synth.SCENES:
             assert name in result.stdout
         assert "bowl, concave regions drawn" in result.stdout and "eikonal" in result.stdout
 
     def test_numbers(self):
-        result = invoke("evaluate", "--size", "64", "--scenes", "sphere,bowl", "--json")
+        result = invoke(
+            "evaluate",
+            "--size",
+            "64",
+            "--scenes",
+            "sphere,bowl",
+            "--methods",
+            "propagation",
+            "--methods",
+            "eikonal",
+            "--json",
+        )
         assert result.exit_code == 0, result.output
         rows = json.loads(result.stdout)["rows"]
         # sphere: 3 methods; bowl: 3 methods x without/with its region

@@ -260,7 +260,7 @@ class TestExport:
         with pytest.raises(InputError, match="does not exist; create it first"):
             export(mesh, tmp_path / "missing" / "mesh.iv")
 
-    def test_failure_mid_write_keeps_the_old_file(self, tmp_path, mesh, monkeypatch):
+    def test_failure_mid_write_keeps_the_old_file(self, tmp_path, mesh):
         target = tmp_path / "model.wrl"
         export(mesh, target)
         good = target.read_bytes()
@@ -269,10 +269,10 @@ class TestExport:
             file_obj.write(b"#VRML V2.0 utf8\nShape { geometry IndexedFaceSet { coord")
             raise OSError("disk full")
 
-        patched = {**exporters._WRITERS, ".wrl": write_half_then_fail}
-        monkeypatch.setattr(exporters, "_WRITERS", patched)
-        with pytest.raises(OSError, match="disk full"):
+        with exporters.EXPORTERS.restored(), pytest.raises(OSError, match="disk full"):
+            register(".wrl", write_half_then_fail, description="fails half way")
             export(hemisphere_mesh(3), target)
+        assert available_formats()[".wrl"].startswith("VRML")  # the registry as it was
         assert target.read_bytes() == good
         assert sorted(p.name for p in tmp_path.iterdir()) == ["model.wrl"]
 
@@ -331,10 +331,12 @@ class TestAvailableFormats:
 
 
 class TestRegister:
-    def test_registered_format_is_listed_and_written(self, tmp_path, mesh, monkeypatch):
-        monkeypatch.setattr(exporters, "_WRITERS", dict(exporters._WRITERS))
-        monkeypatch.setattr(exporters, "_DESCRIPTIONS", dict(exporters._DESCRIPTIONS))
+    @pytest.fixture(autouse=True)
+    def _restored(self):
+        with exporters.EXPORTERS.restored():
+            yield
 
+    def test_registered_format_is_listed_and_written(self, tmp_path, mesh):
         def write_counts(mesh, file_obj):
             file_obj.write(f"{mesh.n_vertices} {mesh.n_faces}\n".encode())
 
@@ -342,6 +344,7 @@ class TestRegister:
         assert available_formats()[".cnt"] == "vertex and face counts"
         path = export(mesh, tmp_path / "m.Cnt")
         assert path.read_text() == f"{mesh.n_vertices} {mesh.n_faces}\n"
+        assert exporters.EXPORTERS.get(".cnt").writer is write_counts
 
     def test_bad_suffix_is_rejected(self):
         with pytest.raises(ValueError, match="suffix"):

@@ -378,6 +378,34 @@ class TestPhotosThatContradict:
         assert result.photos_dropped == () and result.photos_rescaled == ()
 
 
+class TestRegistry:
+    def test_a_method_registered_later_is_listed_and_taken(self, sphere):
+        import shadeform.photometric as photometric
+        from shadeform.photometric import STEREO_METHODS, StereoMethod, available_stereo_methods, register
+
+        lights = ring(6, 40.0)
+        with STEREO_METHODS.restored():
+            register(
+                StereoMethod(
+                    "woodham", "shadeform.photometric.lambertian:least_squares", "a copy", drops_photos=False
+                )
+            )
+            assert "woodham" in photometric.METHODS and "woodham" in available_stereo_methods()
+            from shadeform.photometric import METHODS  # importable, and read when imported
+
+            assert METHODS[-1] == "woodham"
+            result = photometric_stereo(photos(sphere, lights), lights, sphere.mask, method="woodham")
+            assert np.isfinite(result.normals[sphere.mask]).all()
+        assert "woodham" not in photometric.METHODS
+        assert photometric.METHODS == ("bivariate", "robust", "least_squares")
+
+    def test_available_methods_is_a_deprecated_alias(self):
+        from shadeform.photometric import available_methods, available_stereo_methods
+
+        with pytest.warns(DeprecationWarning, match="available_stereo_methods"):
+            assert available_methods() == available_stereo_methods()
+
+
 class TestPhotometricStereoErrors:
     @pytest.fixture
     def good(self):

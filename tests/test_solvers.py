@@ -1,7 +1,8 @@
 """The solver registry: one module + one ``register`` line makes a solver available everywhere.
 
 The proof: a small solver written here, registered inside the test, runs through the library,
-the CLI and the server without touching any of them.
+the CLI and the server without touching any of them; and a newcomer's solver with an option of its
+own (``toy``, ``strength``) is listed, run, evaluated and offered with that option.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from PIL import Image
 import shadeform
 from shadeform import metrics, synth
 from shadeform.errors import InputError
+from shadeform.registry import Option, Registry
 from shadeform.solvers import AUTO, Problem, Solution, Solver, available_methods, choose, get_solver
 from shadeform.solvers.propagation import image_gradient
 
@@ -49,6 +51,29 @@ TINY = Solver(
 def tiny(registries):
     registries[0].register(TINY)
     return TINY
+
+
+def toy_solve(problem: Problem) -> Solution:
+    """The newcomer's solver: the gradient solver's normals, its depth stretched by its option."""
+    solved = gradient_solve(problem)
+    strength = problem.options["strength"]
+    return Solution(solved.normals, solved.depth * strength, {"strength": strength})
+
+
+STRENGTH = Option("strength", float, 1.0, "how much the depth is stretched")
+TOY = Solver(
+    "toy",
+    toy_solve,
+    integrator="poisson",
+    description="a newcomer's solver with an option of its own",
+    options=(STRENGTH,),
+)
+
+
+@pytest.fixture
+def toy(registries):
+    registries[0].register(TOY)
+    return TOY
 
 
 class TestRegistry:
@@ -146,6 +171,103 @@ class TestNewSolverEverywhere:
             )
             assert response.status_code == 200, response.text
             assert response.json()["info"]["method"] == "gradient"
+
+
+class TestNewcomersRecipe:
+    """A solver with its own option, registered from outside the package, is everywhere."""
+
+    def test_library(self, toy, sphere64):
+        scene = sphere64
+        assert "toy" in available_methods()
+        plain = shadeform.reconstruct(scene.image, mask=scene.mask, method="toy")
+        assert plain.info["strength"] == 1.0 and plain.info["method_options"] == {"strength": 1.0}
+        twice = shadeform.reconstruct(
+            scene.image, mask=scene.mask, method="toy", method_options={"strength": "2"}
+        )
+        assert twice.info["method_options"] == {"strength": 2.0}
+        np.testing.assert_allclose(twice.depth, 2 * plain.depth, rtol=1e-6, atol=1e-6, equal_nan=True)
+        with pytest.raises(InputError, match="method 'toy' has no option 'power'; its options: strength"):
+            shadeform.reconstruct(scene.image, mask=scene.mask, method="toy", method_options={"power": 2})
+        with pytest.raises(InputError, match="option 'strength' must be a finite number, got 'lots'"):
+            shadeform.reconstruct(
+                scene.image, mask=scene.mask, method="toy", method_options={"strength": "lots"}
+            )
+        # the built-in solvers have no options, and say so
+        with pytest.raises(InputError, match="method 'eikonal' has no option 'strength'; its options: none"):
+            shadeform.reconstruct(
+                scene.image, mask=scene.mask, method="eikonal", method_options={"strength": 2}
+            )
+        assert "method_options" not in shadeform.reconstruct(scene.image, mask=scene.mask).info
+
+    def test_cli(self, toy, sphere64, cli, tmp_path):
+        listed = cli("methods", "--json")
+        assert listed.exit_code == 0, listed.output
+        rows = {row["name"]: row for row in json.loads(listed.stdout)["methods"]}
+        assert rows["toy"]["options"] == [
+            {"name": "strength", "type": "float", "default": 1.0, "help": STRENGTH.help}
+        ]
+        assert "options" not in rows["eikonal"]
+        table = cli("methods")
+        assert "--option strength=1.0 (float): how much the depth is stretched" in table.stdout
+        photo = tmp_path / "sphere.png"
+        Image.fromarray(np.rint(sphere64.image * 255).astype(np.uint8)).save(photo)
+        mesh = tmp_path / "sphere.ply"
+        result = cli("reconstruct", photo, "-o", mesh, "--method", "toy", "--option", "strength=2", "--json")
+        assert result.exit_code == 0, result.output
+        info = json.loads(result.stdout)["info"]
+        assert info["method"] == "toy" and info["method_options"] == {"strength": 2.0}
+        for wrong, message in (("strength", "NAME=VALUE"), ("power=2", "no option 'power'")):
+            refused = cli(
+                "reconstruct", photo, "-o", tmp_path / "x.ply", "--method", "toy", "--option", wrong
+            )
+            assert refused.exit_code == 2 and message in refused.output
+        evaluated = cli(
+            "evaluate", "--size", "32", "--scenes", "sphere", "--methods", "toy,eikonal", "--json"
+        )
+        assert evaluated.exit_code == 0, evaluated.output
+        rows = json.loads(evaluated.stdout)["rows"]
+        assert [row["label"] for row in rows] == ["toy", "eikonal"]
+        assert rows[0]["method_options"] == {"strength": 1.0} and rows[0]["angular_error_deg"] < 5
+        assert "toy" in cli("evaluate", "--size", "8", "--methods", "nothing").output
+
+    def test_server(self, toy):
+        from shadeform.app.server import create_app
+
+        with TestClient(create_app(), base_url="http://127.0.0.1:8000") as client:
+            methods = {m["name"]: m for m in client.get("/api/options").json()["methods"]}
+        assert methods["toy"] == {
+            "name": "toy",
+            "description": TOY.description,
+            "options": [{"name": "strength", "type": "float", "default": 1.0, "help": STRENGTH.help}],
+        }
+        assert "options" not in methods["eikonal"]  # sent only when a method has some
+
+
+class TestGenericRegistry:
+    def test_options_read_text_as_their_types(self):
+        assert Option("n", int, 3, "x").parse("4") == 4 and Option("n", int, 3, "x").parse(5.0) == 5
+        assert Option("on", bool, False, "x").parse("yes") is True
+        assert Option("on", bool, "true", "x").default is True
+        assert Option("w", str, "a", "x").parse("b c") == "b c"
+        with pytest.raises(InputError, match="option 'n' must be a whole number, got 2.5"):
+            Option("n", int, 3, "x").parse(2.5)
+        with pytest.raises(InputError, match="true or false"):
+            Option("on", bool, False, "x").parse("maybe")
+        with pytest.raises(ValueError, match="type"):
+            Option("n", list, [], "x")
+
+    def test_entries_by_name_in_order_and_restored(self):
+        registry = Registry("method", Solver)
+        with pytest.raises(TypeError, match="register expects a Solver, got str"):
+            registry.register("tiny")
+        registry.register(TINY)
+        with registry.restored():
+            registry.register(TOY)
+            assert registry.names() == ("gradient", "toy") and "toy" in registry
+            assert registry.settle("toy", {"strength": 3}) == {"strength": 3.0}
+        assert list(registry) == ["gradient"] and len(registry) == 1
+        with pytest.raises(InputError, match="unknown method 'toy'; choose one of: gradient"):
+            registry.get("toy")
 
 
 class TestSolverContract:

@@ -9,7 +9,7 @@ in :mod:`shadeform.coarse`, which calls :func:`reconstruct`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -27,6 +27,7 @@ from shadeform.regions import as_regions, concave_masks
 from shadeform.solvers import (
     AUTO,
     NOISY,
+    SOLVERS,
     Problem,
     Reference,
     available_methods,
@@ -57,6 +58,7 @@ def reconstruct(
     concave: Any = None,
     integrator: str | None = None,
     refine: int = 3,
+    method_options: Mapping[str, Any] | None = None,
     progress: Callable[[str, float], None] | None = None,
 ) -> Reconstruction:
     """Recover normals and depth from one shading image.
@@ -114,6 +116,10 @@ def reconstruct(
         Iterations of the integrability refinement of the propagated field
         (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
         field exactly.
+    method_options : mapping, optional
+        The solver's own options, name to value (text is read as the option's type): those its
+        registry entry declares (:class:`shadeform.solvers.Solver` ``options``; ``shadeform
+        methods`` lists them). The built-in solvers declare none.
     progress : callable, optional, keyword-only
         Called as ``progress(stage, fraction)`` after each stage (the names of
         ``info["timings"]``), ``fraction`` the rough share of the work done (:data:`STAGE_SHARES`);
@@ -150,6 +156,8 @@ def reconstruct(
     light = None if estimate_wanted else as_light(light)
     check_choice(method, tuple(available_methods()), "method")  # "auto" too, unlike get_solver's list
     solver = None if method == AUTO else get_solver(method)
+    # a named solver's options are checked before any work; "auto"'s once it has chosen
+    settled_options = None if solver is None else SOLVERS.settle(solver.name, method_options)
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
     refine = whole(refine, "refine")
@@ -194,6 +202,8 @@ def reconstruct(
             lap("filter")
         if solver.denoise is None:
             noise = None
+    if settled_options is None:
+        settled_options = SOLVERS.settle(solver.name, method_options)
     if not solver.takes(light):
         raise InputError(
             f"method {solver.name!r} needs the light at (0, 0, 1); use "
@@ -221,6 +231,7 @@ def reconstruct(
         integrator=integrator or solver.integrator,
         refine=refine,
         noise=noise,
+        options=settled_options,
         lap=lap,
     )
     del concave_x, concave_y, labels  # the problem holds them until the solver is done
@@ -259,6 +270,8 @@ def reconstruct(
             for area in assessed.unsure
         ],
     }
+    if settled_options:
+        info["method_options"] = settled_options
     if assessed.others:
         info["unsure_others"] = {"areas": assessed.others, "share": assessed.others_share}
     if bounded.applied:

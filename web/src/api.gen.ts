@@ -68,11 +68,22 @@ export interface ReconstructRequest {
   preview: boolean;
 }
 
+/** One option of a method's own (:class:`shadeform.registry.Option`). */
+export interface OptionInfo {
+  name: string;
+  type: "bool" | "int" | "float" | "str";
+  default: boolean | number | string;
+  /** One line in the user's words. */
+  help: string;
+}
+
 /** A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`, :func:`shadeform.integration.available_integrators`). */
 export interface MethodInfo {
   name: string;
   /** One line in the user's words. */
   description: string;
+  /** Its own options (``--option NAME=VALUE`` on the command line); absent when it has none. */
+  options?: OptionInfo[];
 }
 
 /** A mesh format the export endpoint writes (:func:`shadeform.available_formats`). */

@@ -32,6 +32,7 @@ from shadeform.app.schema import (
     LightParams,
     Limits,
     MethodInfo,
+    OptionInfo,
     Options,
     ReconstructParams,
 )
@@ -294,27 +295,37 @@ def image_info(entry: StoredImage) -> ImageInfo:
     )
 
 
+def method_infos(registry) -> list[MethodInfo]:
+    """Every entry of a :class:`shadeform.registry.Registry` with its options, in registration order."""
+    return [
+        MethodInfo(
+            name=name,
+            description=text,
+            options=[OptionInfo(**option.describe()) for option in registry.options(name)],
+        )
+        for name, text in registry.descriptions().items()
+    ]
+
+
 def app_options(limits: AppLimits, initial: StoredImage | None) -> Options:
     """What ``/api/options`` lists: methods, integrators, formats, examples, limits, defaults."""
     from shadeform.app.schema import StereoParams
     from shadeform.examples import EXAMPLES, PHOTO_SET_EXAMPLES, VIEW_SET_EXAMPLES
-    from shadeform.integration import available_integrators
+    from shadeform.integration import INTEGRATORS
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
-    from shadeform.photometric import available_methods as stereo_methods
+    from shadeform.photometric import STEREO_METHODS
     from shadeform.preprocess import FILTER_KINDS
-    from shadeform.solvers import available_methods
+    from shadeform.solvers import AUTO, SOLVERS, available_methods
 
     return Options(
-        methods=[MethodInfo(name=name, description=text) for name, text in available_methods().items()],
-        integrators=[
-            MethodInfo(name=name, description=text) for name, text in available_integrators().items()
-        ],
+        methods=[MethodInfo(name=AUTO, description=available_methods()[AUTO]), *method_infos(SOLVERS)],
+        integrators=method_infos(INTEGRATORS),
         channels=list(CHANNELS),
         filters=list(FILTER_KINDS),
         formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],
         examples=[ExampleInfo(name=name, title=title) for name, title in EXAMPLES.items()],
-        stereo_methods=[MethodInfo(name=name, description=text) for name, text in stereo_methods().items()],
+        stereo_methods=method_infos(STEREO_METHODS),
         photo_set_examples=[
             ExampleInfo(name=name, title=title) for name, title in PHOTO_SET_EXAMPLES.items()
         ],

@@ -336,15 +336,16 @@ def _solve(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedS
     """The photometric stereo result for these parameters, from the cache when only ``step``
     changed."""
     from shadeform.integration import available_integrators
-    from shadeform.photometric import METHODS, reconstruct_stereo
+    from shadeform.photometric import STEREO_METHODS, reconstruct_stereo
 
     key = (entry.photoset_id, params.model_dump_json(exclude={"step"}))
     solved = state.results.get(key)
     if solved is not None:
         return solved, True
-    if params.method not in METHODS:
+    if params.method not in STEREO_METHODS:
         raise InputError(
-            f"unknown photometric stereo method {params.method!r}; choose one of: {', '.join(METHODS)}"
+            f"unknown photometric stereo method {params.method!r}; choose one of: "
+            f"{', '.join(STEREO_METHODS.names())}"
         )
     if params.integrator not in available_integrators():
         raise InputError(

@@ -13,8 +13,20 @@ from rich.markup import escape
 
 from shadeform.cli._shell import (
     MAX_PIXELS,
+    ChannelOption,
+    ConcaveOption,
+    FilterOption,
+    IntegratorOption,
     JsonOption,
+    LightOption,
+    LinearOption,
+    MaskFileOption,
     MaxPixelsOption,
+    MethodOption,
+    ReferenceOption,
+    RefineOption,
+    SlantOption,
+    TiltOption,
     app,
     format_seconds,
     print_files,
@@ -24,13 +36,12 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import photo_command, reconstruct_options, reconstruct_photo
+from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
 from shadeform.texture import LEGEND, legend
 
 
 @app.command()
-@photo_command
 def maps(
     image: Annotated[
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
@@ -65,8 +76,18 @@ def maps(
     tile: Annotated[
         bool, typer.Option("--tile", help="With --material: make the albedo map tile seamlessly too.")
     ] = False,
-    photo_options: dict = None,
-    solver_options: dict = None,
+    filter: FilterOption = None,
+    light: LightOption = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
@@ -83,11 +104,12 @@ def maps(
         )
     wanted = _wanted(only, [*LEGEND, "albedo"] if material else list(LEGEND))
     if material:
-        given = {name: photo_options[name] for name in ("light", "slant", "tilt", "channel", "linear")}
-        return _material(
-            image, out, wanted, reach=reach, tile=tile, as_json=as_json, max_pixels=max_pixels, **given
-        )
-    options = reconstruct_options(photo_options, solver_options)
+        return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
+                         channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
+    options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+    )  # fmt: skip
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -96,7 +118,9 @@ def maps(
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
-        photo, rec = reconstruct_photo(err, timings, image, photo_options, options, max_pixels=max_pixels)
+        photo, rec = reconstruct_photo(
+            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
+        )
         start = time.perf_counter()
         with err.status("making the maps", spinner="dots"):
             made = shadeform.maps(rec, reach=reach)

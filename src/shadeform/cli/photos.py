@@ -4,8 +4,6 @@ and solving of one photo that ``relief`` and ``maps`` share. ``stereo`` and ``li
 
 from __future__ import annotations
 
-import functools
-import inspect
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -56,66 +54,32 @@ from shadeform.cli.tiles import tile_size, tiled_reconstruct
 from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 
-#: The options of loading and solving one photo that ``reconstruct``, ``relief`` and ``maps``
-#: share, (name, annotation, default) in the order their help lists them: :func:`photo_command`
-#: puts the first group where a command has a parameter ``photo_options``, the second where it
-#: has ``solver_options``.
-SHARED_OPTIONS = {
-    "photo_options": (
-        ("filter", FilterOption, None),
-        ("light", LightOption, None),
-        ("slant", SlantOption, None),
-        ("tilt", TiltOption, None),
-        ("channel", ChannelOption, "auto"),
-        ("linear", LinearOption, None),
-        ("concave", ConcaveOption, None),
-        ("reference", ReferenceOption, None),
-        ("mask", MaskFileOption, None),
+# a solver's own options (its registry entry's): the solver is chosen by --method, so these are read
+# by name and type only once it is known (shadeform.reconstruct(method_options=...))
+MethodOptionsOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--option",
+        metavar="NAME=VALUE",
+        help="An option of the solver's own (`shadeform methods` lists them); repeat for several.",
+        show_default=False,
     ),
-    "solver_options": (
-        ("method", MethodOption, "auto"),
-        ("integrator", IntegratorOption, None),
-        ("refine", RefineOption, 3),
-    ),
-}
+]
 
 
-def photo_command(command):
-    """``command`` with the :data:`SHARED_OPTIONS` in place of its parameters ``photo_options``
-    and ``solver_options``, which it then receives as dicts of the options' values.
-
-    Typer reads a command's options from its signature: the one given here lists the shared
-    options themselves, so each command's ``--help`` shows them where the placeholder stands.
-    """
-    signature = inspect.signature(command, eval_str=True)
-    parameters = []
-    for parameter in signature.parameters.values():
-        if parameter.name not in SHARED_OPTIONS:
-            parameters.append(parameter)
-            continue
-        parameters += [
-            inspect.Parameter(name, parameter.kind, default=default, annotation=annotation)
-            for name, annotation, default in SHARED_OPTIONS[parameter.name]
-        ]
-
-    shared = signature.replace(parameters=parameters)
-
-    @functools.wraps(command)
-    def run(*args, **kwargs):
-        bound = shared.bind(*args, **kwargs)
-        bound.apply_defaults()
-        given = dict(bound.arguments)
-        for group, options in SHARED_OPTIONS.items():
-            given[group] = {name: given.pop(name) for name, _, _ in options}
-        return command(**given)
-
-    run.__signature__ = shared
-    run.__annotations__ = {p.name: p.annotation for p in parameters} | {"return": signature.return_annotation}
-    return run
+def parse_method_options(texts: list[str] | None) -> dict[str, str] | None:
+    """``--option NAME=VALUE`` texts as ``{NAME: VALUE}`` (the values still text: the solver's
+    registry entry reads them as their types); None when none were given."""
+    options = {}
+    for text in texts or ():
+        name, equals, value = text.partition("=")
+        if not equals or not name.strip():
+            raise InputError(f"--option takes NAME=VALUE, got {text!r}")
+        options[name.strip()] = value.strip()
+    return options or None
 
 
 @app.command()
-@photo_command
 def reconstruct(
     image: Annotated[
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
@@ -127,13 +91,24 @@ def reconstruct(
         ),
     ],
     step: StepOption = 1,
-    photo_options: dict = None,
+    filter: FilterOption = None,
+    light: LightOption = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: JsonOption = False,
-    solver_options: dict = None,
+    method: MethodOption = "auto",
+    option: MethodOptionsOption = None,
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
     tiles: Annotated[
         str,
@@ -167,13 +142,12 @@ def reconstruct(
     check_outputs(output, depth, normals)
     tile = tile_size(tiles, image, max_pixels)
     if tile is not None:
-        given = photo_options
         tiled_reconstruct(
-            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=given["mask"],
+            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
             keep_tiles=keep_tiles,
-            refused={"--reference": given["reference"], "--concave": given["concave"], "--normals": normals},
-            light=resolve_light(given["light"], given["slant"], given["tilt"]), filter=given["filter"],
-            **solver_options, channel=given["channel"], linear=given["linear"], max_pixels=max_pixels,
+            refused={"--reference": reference, "--concave": concave, "--normals": normals, "--option": option},
+            light=resolve_light(light, slant, tilt), method=method, filter=filter, integrator=integrator,
+            refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
         )  # fmt: skip
         return
     if scheduler is not None or keep_tiles:
@@ -182,14 +156,20 @@ def reconstruct(
             "image is solved whole (--tiles off, or within --max-pixels); add --tiles N to solve it "
             "in tiles of N pixels"
         )
-    options = reconstruct_options(photo_options, solver_options)
+    options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+        method_options=parse_method_options(option),
+    )  # fmt: skip
 
     err = stderr_console()
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        photo, rec = reconstruct_photo(err, timings, image, photo_options, options, max_pixels=max_pixels)
+        photo, rec = reconstruct_photo(
+            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
+        )
         pixels = photo.image
         mesh, written, report = write_model(
             outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
@@ -238,42 +218,39 @@ def reconstruct(
     print_files(out, written)
 
 
-def reconstruct_options(photo_options: dict, solver_options: dict) -> dict:
-    """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the
-    :data:`SHARED_OPTIONS`: the light as ``--light`` or ``--slant``/``--tilt``, references, a
-    regions file), checked before any work; the filter and the solver's options pass through."""
+def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
+    """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the light
+    as ``--light`` or ``--slant``/``--tilt``, references, a regions file), checked before any
+    work; ``rest`` (method, filter, integrator, refine, method_options) passes through."""
     from shadeform.regions import parse_regions
 
-    given = photo_options
-    references = [parse_reference(text) for text in given["reference"] or ()]
+    references = [parse_reference(text) for text in reference or ()]
+    method, given = rest.get("method", "auto"), rest.get("method_options")
+    if given and method != "auto":  # a named solver's options are checked before the photo is read
+        from shadeform.solvers import SOLVERS
+
+        SOLVERS.settle(method, given)
     return {
-        "light": resolve_light(given["light"], given["slant"], given["tilt"]),
+        "light": resolve_light(light, slant, tilt),
         "references": references or None,
-        "concave": parse_regions(given["concave"]) if given["concave"] is not None else None,
-        "filter": given["filter"],
-        **solver_options,
+        "concave": parse_regions(concave) if concave is not None else None,
+        **rest,
     }
 
 
-def reconstruct_photo(
-    err, timings, image: Path, photo_options: dict, options: dict, *, max_pixels, grid=None
-):
+def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, grid=None, **options):
     """Load a photo (and its mask file, if given) and reconstruct it, each under a spinner: the
     part of ``reconstruct`` that the commands making other things from one photo share.
-
-    ``photo_options`` are the user's :data:`SHARED_OPTIONS` (its channel, linear and mask are
-    read here), ``options`` those :func:`reconstruct_options` made of them.
 
     ``grid``, if given, maps the object's mask to a grid spacing: the photo is then solved on
     that grid only (:func:`shadeform.coarse.reconstruct_on_grid`; the reconstruction has the
     grid's shape). Returns the :class:`~shadeform.io.images.Photo` and the reconstruction, whose
-    ``info`` holds the photo's under ``"photo"``."""
+    ``info`` holds the photo's under ``"photo"``; ``options`` go to :func:`shadeform.reconstruct`."""
     import shadeform
     from shadeform.coarse import reconstruct_on_grid
     from shadeform.io.images import read_photo
     from shadeform.masks import find_object
 
-    channel, linear, mask = (photo_options[name] for name in ("channel", "linear", "mask"))
     with stage(err, f"loading {escape(str(image))}", timings, "load"):
         photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
         object_mask = (

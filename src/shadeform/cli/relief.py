@@ -11,8 +11,20 @@ from rich.markup import escape
 
 from shadeform.cli._shell import (
     MAX_PIXELS,
+    ChannelOption,
+    ConcaveOption,
+    FilterOption,
+    IntegratorOption,
     JsonOption,
+    LightOption,
+    LinearOption,
+    MaskFileOption,
     MaxPixelsOption,
+    MethodOption,
+    ReferenceOption,
+    RefineOption,
+    SlantOption,
+    TiltOption,
     app,
     check_outputs,
     describe_photo,
@@ -26,7 +38,7 @@ from shadeform.cli._shell import (
     stdout_console,
     write_maps,
 )
-from shadeform.cli.photos import photo_command, reconstruct_options, reconstruct_photo
+from shadeform.cli.photos import reconstruct_options, reconstruct_photo
 from shadeform.io.atomic import OutputSet
 from shadeform.solid import MIN_WALL_MM, grid_step
 
@@ -44,7 +56,6 @@ _FLAGS = {
 
 
 @app.command("relief")
-@photo_command
 def relief_command(
     image: Annotated[
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
@@ -113,13 +124,23 @@ def relief_command(
             "the budget samples is solved, since the simplified surface keeps nothing finer.",
         ),
     ] = False,
-    photo_options: dict = None,
+    filter: FilterOption = None,
+    light: LightOption = None,
+    slant: SlantOption = None,
+    tilt: TiltOption = None,
+    channel: ChannelOption = "auto",
+    linear: LinearOption = None,
+    concave: ConcaveOption = None,
+    reference: ReferenceOption = None,
+    mask: MaskFileOption = None,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy), pixel units.")
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: JsonOption = False,
-    solver_options: dict = None,
+    method: MethodOption = "auto",
+    integrator: IntegratorOption = None,
+    refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Make a print-ready relief from one photo: a closed solid in millimetres with a flat base."""
@@ -140,7 +161,10 @@ def relief_command(
         max_triangles=max_triangles,
         names=_FLAGS,
     )
-    solve_options = reconstruct_options(photo_options, solver_options)
+    solve_options = reconstruct_options(
+        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
+        method=method, filter=filter, integrator=integrator, refine=refine,
+    )  # fmt: skip
 
     # a budget samples the surface every few pixels: solve only that grid, unless a per-pixel
     # map is asked for too
@@ -157,7 +181,15 @@ def relief_command(
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
         photo, rec = reconstruct_photo(
-            err, timings, image, photo_options, solve_options, max_pixels=max_pixels, grid=grid
+            err,
+            timings,
+            image,
+            channel=channel,
+            linear=linear,
+            max_pixels=max_pixels,
+            mask=mask,
+            grid=grid,
+            **solve_options,
         )
         pixels = photo.image
         with stage(err, "building the solid", timings, "relief"):

@@ -131,7 +131,7 @@ def stereo(
     The lights come from a light file (``--lights``, also RTI ``.lp``), a shiny sphere in the
     photos (``--sphere``), or are found from the photos themselves (``--unknown-lights``)."""
     from shadeform._checks import check_choice
-    from shadeform.photometric import METHODS, reconstruct_stereo
+    from shadeform.photometric import STEREO_METHODS, reconstruct_stereo
     from shadeform.photoset import load_photo_set
 
     # everything the user typed is checked before the photos are read
@@ -139,7 +139,7 @@ def stereo(
     for path, what in ((albedo, "an albedo map to"), (confidence, "a confidence map to")):
         if path is not None:
             check_suffix(path, (".png",), what)
-    check_choice(method, METHODS, "method")
+    STEREO_METHODS.get(method)  # an unknown name is refused here, listing the registered
     check_choice(integrator, tuple(available_integrators()), "integrator")
     err = stderr_console()
     timings: dict[str, float] = {}

@@ -117,12 +117,22 @@ def synth(
 # --- evaluate ----------------------------------------------------------------------------------
 
 
-#: (label, keyword arguments of reconstruct) of every method the table compares.
-_METHODS = (
-    ("propagation", {"method": "propagation", "refine": 3, "integrator": "paths"}),
-    ("propagation (2002, no refinement)", {"method": "propagation", "refine": 0, "integrator": "paths"}),
-    ("eikonal", {"method": "eikonal"}),
-)
+#: Rows beside a solver's own (label, keyword arguments of reconstruct): the 2002 report's
+#: propagation, without the integrability refinement.
+_VARIANTS = {"propagation": (("propagation (2002, no refinement)", {"method": "propagation", "refine": 0}),)}
+
+
+def _evaluated(selected: list[str] | None) -> list[tuple[str, dict]]:
+    """(label, keyword arguments of reconstruct) of every row the table compares: each registered
+    solver (or those named, comma-separated or repeated) with its defaults, then its variants."""
+    from shadeform.solvers import SOLVERS
+
+    names = [name.strip() for item in selected or () for name in item.split(",") if name.strip()]
+    runs = []
+    for name in names or SOLVERS.names():
+        SOLVERS.get(name)  # an unknown name is refused before any work, listing the registered
+        runs += [(name, {"method": name}), *_VARIANTS.get(name, ())]
+    return runs
 
 
 @app.command()
@@ -132,6 +142,15 @@ def evaluate(
         list[str] | None,
         typer.Option(
             "--scenes", metavar="NAMES", help="Scenes to run, comma-separated or repeated; all if not given."
+        ),
+    ] = None,
+    methods: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--methods",
+            metavar="NAMES",
+            help="Solvers to run (`shadeform methods`), comma-separated or repeated; every registered "
+            "one if not given, each with its defaults.",
         ),
     ] = None,
     as_json: Annotated[
@@ -146,7 +165,7 @@ def evaluate(
         ),
     ] = False,
 ) -> None:
-    """Run the methods on the synthetic scenes (light +z, no noise) and print their errors."""
+    """Run the solvers on the synthetic scenes (light +z, no noise) and print their errors."""
 
     import shadeform
     from shadeform import metrics
@@ -160,11 +179,12 @@ def evaluate(
     for name in names:
         if name not in synth_module.SCENES:
             raise InputError(f"unknown scene {name!r}; choose from: {', '.join(synth_module.SCENES)}")
+    evaluated = _evaluated(methods)
 
     runs = []  # (scene name, concave regions given, method label, reconstruct kwargs)
     for name in names:
         marked = bool(synth_module.concave_regions(name, size=size)["regions"])
-        for label, kwargs in _METHODS:
+        for label, kwargs in evaluated:
             runs.append((name, False, label, kwargs))
             if marked:
                 runs.append((name, True, label, kwargs))
@@ -193,6 +213,9 @@ def evaluate(
                     "angular_error_deg": metrics.angular_error(rec.normals, scene.normals),
                     "depth_error_pct": metrics.depth_error(rec.depth, scene.depth, fit="offset"),
                     "seconds": seconds,
+                    **(
+                        {"method_options": rec.info["method_options"]} if "method_options" in rec.info else {}
+                    ),
                 }
             )
             progress.advance(task)
@@ -306,8 +329,9 @@ def methods(
         bool, typer.Option("--json", help="Print one JSON object instead of the tables.")
     ] = False,
 ) -> None:
-    """List the solvers `reconstruct --method` takes and the integrators of `--integrator`."""
-    from shadeform.solvers import AUTO, get_solver, solver_names
+    """List the solvers `reconstruct --method` takes (with their own `--option`s) and the
+    integrators of `--integrator`."""
+    from shadeform.solvers import AUTO, SOLVERS
 
     rows = [
         {
@@ -317,10 +341,16 @@ def methods(
             "description": available_methods()[AUTO],
         }
     ]
-    rows += [
-        {"name": s.name, "lights": s.lights, "depth": s.integrator or s.depth, "description": s.description}
-        for s in map(get_solver, solver_names())
-    ]
+    for s in SOLVERS.entries():
+        row = {
+            "name": s.name,
+            "lights": s.lights,
+            "depth": s.integrator or s.depth,
+            "description": s.description,
+        }
+        if s.options:  # the built-in solvers have none, and their rows stay as they were
+            row["options"] = [option.describe() for option in s.options]
+        rows.append(row)
     if as_json:
         print_json({"command": "methods", "methods": rows, "integrators": available_integrators()})
         return
@@ -328,7 +358,11 @@ def methods(
     for column in ("method", "lights", "depth by", "what it does"):
         table.add_column(column, style="bold" if column == "method" else None)
     for row in rows:
-        table.add_row(row["name"], row["lights"], row["depth"], row["description"])
+        options = "".join(
+            f"\n--option {o['name']}={o['default']} ({o['type']}): {o['help']}"
+            for o in row.get("options", ())
+        )
+        table.add_row(row["name"], row["lights"], row["depth"], escape(row["description"] + options))
     out = stdout_console()
     out.print(table)
     table = Table(title="Integrators (--integrator)")

@@ -24,16 +24,16 @@ pipeline, the CLI's ``--integrator`` and the app's picker list it from here.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from shadeform._checks import check_choice, check_mask
+from shadeform._checks import check_mask
 from shadeform.errors import InputError
+from shadeform.registry import Option, Registry, load
 
-__all__ = ["Integrator", "available_integrators", "integrate", "register"]
+__all__ = ["INTEGRATORS", "Integrator", "available_integrators", "integrate", "register"]
 
 
 @dataclass(frozen=True)
@@ -51,34 +51,34 @@ class Integrator:
         One line in the user's words.
     perspective : bool
         Whether it also takes ``K=`` (a pinhole camera) in place of ``origin``.
+    options : tuple of Option
+        Options of its own (:class:`shadeform.registry.Option`), listed by the app's
+        ``/api/options``; no caller passes any yet, and the built-in integrators declare none.
     """
 
     name: str
     function: Callable[..., np.ndarray] | str
     description: str
     perspective: bool = False
+    options: tuple[Option, ...] = ()
 
     def load(self) -> Callable[..., np.ndarray]:
         """The function (imports its module the first time)."""
-        if isinstance(self.function, str):
-            module, _, name = self.function.partition(":")
-            return getattr(importlib.import_module(module), name)
-        return self.function
+        return load(self.function)
 
 
-_INTEGRATORS: dict[str, Integrator] = {}
+#: The registered integrators, in registration order.
+INTEGRATORS: Registry[Integrator] = Registry("integration method", Integrator)
 
 
 def register(integrator: Integrator) -> None:
     """Add (or replace) an integrator."""
-    if not isinstance(integrator, Integrator):
-        raise TypeError(f"register expects an Integrator, got {type(integrator).__name__}")
-    _INTEGRATORS[integrator.name] = integrator
+    INTEGRATORS.register(integrator)
 
 
 def available_integrators() -> dict[str, str]:
     """Integrator name to a one-line description, in registration order."""
-    return {name: integrator.description for name, integrator in _INTEGRATORS.items()}
+    return INTEGRATORS.descriptions()
 
 
 def integrate(
@@ -117,10 +117,10 @@ def integrate(
     mask = check_mask(mask, normals.shape[:2], of="the normals")
     if not np.isfinite(normals[mask]).all():
         raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
-    integrator = _INTEGRATORS[check_choice(method, tuple(_INTEGRATORS), "integration method")]
+    integrator = INTEGRATORS.get(method)
     if K is not None:
         if not integrator.perspective:
-            perspective = [name for name, i in _INTEGRATORS.items() if i.perspective]
+            perspective = [i.name for i in INTEGRATORS.entries() if i.perspective]
             raise InputError(
                 f"a perspective camera (K) needs method={' or '.join(map(repr, perspective))}, not {method!r}"
             )

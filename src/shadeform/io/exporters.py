@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import zipfile
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
@@ -27,14 +28,38 @@ from shadeform.io.atomic import atomic_write
 from shadeform.io.inventor import write_inventor
 from shadeform.io.vrml import format_rows, write_vrml
 from shadeform.mesh import Mesh
+from shadeform.registry import Option, Registry
 
-__all__ = ["Writer", "register", "available_formats", "export", "write_3mf"]
+__all__ = ["EXPORTERS", "Exporter", "Writer", "register", "available_formats", "export", "write_3mf"]
 
 Writer = Callable[[Mesh, BinaryIO], None]
 """A writer takes a mesh and a binary file open for writing, writes the whole file, returns None."""
 
-_WRITERS: dict[str, Writer] = {}
-_DESCRIPTIONS: dict[str, str] = {}
+
+@dataclass(frozen=True)
+class Exporter:
+    """One mesh format of the registry.
+
+    Attributes
+    ----------
+    name : str
+        Its file suffix, lower case with the dot (``".wrl"``).
+    writer : callable ``(mesh, file_obj) -> None``
+        See :func:`register`.
+    description : str
+        One line shown to users.
+    options : tuple of Option
+        Options of its own (:class:`shadeform.registry.Option`); none of the built-in formats has any.
+    """
+
+    name: str
+    writer: Writer
+    description: str
+    options: tuple[Option, ...] = ()
+
+
+#: The registered formats by suffix, in registration order.
+EXPORTERS: Registry[Exporter] = Registry("mesh format suffix", Exporter)
 
 
 def _normalise_suffix(suffix: str) -> str:
@@ -58,8 +83,7 @@ def register(suffix: str, writer: Writer, *, description: str) -> None:
     suffix = _normalise_suffix(suffix)
     if len(suffix) < 2 or not suffix[1:].isalnum():
         raise ValueError(f"exporter suffix must be a dot and letters or digits, got {suffix!r}")
-    _WRITERS[suffix] = writer
-    _DESCRIPTIONS[suffix] = description
+    EXPORTERS.register(Exporter(suffix, writer, description))
 
 
 def available_formats() -> dict[str, str]:
@@ -70,7 +94,7 @@ def available_formats() -> dict[str, str]:
     dict of str to str
         Suffix (lower case, with the dot) to a one-line description, in registration order.
     """
-    return dict(_DESCRIPTIONS)
+    return EXPORTERS.descriptions()
 
 
 def export(mesh: Mesh, path: str | os.PathLike[str]) -> Path:
@@ -101,13 +125,12 @@ def export(mesh: Mesh, path: str | os.PathLike[str]) -> Path:
         raise TypeError(f"export expects a shadeform Mesh, got {type(mesh).__name__}")
     path = Path(path)
     suffix = path.suffix.lower()
-    writer = _WRITERS.get(suffix)
-    if writer is None:
-        known = ", ".join(_WRITERS)
+    if suffix not in EXPORTERS:
+        known = ", ".join(EXPORTERS.names())
         given = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
         raise InputError(f"cannot export '{path.name}': {given}; use one of {known}")
     with atomic_write(path, mode="wb") as file_obj:
-        writer(mesh, file_obj)
+        EXPORTERS.get(suffix).writer(mesh, file_obj)
     return path
 
 

@@ -7,7 +7,8 @@ non-coplanar lights reach it, ``g = rho n`` is the least-squares solution of ``L
 
 Real objects break that model: attached and cast shadows, specular highlights and a falloff
 that is not the cosine (``benchmarks/results/stereo.md``). The methods, one module each in a
-registry (:func:`register`; ``shadeform stereo --method``):
+registry (:data:`STEREO_METHODS`, :func:`register`, :func:`available_stereo_methods`;
+``shadeform stereo --method``):
 
 - ``"bivariate"`` (the default, :mod:`.bivariate`): a low-order reflectance model per pixel
   (powers of ``n . l`` and gloss lobes round the half vector), readings it cannot explain
@@ -65,7 +66,13 @@ from shadeform.photometric.lambertian import HIGHLIGHT_ANGLE as HIGHLIGHT_ANGLE
 from shadeform.photometric.lambertian import ITERATIONS as ITERATIONS
 from shadeform.photometric.lambertian import MIN_SHADING as MIN_SHADING
 from shadeform.photometric.reconstruct import reconstruct_stereo
-from shadeform.photometric.registry import METHODS, StereoMethod, available_methods, register
+from shadeform.photometric.registry import (
+    STEREO_METHODS,
+    StereoMethod,
+    available_methods,
+    available_stereo_methods,
+    register,
+)
 from shadeform.photometric.stereo import CHUNK as CHUNK
 from shadeform.photometric.stereo import SAMPLE as SAMPLE
 from shadeform.photometric.stereo import SLANT_SAMPLE as SLANT_SAMPLE
@@ -74,10 +81,19 @@ from shadeform.photometric.stereo import PhotometricStereo, photometric_stereo
 
 __all__ = [
     "METHODS",
+    "STEREO_METHODS",
     "PhotometricStereo",
     "StereoMethod",
     "available_methods",
+    "available_stereo_methods",
     "photometric_stereo",
     "reconstruct_stereo",
     "register",
 ]
+
+
+def __getattr__(name: str):
+    # METHODS follows the registry (a method registered after import is in it)
+    if name == "METHODS":
+        return STEREO_METHODS.names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,13 +1,24 @@
 """The photometric-stereo methods (:mod:`shadeform.photometric`'s description): one
-:class:`StereoMethod` each, added by :func:`register`; a new method is one module and one
-``register(...)`` line below (``shadeform stereo --method`` and the app list them from here).
+:class:`StereoMethod` each in :data:`STEREO_METHODS`, added by :func:`register`; a new method is
+one module and one ``register(...)`` line below (``shadeform stereo --method`` and the app list
+them from here, when asked: a method registered later is listed and taken too).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
-__all__ = ["METHODS", "StereoMethod", "available_methods", "register"]
+from shadeform.registry import Option, Registry
+
+__all__ = [
+    "METHODS",  # noqa: F822 (given by __getattr__, read from the registry when asked)
+    "STEREO_METHODS",
+    "StereoMethod",
+    "available_methods",
+    "available_stereo_methods",
+    "register",
+]
 
 
 @dataclass(frozen=True)
@@ -31,6 +42,9 @@ class StereoMethod:
         -> float``: the factor on the given lights' ``tan(slant)`` that the method's model
         explains a sample of readings best with (1 where they cannot tell); None: the method
         takes the lights as given.
+    options : tuple of Option
+        Options of its own (:class:`shadeform.registry.Option`), listed by the app's
+        ``/api/options``; no caller passes any yet, and the built-in methods declare none.
     """
 
     name: str
@@ -38,26 +52,40 @@ class StereoMethod:
     description: str
     drops_photos: bool = True
     slant_scale: str | None = None
+    options: tuple[Option, ...] = ()
 
 
-_REGISTRY: dict[str, StereoMethod] = {}
+#: The registered methods, the default first.
+STEREO_METHODS: Registry[StereoMethod] = Registry("method", StereoMethod)
 
 
 def register(method: StereoMethod) -> None:
     """Add a method (its module is imported when first used)."""
-    _REGISTRY[method.name] = method
+    STEREO_METHODS.register(method)
+
+
+def available_stereo_methods() -> dict[str, str]:
+    """The registered methods, the default first: name -> one-line description."""
+    return STEREO_METHODS.descriptions()
 
 
 def available_methods() -> dict[str, str]:
-    """The registered methods, the default first: name -> one-line description."""
-    return {name: method.description for name, method in _REGISTRY.items()}
+    """Deprecated alias of :func:`available_stereo_methods` (``shadeform.available_methods`` lists
+    the solvers); removed in the next release."""
+    warnings.warn(
+        "shadeform.photometric.available_methods is deprecated; use available_stereo_methods "
+        "(shadeform.available_methods lists the one-photo solvers)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return available_stereo_methods()
 
 
-def _fit_function(name, attribute="fit"):
-    import importlib
-
-    module, function = getattr(_REGISTRY[name], attribute).split(":")
-    return getattr(importlib.import_module(module), function)
+def __getattr__(name: str):
+    # METHODS follows the registry: read when asked, not copied at import
+    if name == "METHODS":
+        return STEREO_METHODS.names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 register(
@@ -83,5 +111,3 @@ register(
         drops_photos=False,
     )
 )
-#: The registered method names, the default first.
-METHODS = tuple(_REGISTRY)

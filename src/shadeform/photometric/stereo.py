@@ -9,13 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shadeform._checks import check_choice, check_mask
+from shadeform._checks import check_mask
 from shadeform.errors import InputError
 from shadeform.photometric import lambertian
 from shadeform.photometric.audit import _audit
 from shadeform.photometric.holes import _fill
 from shadeform.photometric.lambertian import HIGHLIGHT_ANGLE, ITERATIONS, MIN_SHADING
-from shadeform.photometric.registry import _REGISTRY, _fit_function
+from shadeform.photometric.registry import STEREO_METHODS
+from shadeform.registry import load
 
 #: Pixels solved at once: bounds the memory of the (images x pixels) arrays.
 CHUNK = 1 << 15
@@ -44,7 +45,7 @@ class PhotometricStereo:
     lights_used : (H, W) int
         How many images the final fit used at each pixel (0 outside the mask).
     method : str
-        The method's name (:data:`METHODS`).
+        The method's name (:data:`~shadeform.photometric.registry.STEREO_METHODS`).
     confidence : (H, W) float64
         In [0, 1], the share of the set's information about the normal that its fit had (module
         description); 0 outside the mask.
@@ -150,7 +151,7 @@ def photometric_stereo(
     0.6
     """
     stack, lights, mask, scale = _check(images, lights, mask, intensities)
-    check_choice(method, tuple(_REGISTRY), "method")
+    entry = STEREO_METHODS.get(method)
     if not (np.isfinite(min_shading) and 0 <= min_shading < 1):
         raise InputError(f"min_shading must be in [0, 1), got {min_shading!r}")
     if not (np.isfinite(highlight_angle) and 0 <= highlight_angle < 90):
@@ -184,7 +185,7 @@ def photometric_stereo(
         lights, found = estimate_lights(readings_of(np.flatnonzero(coarse)).mean(axis=2), small)
         scale = scale * found[:, None]
 
-    fit = _fit_function(method)
+    fit = load(entry.fit)
 
     def solve(directions, gray):
         return fit(
@@ -192,7 +193,7 @@ def photometric_stereo(
         )
 
     kept, factors = np.arange(len(lights)), np.ones(len(lights))
-    if _REGISTRY[method].drops_photos and len(lights) > 3:
+    if entry.drops_photos and len(lights) > 3:
         sample = where[np.linspace(0, where.size - 1, min(where.size, SAMPLE)).astype(np.int64)]
         gray = readings_of(sample).mean(axis=2)
         first, usable = lambertian.robust(
@@ -203,7 +204,7 @@ def photometric_stereo(
         scale = scale * np.where(np.isfinite(factors), factors, 1.0)[:, None]
     use = lights[kept]
     light_scale = 1.0
-    if refine_lights and not estimated and _REGISTRY[method].slant_scale and len(use) > 3:
+    if refine_lights and not estimated and entry.slant_scale and len(use) > 3:
         sample = where[np.linspace(0, where.size - 1, min(where.size, SLANT_SAMPLE)).astype(np.int64)]
         gray = readings_of(sample, kept).mean(axis=2)
         g, _ = lambertian.robust(
@@ -212,7 +213,7 @@ def photometric_stereo(
         length = np.linalg.norm(g, axis=1)
         solved = np.isfinite(length) & (length > 0)
         if np.count_nonzero(solved) >= 3:
-            light_scale = _fit_function(method, "slant_scale")(use, gray[:, solved], g[solved])
+            light_scale = load(entry.slant_scale)(use, gray[:, solved], g[solved])
         if light_scale != 1.0:
             lights = lambertian.scaled_lights(lights, light_scale)
             use = lights[kept]

@@ -15,22 +15,23 @@ methods (the CLI's help, the app's options) stays cheap.
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from shadeform._checks import check_choice
+from shadeform.registry import Option, Registry, load
 from shadeform.solvers.problem import Problem, Reference, Solution
 
 __all__ = [
     "AUTO",
     "NOISY",
     "OUTLIERS",
+    "Option",
     "Problem",
     "Reference",
+    "SOLVERS",
     "Solution",
     "Solver",
     "available_methods",
@@ -96,6 +97,10 @@ class Solver:
     min_outliers : float or None
         When given, "auto" takes it only for noisy images (:data:`NOISY`) whose share of outlying
         detail is at least this (:data:`OUTLIERS`): the solver for real photographs.
+    options : tuple of Option
+        Its own options (:class:`shadeform.registry.Option`: name, type, default, help), given as
+        ``reconstruct(method_options={...})`` or ``--option NAME=VALUE`` and read by the solver as
+        ``problem.options[NAME]`` (every one present: the user's value or the default).
     """
 
     name: str
@@ -109,6 +114,7 @@ class Solver:
     auto: int | None = None
     max_noise: float = math.inf
     min_outliers: float | None = None
+    options: tuple[Option, ...] = ()
 
     def __post_init__(self):
         if not self.name.isidentifier() or self.name == AUTO:
@@ -119,33 +125,31 @@ class Solver:
             raise ValueError(f"lights must be one of {LIGHTS}, got {self.lights!r}")
         if self.integrator is None and not self.depth:
             raise ValueError("a solver with no default integrator must say what makes its depth")
+        object.__setattr__(self, "options", tuple(self.options))
+        if not all(isinstance(option, Option) for option in self.options):
+            raise ValueError("a solver's options must be shadeform.registry.Option records")
 
     def run(self, problem: Problem) -> Solution:
         """Solve ``problem`` (imports the solver's module the first time)."""
-        solve = self.solve
-        if isinstance(solve, str):
-            module, _, function = solve.partition(":")
-            solve = getattr(importlib.import_module(module), function)
-        return solve(problem)
+        return load(self.solve)(problem)
 
     def takes(self, light) -> bool:
         """Whether it takes ``light``: a (3,) direction, or None for a light to be estimated."""
         return self.lights == "any" or (light is not None and is_frontal(light))
 
 
-_SOLVERS: dict[str, Solver] = {}
+#: The registered solvers (not "auto"), in registration order.
+SOLVERS: Registry[Solver] = Registry("method", Solver)
 
 
 def register(solver: Solver) -> None:
     """Add (or replace) a solver: it is then available to ``reconstruct``, the CLI and the app."""
-    if not isinstance(solver, Solver):
-        raise TypeError(f"register expects a Solver, got {type(solver).__name__}")
-    _SOLVERS[solver.name] = solver
+    SOLVERS.register(solver)
 
 
 def solver_names() -> tuple[str, ...]:
     """The registered solvers' names, in registration order."""
-    return tuple(_SOLVERS)
+    return SOLVERS.names()
 
 
 def available_methods() -> dict[str, str]:
@@ -159,13 +163,13 @@ def available_methods() -> dict[str, str]:
     rule = ", else ".join(solver.name + _conditions(solver) for solver in _ranked())
     return {
         AUTO: f"picks the best measured solver: {rule}",
-        **{name: s.description for name, s in _SOLVERS.items()},
+        **SOLVERS.descriptions(),
     }
 
 
 def get_solver(method: str) -> Solver:
     """The registered solver called ``method`` (not "auto": see :func:`choose`)."""
-    return _SOLVERS[check_choice(method, tuple(_SOLVERS), "method")]
+    return SOLVERS.get(method)
 
 
 def choose(light, *, noise: float = 0.0, outliers: float = 0.0) -> Solver:
@@ -197,7 +201,7 @@ def choose(light, *, noise: float = 0.0, outliers: float = 0.0) -> Solver:
 
 def _ranked() -> list[Solver]:
     """The solvers "auto" may pick, best first."""
-    return sorted((s for s in _SOLVERS.values() if s.auto is not None), key=lambda s: s.auto)
+    return sorted((s for s in SOLVERS.entries() if s.auto is not None), key=lambda s: s.auto)
 
 
 def _conditions(solver: Solver) -> str:

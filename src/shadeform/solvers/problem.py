@@ -63,6 +63,9 @@ class Problem:
     noise : float or None
         The image's noise (standard deviation, image units; :func:`shadeform.preprocess.noise_level`),
         measured for solvers with a noise policy, else None.
+    options : dict of str to value
+        The solver's own options (``Solver.options``): every one it declares, the user's value or
+        its default.
     lap : callable
         ``lap("stage")`` records the time since the last lap under that stage in ``info["timings"]``.
     """
@@ -80,6 +83,7 @@ class Problem:
     integrator: str | None = None
     refine: int = 0
     noise: float | None = None
+    options: dict[str, Any] = field(default_factory=dict)
     lap: Callable[[str], None] = field(default=lambda stage: None, repr=False)
 
     @property

@@ -30,7 +30,7 @@ from shadeform.app.schema.masks import (
     MaskResult,
     SeedMaskRequest,
 )
-from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, Options
+from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, OptionInfo, Options
 from shadeform.app.schema.printing import (
     MapPreview,
     MapsResult,
@@ -80,6 +80,7 @@ __all__ = [
     "ReconstructParams",
     "ReconstructRequest",
     "MethodInfo",
+    "OptionInfo",
     "FormatInfo",
     "ExampleInfo",
     "Limits",

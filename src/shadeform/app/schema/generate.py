@@ -15,7 +15,7 @@ from shadeform.app.schema.masks import (
     MaskResult,
     SeedMaskRequest,
 )
-from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, Options
+from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, OptionInfo, Options
 from shadeform.app.schema.printing import MapPreview, MapsResult, ReliefParams, ReliefRequest, ReliefResult
 from shadeform.app.schema.projects import (
     DisplaySettings,
@@ -50,6 +50,7 @@ _EXPORTED = (
     ConcaveRegions,
     ReconstructParams,
     ReconstructRequest,
+    OptionInfo,
     MethodInfo,
     FormatInfo,
     ExampleInfo,
@@ -142,7 +143,7 @@ def _ts_type(spec: dict) -> str:
     if "const" in spec:
         return json.dumps(spec["const"])
     if "anyOf" in spec:
-        return " | ".join(_ts_type(option) for option in spec["anyOf"])
+        return " | ".join(dict.fromkeys(_ts_type(option) for option in spec["anyOf"]))  # int | float: number
     kind = spec.get("type")
     if kind == "array":
         if "prefixItems" in spec:

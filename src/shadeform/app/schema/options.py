@@ -3,7 +3,9 @@ examples, the upload limits and every panel's default parameters."""
 
 from __future__ import annotations
 
-from pydantic import Field
+from typing import Literal
+
+from pydantic import ConfigDict, Field
 
 from shadeform.app.schema.common import _Model
 from shadeform.app.schema.printing import ReliefParams
@@ -11,12 +13,33 @@ from shadeform.app.schema.reconstruct import ImageInfo, ReconstructParams
 from shadeform.app.schema.stereo import StereoParams
 
 
+class OptionInfo(_Model):
+    """One option of a method's own (:class:`shadeform.registry.Option`)."""
+
+    name: str
+    type: Literal["bool", "int", "float", "str"]
+    default: bool | int | float | str
+    help: str = Field(description="One line in the user's words.")
+
+
+def _options_optional(schema: dict) -> None:
+    # sent only when a method has options: the built-in ones have none
+    schema["required"] = [name for name in schema.get("required", ()) if name != "options"]
+
+
 class MethodInfo(_Model):
     """A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`,
     :func:`shadeform.integration.available_integrators`)."""
 
+    model_config = ConfigDict(json_schema_extra=_options_optional)
+
     name: str
     description: str = Field(description="One line in the user's words.")
+    options: list[OptionInfo] = Field(
+        default_factory=list,
+        exclude_if=lambda options: not options,
+        description="Its own options (``--option NAME=VALUE`` on the command line); absent when it has none.",
+    )
 
 
 class FormatInfo(_Model):
