@@ -7,11 +7,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from helpers import ROOT, SHARED_DATA
 from shadeform import integration, solvers, synth
-
-#: The repository and the shared data beside it (``../shared/data``: DiLiGenT, MIT-Berkeley).
-ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
 
 
 @pytest.fixture(scope="session")
@@ -73,12 +70,11 @@ def sphere64():
 @pytest.fixture
 def app_server(tmp_path):
     """The app's real server with a session store, on a port it can be stopped and started on
-    again (``test_app_browser_reconnect.RestartableServer``)."""
-    from shadeform.app.server import STATIC_DIR, create_app
-    from test_app_browser_reconnect import RestartableServer
+    again (``helpers.browser.RestartableServer``)."""
+    from helpers.browser import RestartableServer, require_built_client
+    from shadeform.app.server import create_app
 
-    if not (STATIC_DIR / "index.html").is_file():
-        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
+    require_built_client()
     controlled = RestartableServer()
     controlled.start(lambda: create_app(sessions=tmp_path / "s.sqlite3", warm=True))
     yield controlled

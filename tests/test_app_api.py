@@ -22,6 +22,7 @@ from fastapi.testclient import TestClient
 from PIL import Image
 
 import shadeform
+from helpers.pngs import png_with_ihdr
 from shadeform import metrics, synth
 from shadeform.app import reconstruct as reconstruct_routes
 from shadeform.app import schema, server
@@ -34,8 +35,7 @@ from shadeform.io.exporters import available_formats
 from shadeform.io.images import CHANNELS, srgb_encode
 from shadeform.light import light_from_slant_tilt
 from shadeform.preprocess import FILTER_KINDS, apply_filter
-from shadeform.solvers import available_methods
-from test_io_images import png_with_ihdr
+from shadeform.solvers import Problem, Solution, Solver, available_methods
 
 ROOT = Path(__file__).resolve().parents[1]
 LOCAL = "http://127.0.0.1:8000"
@@ -1079,5 +1079,49 @@ class TestAppCommand:
         assert result.exit_code == 2 and "choose another --port" in result.stderr
 
 
-def test_warm_up_runs_every_method():
-    server.warm_up()  # raises if a method/integrator pair the app offers does not run
+def facing_the_viewer(problem: Problem) -> Solution:
+    """A solver registered by the warm-up test: every normal toward the viewer, depth by the
+    integrator."""
+    normals = np.zeros((*problem.mask.shape, 3))
+    normals[..., 2] = 1.0
+    return Solution(normals, problem.integrate(normals), {})
+
+
+def test_warm_up_runs_every_method(registries, monkeypatch):
+    """The warm-up solves with every method the app lists (one registered just now included), with
+    each integrator it lists and the solver's own, on float32 and float64 images, and meshes each
+    result: so the first request of each kind finds its kernels compiled."""
+    registries[0].register(
+        Solver("facing", facing_the_viewer, integrator="poisson", description="flat (a test solver)")
+    )
+    solved, meshed = [], []
+    real_reconstruct, real_to_mesh = shadeform.reconstruct, shadeform.to_mesh
+
+    def reconstruct(image, **options):
+        result = real_reconstruct(image, **options)  # a method that fails raises here
+        solved.append((options.get("method", "auto"), options.get("integrator"), image.dtype))
+        return result
+
+    def to_mesh(result, **options):
+        meshed.append(result)
+        return real_to_mesh(result, **options)
+
+    # warm_up imports them from the package when it runs
+    monkeypatch.setattr(shadeform, "reconstruct", reconstruct)
+    monkeypatch.setattr(shadeform, "to_mesh", to_mesh)
+    server.warm_up()
+
+    with TestClient(create_app(), base_url=LOCAL) as fresh:  # an app's options are read when it is made
+        options = fresh.get("/api/options").json()
+    methods = [m["name"] for m in options["methods"]]
+    integrators = [None, *(i["name"] for i in options["integrators"])]
+    assert "facing" in methods and len(integrators) > 2
+    offered = {
+        (method, integrator, np.dtype(dtype))
+        for method in methods
+        for integrator in integrators
+        for dtype in (np.float32, np.float64)
+    }
+    assert offered <= set(solved), sorted(map(str, offered - set(solved)))
+    # each pair once per dtype, each of them meshed, plus the one solve of the confidence's outlines
+    assert len(solved) == len(offered) + 1 and len(meshed) == len(offered)

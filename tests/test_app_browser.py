@@ -18,111 +18,35 @@ import base64
 import io
 import json
 import math
-import socket
-import threading
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import browser as ui
+from helpers.browser import (
+    ARTIFACTS,
+    BOWL,
+    FIRST_RESULT_MS,
+    RESULT_MS,
+    applied,
+    click_image,
+    download,
+    open_example,
+    wait_for_result,
+)
+from helpers.readers import check_inventor, check_vrml, inventor_numbers, run_tool
 from shadeform.mesh import Mesh, to_mesh
-from test_exporters import check_inventor, check_vrml, inventor_numbers, require, run_tool
-
-CHROMIUM = Path("/usr/bin/chromium")
-ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
-# a cold start compiles the numba kernels (up to a minute on 2 cores); warm solves take < 1 s
-FIRST_RESULT_MS = 180_000
-RESULT_MS = 60_000
 
 # the synthetic bowl at its default size (256 px): its object is a disk of radius ~108 px
-BOWL = "synth:bowl"
 CENTRE = (128, 128)
 RING_RADIUS = 70  # inside the disk, inside the polygon drawn below
 
 
-# ---------------------------------------------------------------------------- fixtures
-
-
-@pytest.fixture(scope="module")
-def server():
-    """The app's real server on a free loopback port; yields its address."""
-    import uvicorn
-
-    from shadeform.app.server import STATIC_DIR, create_app
-
-    if not (STATIC_DIR / "index.html").is_file():
-        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    config = uvicorn.Config(create_app(warm=True), host="127.0.0.1", port=port, log_level="warning")
-    uvicorn_server = uvicorn.Server(config)
-    thread = threading.Thread(target=uvicorn_server.run, name="app-under-test", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not uvicorn_server.started:
-        assert thread.is_alive() and time.monotonic() < deadline, "the app server did not start"
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}/"
-    uvicorn_server.should_exit = True
-    thread.join(timeout=10)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    require(
-        CHROMIUM.is_file(),
-        f"{CHROMIUM} not installed (Debian package chromium): cannot run the browser tests",
-    )
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(
-            executable_path=str(CHROMIUM), headless=True, args=["--no-sandbox"]
-        )
-        yield chromium
-        chromium.close()
-
-
-@pytest.fixture
-def page(browser, server):
-    """A fresh browser profile (empty storage) on the app's page, ready to use."""
-    context = browser.new_context(viewport={"width": 1440, "height": 860}, accept_downloads=True)
-    page = context.new_page()
-    errors = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    page.goto(server)
-    page.evaluate("window.shadeform.ready")
-    yield page
-    context.close()
-    assert not errors, f"uncaught errors in the page: {errors}"
+# the real server, Chromium and a fresh page per test (tests/helpers/browser.py)
+server, browser, page = ui.server, ui.browser, ui.page
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def applied(page) -> int:
-    return page.evaluate("window.shadeform.applied()")
-
-
-def wait_for_result(page, after: int, timeout=RESULT_MS) -> None:
-    """Wait until a result newer than the ``after``-th is on screen and nothing is pending."""
-    page.wait_for_function(
-        f"window.shadeform.applied() > {after} && !window.shadeform.state().busy", timeout=timeout
-    )
-    # nothing pending means the full-resolution model, not the quick look, is on screen
-    assert page.evaluate("window.shadeform.lastResult().preview") is False
-
-
-def open_example(page, name: str) -> None:
-    before = applied(page)
-    page.click("#examples-menu > button")
-    page.click(f'#examples-menu [data-example="{name}"]')
-    wait_for_result(page, before, timeout=FIRST_RESULT_MS)
-    assert page.evaluate("window.shadeform.state().image.name") == name
-    # the mask the result was solved with is decoded in the mask worker, beside the model's frame
-    page.wait_for_function("window.shadeform.mask().pixels > 0", timeout=RESULT_MS)
 
 
 def depth(page, row: int, col: int) -> float:
@@ -142,12 +66,6 @@ def centre_minus_ring(zs_at) -> float:
     return zs_at(*CENTRE) - float(np.mean([zs_at(r, c) for r, c in ring_points(RING_RADIUS)]))
 
 
-def click_image(page, x: float, y: float) -> None:
-    """Click image pixel (x = column, y = row) on the image pane's canvas."""
-    at = page.evaluate(f"window.shadeform.pagePoint({x}, {y})")
-    page.mouse.click(at["x"], at["y"])
-
-
 def shown_mesh(page) -> Mesh:
     """The mesh the 3D view shows, as the library's Mesh (float32 values widened)."""
     data = page.evaluate("window.shadeform.mesh()")
@@ -157,18 +75,6 @@ def shown_mesh(page) -> Mesh:
         normals=np.array(data["normals"], dtype=np.float64).reshape(-1, 3),
         uv=np.array(data["uvs"], dtype=np.float64).reshape(-1, 2),
     )
-
-
-def download(page, selector: str, menu: str, folder: Path) -> Path:
-    """Open ``menu``, click ``selector`` in it and save the download it starts under ``folder``."""
-    page.click(f"{menu} > button")
-    with page.expect_download(timeout=RESULT_MS) as started:
-        page.click(selector)
-    done = started.value
-    assert done.failure() is None, done.failure()
-    target = folder / done.suggested_filename
-    done.save_as(target)
-    return target
 
 
 def nearest_z(points: np.ndarray, row: int, col: int) -> float:

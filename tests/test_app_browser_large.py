@@ -23,24 +23,21 @@ from __future__ import annotations
 
 import io
 import re
-import socket
 import sys
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-import test_app_browser
-from test_app_browser import ARTIFACTS
+from helpers import browser as ui
+from helpers.browser import ARTIFACTS, opened, require_built_client, serving
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 # the long-task observer and the photo are the benchmark's: the tests check what it measures
 from bench_app_large import OBSERVE, orbit, phone_photo
 
-browser = test_app_browser.browser
+browser = ui.browser
 
 #: Longest task the page may run once a photo is chosen, ms. The issue's bar, 50 ms, is the
 #: benchmark's (``benchmarks/bench_app_large.py``); here the browser shares 2 loaded cores with
@@ -69,42 +66,20 @@ def photos(tmp_path_factory):
 def server():
     """The real server (uvicorn) with a pixel limit of 13 Mpx: the 12 Mpx photo fits, a 14 Mpx
     one is refused with the offer."""
-    import uvicorn
-
     from shadeform.app.guard import AppLimits
-    from shadeform.app.server import STATIC_DIR, create_app, warm_up
+    from shadeform.app.server import create_app, warm_up
 
-    if not (STATIC_DIR / "index.html").is_file():
-        pytest.fail(f"the web client is not built ({STATIC_DIR} has no index.html): run `make web`")
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    require_built_client()
     warm_up()  # the kernels loaded before the clock runs (``shadeform app`` warms them at start)
-    app = create_app(limits=AppLimits(max_pixels=13_000_000, max_image_bytes=2 * 2**30))
-    uvicorn_server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=uvicorn_server.run, name="app-under-test", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not uvicorn_server.started:
-        assert thread.is_alive() and time.monotonic() < deadline, "the app server did not start"
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}/"
-    uvicorn_server.should_exit = True
-    thread.join(timeout=10)
+    with serving(create_app(limits=AppLimits(max_pixels=13_000_000, max_image_bytes=2 * 2**30))) as url:
+        yield url
 
 
 @pytest.fixture
 def page(browser, server):
-    context = browser.new_context(viewport={"width": 1440, "height": 860})
-    context.add_init_script(OBSERVE)
-    page = context.new_page()
-    errors = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    page.goto(server)
-    page.evaluate("window.shadeform.ready")
-    yield page
-    context.close()
-    assert not errors, f"uncaught errors in the page: {errors}"
+    """A fresh page that watches its long tasks from before it loads."""
+    with opened(browser, server, init_script=OBSERVE) as fresh:
+        yield fresh
 
 
 def view_in_worker(page) -> bool:

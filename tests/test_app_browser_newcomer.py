@@ -3,8 +3,8 @@ which light is used, the printed solid fills the view, the mask threshold and th
 methods are in words, and what the result's info reports of a depth pulled back and of unsure
 areas not listed is shown.
 
-The server, the browser and a fresh page per test are those of ``tests/test_app_browser.py``
-(its fixtures, imported). Screenshots go to ``tests/artifacts/newcomer-*.png``.
+The server, the browser and a fresh page per test are those of
+``tests/helpers/browser.py``. Screenshots go to ``tests/artifacts/newcomer-*.png``.
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import math
 import numpy as np
 import pytest
 
-import test_app_browser
-from test_app_browser import ARTIFACTS, BOWL, RESULT_MS, applied, open_example, wait_for_result
+from helpers import browser as ui
+from helpers.browser import ARTIFACTS, BOWL, RESULT_MS, applied, open_example, wait_for_result
 
-# the real server, Chromium and a fresh page per test: test_app_browser's own fixtures
-server, browser, page = test_app_browser.server, test_app_browser.browser, test_app_browser.page
+# the real server, Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py
+server, browser, page = ui.server, ui.browser, ui.page
 
 ACCENT = "rgb(90, 169, 255)"  # style.css --accent: a control in use
 VIEW_FOV = 32.0  # viewer.ts: the 3D view's vertical field of view, degrees

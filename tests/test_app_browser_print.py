@@ -1,12 +1,12 @@
 """The Print and Maps panels in a real browser: build a solid of a given size, see its measures,
 download it; preview the texture maps, download them as a zip.
 
-The server, the browser and a fresh page per test are those of ``tests/test_app_browser.py`` (its
-fixtures, imported): the real server under uvicorn on a free loopback port serving the built
-client, Debian's Chromium driven by Playwright with clicks and typing. Facts come from the test
-hook (``window.shadeform.print`` and ``.maps``), from the page (the measures' text, the buttons)
-and from the downloaded files, read back with trimesh and PyPNG. Screenshots of both panels go
-to ``tests/artifacts/app-print.png`` and ``app-maps.png``.
+The server, the browser and a fresh page per test are those of ``tests/helpers/browser.py``: the
+real server under uvicorn on a free loopback port serving the built client, Debian's Chromium
+driven by Playwright with clicks and typing. Facts come from the test hook
+(``window.shadeform.print`` and ``.maps``), from the page (the measures' text, the buttons) and
+from the downloaded files, read back with trimesh and PyPNG. Screenshots of both panels go to
+``tests/artifacts/app-print.png`` and ``app-maps.png``.
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ import zipfile
 import png
 import pytest
 
-import test_app_browser
-from test_app_browser import ARTIFACTS, BOWL, RESULT_MS, applied, open_example, wait_for_result
+from helpers import browser as ui
+from helpers.browser import ARTIFACTS, BOWL, RESULT_MS, applied, open_example, wait_for_result
 
-# the real server, Chromium and a fresh page per test: test_app_browser's own fixtures
-server, browser, page = test_app_browser.server, test_app_browser.browser, test_app_browser.page
+# the real server, Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py
+server, browser, page = ui.server, ui.browser, ui.page
 
 trimesh = pytest.importorskip("trimesh")
 

@@ -1,13 +1,13 @@
 """Projects kept by the server outlive a server restart and a browser without storage (issue 14,
 point 4), in a real browser.
 
-The browser and a fresh page per test are those of ``tests/test_app_browser.py`` (its fixtures,
-imported); the server is ``tests/test_app_browser_reconnect.py``'s restartable one, with a
-sessions file. The page autosaves its work (a second after the last change); the server is then
-stopped and started again as a new ``create_app`` with the same file, and a new browser profile
-(empty storage: another browser, or storage cleared) is offered the newest project and reopens
-it from Project ▸ Open recent…, its image from the server's session store (nothing sent again),
-its parameters and regions as they were.
+The browser and a fresh page per test are those of ``tests/helpers/browser.py``; the server is
+its restartable one (``RestartableServer``, the ``app_server`` fixture), with a sessions file.
+The page autosaves its work (a second after the last change); the server is then stopped and
+started again as a new ``create_app`` with the same file, and a new browser profile (empty
+storage: another browser, or storage cleared) is offered the newest project and reopens it from
+Project ▸ Open recent…, its image from the server's session store (nothing sent again), its
+parameters and regions as they were.
 """
 
 from __future__ import annotations
@@ -15,13 +15,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import test_app_browser
-from test_app_browser import ARTIFACTS, FIRST_RESULT_MS, RESULT_MS, click_image, open_example, wait_for_result
-from test_app_browser_reconnect import record_requests, toast_texts
+from helpers import browser as ui
+from helpers.browser import (
+    ARTIFACTS,
+    FIRST_RESULT_MS,
+    RESULT_MS,
+    click_image,
+    open_example,
+    record_requests,
+    toast_texts,
+    wait_for_result,
+)
 
-# Chromium and a fresh page per test: test_app_browser's own fixtures (the page opens ``server``,
-# which is this module's)
-browser, page = test_app_browser.browser, test_app_browser.page
+# Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py (the page opens
+# ``server``, which is this module's)
+browser, page = ui.browser, ui.page
 
 #: The autosave waits 1 s after the last change; a save takes milliseconds.
 SAVED_MS = 10_000
@@ -29,7 +37,7 @@ SAVED_MS = 10_000
 
 @pytest.fixture
 def server(app_server):
-    """The address test_app_browser's ``page`` opens (``app_server``: tests/conftest.py)."""
+    """The address the ``page`` fixture opens (``app_server``: tests/conftest.py)."""
     return app_server.url
 
 
@@ -252,7 +260,7 @@ def put_project(page, project_id: str, document: dict) -> int:
 
 
 def test_a_project_whose_image_the_server_forgot_opens_it_again_or_says_why(page):
-    from test_app_projects import photo_document
+    from helpers.projects import photo_document
 
     # an example the server no longer has under that id: opened again by name
     example = photo_document("synth:sphere", step=3)

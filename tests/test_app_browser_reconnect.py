@@ -1,9 +1,9 @@
 """The client reconnects after a server restart, and says so (issue 14, point 4), in a real browser.
 
-The browser and a fresh page per test are those of ``tests/test_app_browser.py`` (its fixtures,
-imported); the server is this module's own: the real app under uvicorn in a thread on a free
-loopback port, stopped and started again as a new ``create_app`` ON THE SAME PORT, as a user's
-``shadeform app`` is restarted. A request made while it is stopped fails at the network level
+The browser and a fresh page per test are those of ``tests/helpers/browser.py``; the server is
+its ``RestartableServer`` (the ``app_server`` fixture): the real app under uvicorn in a thread
+on a free loopback port, stopped and started again as a new ``create_app`` ON THE SAME PORT, as a
+user's ``shadeform app`` is restarted. A request made while it is stopped fails at the network level
 (connection refused), which the page must say (a message that stays, the test hook's
 ``connection()`` "lost", the model failed and not exportable) until the server answers again;
 then it must say "Reconnected" and make the model current again by itself. With the sessions
@@ -13,21 +13,26 @@ file the restarted server knows the page's image id (nothing is sent again); wit
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-import test_app_browser
-from test_app_browser import BOWL, FIRST_RESULT_MS, RESULT_MS, open_example, wait_for_result
+from helpers import browser as ui
+from helpers.browser import (
+    BOWL,
+    FIRST_RESULT_MS,
+    RESULT_MS,
+    open_example,
+    record_requests,
+    toast_texts,
+    wait_for_result,
+)
 
-# Chromium and a fresh page per test: test_app_browser's own fixtures (the page opens ``server``,
-# which is this module's)
-browser, page = test_app_browser.browser, test_app_browser.page
+# Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py (the page opens
+# ``server``, which is this module's)
+browser, page = ui.browser, ui.page
 
 LOST = "Lost the connection to the server; retrying…"
 RECONNECTED = "Reconnected to the server"
@@ -36,45 +41,9 @@ UNREACHABLE = "server not reachable (retrying…)"
 RECONNECT_MS = 15_000
 
 
-class RestartableServer:
-    """The app's real server on one fixed loopback port, which can be stopped and started again."""
-
-    def __init__(self) -> None:
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            self.port = probe.getsockname()[1]
-        self.url = f"http://127.0.0.1:{self.port}/"
-        self._server = None
-        self._thread: threading.Thread | None = None
-
-    def start(self, make_app: Callable) -> None:
-        import uvicorn
-
-        config = uvicorn.Config(make_app(), host="127.0.0.1", port=self.port, log_level="warning")
-        self._server = uvicorn.Server(config)
-        self._thread = threading.Thread(target=self._server.run, name="app-under-test", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + 30
-        while not self._server.started:
-            assert self._thread.is_alive(), f"the app server did not start on port {self.port}"
-            assert time.monotonic() < deadline, "the app server did not start within 30 s"
-            time.sleep(0.05)
-
-    def stop(self) -> None:
-        if self._server is None:
-            return
-        self._server.should_exit = True
-        self._thread.join(timeout=15)
-        assert not self._thread.is_alive(), "the app server did not stop"
-        self._server = None
-        # nothing answers on the port any more: a request now fails at the network level
-        with socket.socket() as probe, pytest.raises(ConnectionRefusedError):
-            probe.connect(("127.0.0.1", self.port))
-
-
 @pytest.fixture
 def server(app_server):
-    """The address test_app_browser's ``page`` opens (``app_server``: tests/conftest.py)."""
+    """The address the ``page`` fixture opens (``app_server``: tests/conftest.py)."""
     return app_server.url
 
 
@@ -83,17 +52,6 @@ def server(app_server):
 
 def shown(page) -> dict:
     return page.evaluate("window.shadeform.shownModelState()")
-
-
-def toast_texts(page, kind: str) -> list[str]:
-    return [t["text"] for t in page.evaluate("window.shadeform.toasts()") if t["kind"] == kind]
-
-
-def record_requests(page) -> list[tuple[str, str]]:
-    """(method, path) of every request the page makes from now on, sent or refused."""
-    log: list[tuple[str, str]] = []
-    page.on("request", lambda request: log.append((request.method, request.url.split("/", 3)[-1])))
-    return log
 
 
 def lose_the_server(page, app_server, change: Callable[[], None], tmp_path: Path) -> None:

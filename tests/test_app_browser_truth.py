@@ -1,8 +1,8 @@
 """The app tells the truth, in a real browser: what the model on screen is, errors that stay,
 shortcuts wherever the focus is, a refused polygon said, a layout that fits.
 
-The server, the browser and a fresh page per test are those of ``tests/test_app_browser.py``
-(its fixtures, imported): the real server under uvicorn on a free loopback port serving the
+The server, the browser and a fresh page per test are those of
+``tests/helpers/browser.py``: the real server under uvicorn on a free loopback port serving the
 built client, Debian's Chromium driven by Playwright with clicks and keys. A refused request is
 a real refusal: Playwright's ``page.route`` rewrites one field of the client's request to a value
 the server rejects and passes the server's own 422 back. Facts come from the test hook
@@ -17,11 +17,19 @@ import json
 
 import pytest
 
-import test_app_browser
-from test_app_browser import BOWL, FIRST_RESULT_MS, RESULT_MS, applied, click_image, open_example
+from helpers import browser as ui
+from helpers.browser import (
+    BOWL,
+    FIRST_RESULT_MS,
+    RESULT_MS,
+    applied,
+    click_image,
+    open_example,
+    wait_for_result,
+)
 
-# the real server, Chromium and a fresh page per test: test_app_browser's own fixtures
-server, browser, page = test_app_browser.server, test_app_browser.browser, test_app_browser.page
+# the real server, Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py
+server, browser, page = ui.server, ui.browser, ui.page
 
 
 def model(page) -> dict:
@@ -306,7 +314,7 @@ def test_a_polygon_of_two_points_is_refused_with_a_message(page, tmp_path):
     assert notice(page) is None
     before = applied(page)
     page.keyboard.press("Enter")
-    test_app_browser.wait_for_result(page, before)
+    wait_for_result(page, before)
     assert len(page.evaluate("window.shadeform.state().params.concave.regions")) == 1
 
     # the same for a mask polygon; Escape drops its corners and the message

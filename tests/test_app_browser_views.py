@@ -1,8 +1,8 @@
 """End-to-end tests of the app's Views panel in a real browser: photos of one object from several
 sides, each reconstructed with its own settings, fused into one closed model on the server.
 
-The server, the browser and a fresh page per test are those of ``tests/test_app_browser.py``
-(its fixtures, imported): the real server under uvicorn on a free loopback port serving the
+The server, the browser and a fresh page per test are those of
+``tests/helpers/browser.py``: the real server under uvicorn on a free loopback port serving the
 built client, Debian's Chromium driven by Playwright with clicks and keys. Facts are read from
 the page's test hook ``window.shadeform.views`` (the views, the newest fused result, what the 3D
 view draws) and from the file the export menu downloads. A screenshot of the panel is kept in
@@ -14,13 +14,13 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-import test_app_browser
+from helpers import browser as ui
+from helpers.browser import ARTIFACTS, FIRST_RESULT_MS, RESULT_MS, download
 from shadeform import synth
 from shadeform.examples import load_view_set_example
-from test_app_browser import ARTIFACTS, FIRST_RESULT_MS, RESULT_MS, download
 
-# the real server, Chromium and a fresh page per test: test_app_browser's own fixtures
-server, browser, page = test_app_browser.server, test_app_browser.browser, test_app_browser.page
+# the real server, Chromium and a fresh page per test: the fixtures of tests/helpers/browser.py
+server, browser, page = ui.server, ui.browser, ui.page
 
 SET = "views:lumpy"
 

@@ -284,11 +284,7 @@ def test_the_background_solver_gives_way_to_what_the_user_looks_at():
 def test_the_object_is_found_on_the_photos_colours(client):
     # a painted body on wood grain (benchmarks/composites.py), as a JPEG: the luma alone takes a
     # sixth of the object; the background solve's worker and the quick look find it on the colours
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from test_masks_composites import body, composites, iou
+    from helpers.masks import body, composites, iou
 
     picture, truth = composites.composite(body(seed=3), "wood", 3, shadow=True)
     buffer = io.BytesIO()

@@ -19,7 +19,7 @@ import png
 import pytest
 from fastapi.testclient import TestClient
 
-from shadeform.app.printing import PREVIEW_SIDE, _shrink
+from shadeform.app.printing import PREVIEW_SIDE
 from shadeform.app.server import create_app
 from shadeform.texture import LEGEND
 
@@ -185,9 +185,24 @@ class TestMaps:
         again = client.post("/api/maps", json=request).json()
         assert again["info"]["reused"] is True
 
-    def test_previews_are_small(self):
-        values = np.random.default_rng(0).random((600, 301, 3))
-        small = _shrink(values)
-        assert small.shape == (200, 101, 3) and max(small.shape[:2]) <= PREVIEW_SIDE
-        assert small[0, 0] == pytest.approx(values[:3, :3].mean(axis=(0, 1)))
-        assert _shrink(values[:200, :200]).shape == (200, 200, 3)
+    def test_previews_are_small(self, client):
+        """A photo over :data:`PREVIEW_SIDE` on a side: each map's preview is the mean of the
+        full-resolution map's 2 x 2 blocks (the map the zip holds), so fine detail shows as its
+        average."""
+        side = PREVIEW_SIDE + 44  # 300: two pixels a side per preview pixel
+        made = client.post(f"/api/examples/synth:bowl?size={side}")
+        assert made.status_code == 201, made.text
+        request = {"image_id": made.json()["image_id"], "params": made.json()["suggested"]}
+        previews = client.post("/api/maps", json=request).json()["maps"]
+        archive = zipfile.ZipFile(io.BytesIO(client.post("/api/maps/zip", json=request).content))
+        for preview in previews:
+            width, height, rows, meta = png.Reader(bytes=base64.b64decode(preview["png"])).read()
+            assert (width, height) == (side // 2, side // 2), preview["name"]
+            small = np.array(list(rows)).reshape(height, width, -1) / (2 ** meta["bitdepth"] - 1)
+            width, height, rows, meta = png.Reader(
+                bytes=archive.read(f"synth_bowl_{preview['name']}.png")
+            ).read()
+            full = np.array(list(rows)).reshape(height, width, -1) / (2 ** meta["bitdepth"] - 1)
+            blocks = full.reshape(side // 2, 2, side // 2, 2, -1).mean(axis=(1, 3))
+            # each rounded to its PNG's levels (the preview's 8 bits at most)
+            np.testing.assert_allclose(small, blocks, atol=1.5 / 255, err_msg=preview["name"])

@@ -22,9 +22,9 @@ from schemathesis.checks import (
     status_code_conformance,
 )
 
+from helpers.projects import photo_document
 from shadeform.app.guard import AppLimits
 from shadeform.app.projects import NO_STORE
-from shadeform.app.schema import ReconstructParams
 from shadeform.app.server import create_app
 from shadeform.app.sessions import SessionStore
 
@@ -34,39 +34,6 @@ JSON = {"content-type": "application/json"}
 
 def client_for(path=None, **options) -> TestClient:
     return TestClient(create_app(sessions=path, **options), base_url=LOCAL, raise_server_exceptions=False)
-
-
-def photo_document(name="bowl.png", **params) -> dict:
-    """A one-photo project as the client autosaves it: the image by its id in the server's store."""
-    info = {"image_id": "0123abcd", "name": name, "width": 64, "height": 48, "channels": 1, "suggested": None}
-    return {
-        "format": "shadeform-project",
-        "version": 1,
-        "name": None,
-        "image": {
-            "name": name,
-            "type": "image/png",
-            "data": None,
-            "example": None,
-            "source": {"kind": "upload", "name": name, "type": "image/png", "index": None},
-            "info": info,
-        },
-        # every field, as the client sends them (its parameters are the server's defaults, edited)
-        "params": ReconstructParams(
-            filter={"kind": "gaussian", "size": 1.5},
-            concave={"regions": [{"polygon": [[1, 2], [30, 2], [15, 40]], "axis": "x"}]},
-            **params,
-        ).model_dump(mode="json"),
-        "view": {
-            "wireframe": True,
-            "normalColours": False,
-            "texture": False,
-            "maskOverlay": True,
-            "lightArrow": True,
-        },
-        "photo_set": None,
-        "views": None,
-    }
 
 
 def one_line(response, *statuses: int) -> str:

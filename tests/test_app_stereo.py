@@ -16,6 +16,7 @@ from fastapi.testclient import TestClient
 from PIL import Image
 
 import shadeform
+from helpers.lights import angles, sphere_rig
 from shadeform import synth
 from shadeform.app.server import AppLimits, create_app
 from shadeform.examples import load_photo_set_example
@@ -23,7 +24,6 @@ from shadeform.io.images import srgb_encode
 from shadeform.light import light_from_slant_tilt
 from shadeform.photometric import reconstruct_stereo
 from shadeform.photoset import write_lights
-from test_light_sphere import angles, sphere_rig
 
 LOCAL = "http://127.0.0.1:8000"
 

@@ -1,5 +1,6 @@
-"""The house rules that a linter does not keep: file sizes, the web client's import graph, and
-docs/architecture.md naming every module that exists (and none that does not).
+"""The house rules that a linter does not keep: file sizes, the web client's import graph,
+docs/architecture.md naming every module that exists (and none that does not), and test modules
+that import no other.
 
 The Python layers and cycles are kept by import-linter's contracts (``.importlinter``, run by
 ``make lint``); the web client has no such tool here, so its graph is read from the sources.
@@ -131,3 +132,28 @@ def test_the_moved_photo_set_reader_is_still_reachable_from_io_with_a_warning():
     assert load_photo_set is photoset.load_photo_set
     with pytest.raises(ImportError, match="no_such_name"):
         from shadeform.io.photoset import no_such_name  # noqa: F401
+
+
+def test_no_test_module_imports_another():
+    """Shared test code lives in ``tests/helpers/`` (and fixtures in ``tests/conftest.py``): a test
+    module, the conftest or a helper importing a test module (or the conftest) would run that
+    module's import-time work and tie the two together."""
+    import ast
+
+    tests = ROOT / "tests"
+    found = []
+    for path in sorted([*tests.glob("*.py"), *(tests / "helpers").glob("*.py")]):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            else:
+                continue
+            for name in names:
+                parts = name.split(".")
+                first = parts[1] if parts[0] == "tests" and len(parts) > 1 else parts[0]
+                if first.startswith("test_") or first in ("conftest", "_surfaces"):
+                    found.append(f"{path.relative_to(tests)}:{node.lineno} imports {name}")
+    assert len(list(tests.glob("test_*.py"))) > 50  # the walk found the tests
+    assert found == []

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _surfaces import l_shaped_mask, normals_of, pixel_xy
+from helpers.surfaces import l_shaped_mask, normals_of, pixel_xy
 from shadeform.errors import InputError
 from shadeform.integration._multigrid import PairHierarchy
 from shadeform.integration.bilateral import contour_scale, integrate_bilateral
@@ -227,6 +227,8 @@ class TestInputs:
 
 
 def test_pair_hierarchy_matches_a_direct_solve():
+    """A kernel against its reference (a name of a private module, deliberately): the multigrid
+    ``_multigrid.PairHierarchy`` solves the weighted system as a direct sparse solve does."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 

@@ -18,7 +18,6 @@ import typer
 from PIL import Image
 
 from shadeform.cli import app
-from shadeform.cli._shell import MAX_PIXELS as CLI_MAX_PIXELS
 from shadeform.errors import InputError
 from shadeform.io.images import MAX_PIXELS
 
@@ -106,17 +105,14 @@ def one_error_line(result) -> str:
     return lines[0]
 
 
-def test_one_limit():
-    """The command line's default is the loader's (written out there to keep start-up light)."""
-    assert CLI_MAX_PIXELS == MAX_PIXELS
-
-
 # The commands that read no photo or mask of the user's (a new command reading one must take
 # --max-pixels, or be listed here knowingly).
 NO_PHOTOS = {"synth", "evaluate", "formats", "methods", "demo", "warm"}
 
 
 def test_every_photo_command_takes_it():
+    """Every command reading a photo takes ``--max-pixels``, its default the loader's limit (the
+    command line writes the number out, to keep start-up light: one limit all the same)."""
     commands = typer.main.get_command(app).commands
     assert set(PHOTO_COMMANDS) <= set(commands)
     for name, command in commands.items():

@@ -182,6 +182,8 @@ class TestMap:
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_singular_points_are_skimages_h_maxima(seed):
+    """A kernel against its reference (a private name, deliberately): ``_standing_maxima``, the
+    labelling that stands in for scikit-image's ``h_maxima`` for speed, finds the same maxima."""
     # the labelling that stands in for h_maxima (for speed) must find the same maxima: a smooth
     # random texture with a few dozen of them, above and below the level
     from scipy import ndimage as ndi
@@ -357,6 +359,8 @@ class TestFastParts:
     references (the pipeline uses the fast ones for memory and start-up time)."""
 
     def test_flood_matches_skimage_watershed(self):
+        """A kernel against its reference (private names, deliberately): the compiled flood
+        ``_basins`` labels the basins as ``_basins_reference`` and scikit-image's watershed do."""
         from scipy import ndimage as ndi
 
         from shadeform.confidence import _basins, _basins_reference
@@ -376,6 +380,8 @@ class TestFastParts:
             np.testing.assert_array_equal(fast, _basins_reference(smooth, mask, markers, 4))
 
     def test_simplified_matches_skimage_approximate_polygon(self):
+        """A kernel against its reference (a private name, deliberately): ``regions._simplified``
+        gives scikit-image's ``approximate_polygon``, point for point."""
         from scipy import ndimage as ndi
         from skimage.measure import approximate_polygon, find_contours
 

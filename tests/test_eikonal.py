@@ -403,10 +403,11 @@ class TestBadInput:
 
 
 def test_pairwise_distances_stop_early_and_side_by_side_as_one_full_march_each():
-    """The singular points' distances (marches run on threads, each stopping once it has reached
-    the nodes after it, one target map shared) equal a full march from each node read at the
-    later nodes' pixels (the table is made symmetric from those); a node sharing its pixels with a
-    later one is at distance 0 from it."""
+    """A kernel against its reference (a private name, deliberately: ``_pairwise_distances``,
+    against full marches). The singular points' distances (marches run on threads, each stopping
+    once it has reached the nodes after it, one target map shared) equal a full march from each node
+    read at the later nodes' pixels (the table is made symmetric from those); a node sharing its
+    pixels with a later one is at distance 0 from it."""
     from shadeform.solvers.eikonal.marching import slope_fields
     from shadeform.solvers.eikonal.singular import Node, _pairwise_distances
 

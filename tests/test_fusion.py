@@ -17,7 +17,8 @@ import trimesh
 from scipy import ndimage
 
 import shadeform
-from shadeform import metrics, synth
+from helpers.fusion import SMALL, scores, true_views
+from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.fusion import place
 from shadeform.fusion.geometry import axis_column, turntable
@@ -25,31 +26,6 @@ from shadeform.fusion.register import _Fit
 from shadeform.reconstruction import Reconstruction
 
 SIZE = 256  # the issue's bars are set at 256x256 views
-SMALL = 128  # tests of other properties: an eighth of the voxels
-
-
-def true_views(name, angles, *, size=SMALL, poses=None, seed=0):
-    """Each view's true depth and normals, every depth shifted by an unknown offset."""
-    rng = np.random.default_rng(seed)
-    views = synth.render_views(name, angles, size=size, poses=poses)
-    return [
-        Reconstruction(
-            normals=np.array(view.normals),
-            depth=np.array(view.depth) + rng.uniform(-40, 40),
-            mask=np.array(view.mask),
-            light=np.array([0.0, 0.0, 1.0]),
-            albedo=1.0,
-        )
-        for view in views
-    ]
-
-
-def scores(mesh, name, size=SMALL):
-    """Chamfer (%), F-score (%), |volume error| (%), closed: 50,000 points on the mesh against
-    200,000 on the true surface."""
-    truth = synth.closed_object(name, size=size)
-    got = metrics.surface_scores(mesh, truth.surface_points(200_000, seed=1)[0], truth.volume)
-    return got["chamfer"], got["f_score"], abs(got["volume_error"]), got["watertight"]
 
 
 @pytest.mark.parametrize("name", ["ellipsoid", "pebble", "lumpy"])
@@ -298,6 +274,9 @@ def test_disagreement_leaves_out_what_another_view_cannot_see():
 
 @pytest.mark.parametrize("on_turntable", [True, False])
 def test_the_refinement_jacobian_is_the_residuals_derivative(on_turntable):
+    """A kernel against its reference (a private name, deliberately): the refinement's
+    (``register._Fit``) analytic Jacobian is the residuals' finite differences, on and off the
+    turntable."""
     angles = (0, 80, 185, 265)
     recs = true_views("ellipsoid", angles, size=96)
     # off the pixel grid, so that no point sits on a kink of the bilinear lookups

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import shadeform
+from helpers.fusion import SMALL, scores, true_views
 from shadeform import synth
 from shadeform.errors import InputError
-from test_fusion import SMALL, scores, true_views
 
 ANGLES = (0, 90, 180, 270)
 

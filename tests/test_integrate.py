@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from _surfaces import l_shaped_mask, normals_of, pixel_xy
+from helpers.surfaces import l_shaped_mask, normals_of, pixel_xy
 from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.integration import integrate
@@ -125,6 +125,9 @@ class TestIntegrateFourier:
         np.testing.assert_allclose(a - a.mean(), b - b.mean(), atol=1e-6)
 
     def test_fused_divergence_equals_reference(self):
+        """A kernel against its reference (private names, deliberately): the fused
+        ``fourier._divergence`` is ``_divergence_reference``, with the slopes' own floor on n_z
+        (``_slopes.MIN_NZ``)."""
         from shadeform.integration._slopes import MIN_NZ
         from shadeform.integration.fourier import _divergence, _divergence_reference
 

@@ -12,6 +12,7 @@ import pytest
 import tifffile
 from PIL import Image
 
+from helpers.pngs import GRAY8, GRAY16, RGB8, RGB16, png_with_ihdr, unit8, write_png16
 from shadeform.errors import InputError
 from shadeform.io.images import (
     CHANNELS,
@@ -21,7 +22,6 @@ from shadeform.io.images import (
     load_pixels,
     select_channel,
 )
-from test_io_images import GRAY8, GRAY16, RGB8, RGB16, png_with_ihdr, unit8, write_png16
 
 
 def files(tmp_path):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from _surfaces import normals_of, pixel_xy
+from helpers.surfaces import normals_of, pixel_xy
 from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.light import as_light, estimate_light, light_from_slant_tilt, parse_light, slant_tilt
@@ -224,8 +224,9 @@ def _random_features(rng, count=2):
 
 class TestBspline:
     def test_partition_of_unity(self):
-        # the compiled kernel's own basis: weights sum to 1 and their derivatives to 0; with all
-        # coefficients 1 (away from the mirrored c_-1 and the end) the profile is 1, its slope 0
+        """A compiled kernel against its definition (a private name, deliberately): ``_spline_at``'s
+        B-spline weights sum to 1 and their derivatives to 0; with all coefficients 1 (away from the
+        mirrored c_-1 and the end) the profile is 1, its slope 0."""
         ones = np.ones(PROFILE_KNOTS)
         for t in np.linspace(0, 7.99, 200):
             assert sum(_spline_at(ones, 0, PROFILE_KNOTS, t)[3]) == pytest.approx(1.0, abs=1e-14)
@@ -244,6 +245,8 @@ class TestBspline:
         np.testing.assert_allclose(spline.derivative()(radius), expected_rate, atol=1e-12)
 
     def test_compiled_profile_matches_scipy(self):
+        """A compiled kernel against its reference (a private name, deliberately): ``_spline_at``
+        gives the profile and its slope of ``_profile_reference`` (scipy's B-spline)."""
         rng = np.random.default_rng(1)
         coefficients = rng.normal(size=PROFILE_KNOTS)
         radius = np.linspace(0, 2.0 * (PROFILE_KNOTS + 2) - 1e-9, 301)
@@ -270,6 +273,8 @@ class TestRenderFeatures:
         )
 
     def test_compiled_matches_the_vectorised_reference(self):
+        """A compiled kernel against its reference (a private name, deliberately):
+        ``render_features`` and its Jacobian are those of ``_render_features_reference``."""
         rng = np.random.default_rng(5)
         params = _random_features(rng, count=4)
         x, y = rng.uniform(0, 40, 500), -rng.uniform(0, 40, 500)
@@ -307,6 +312,8 @@ class TestLevenbergMarquardt:
 
     @pytest.mark.parametrize("scale", [None, 0.02])
     def test_reaches_scipys_minimum(self, scale):
+        """A kernel against its reference (a private name, deliberately): ``_levenberg_marquardt``
+        reaches the minimum scipy's ``least_squares`` finds, with and without the robust loss."""
         from scipy.optimize import least_squares
 
         rng = np.random.default_rng(7)

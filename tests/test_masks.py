@@ -14,7 +14,7 @@ import pytest
 from scipy import ndimage as ndi
 from skimage import data
 
-from conftest import SHARED_DATA
+from helpers import SHARED_DATA
 from shadeform import load_image
 from shadeform.errors import InputError
 from shadeform.examples import EXAMPLES, load_example

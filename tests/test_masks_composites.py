@@ -1,42 +1,19 @@
 """The object mask on ordinary backgrounds: objects pasted on generated tables, paper, wood and
 cloth (``benchmarks/composites.py``), saved as 8-bit sRGB and read back, with known masks.
 
-The objects are made here (a shaded, painted body); no real data is needed. The brightness rules
-alone took a fragment or half the wood on such pictures (``benchmarks/results/masks.md``).
+The objects are made in ``tests/helpers/masks.py`` (a shaded, painted body); no real data is
+needed. The brightness rules alone took a fragment or half the wood on such pictures (``benchmarks/results/masks.md``).
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import composites
+from helpers.masks import body, composites, iou
 from shadeform import reconstruct
 from shadeform.io.images import select_channel
 from shadeform.masks import LOW_CONFIDENCE, find_object, segment_from_box, segment_from_seeds
-
-
-def iou(a, b) -> float:
-    return float((a & b).sum() / (a | b).sum())
-
-
-def body(size=72, seed=0) -> composites.Cutout:
-    """A painted, shaded object: a lit ellipsoid with a blob on top, bands of two colours."""
-    rng = np.random.default_rng(seed)
-    rows, cols = np.mgrid[0:size, 0:size] / (size - 1) * 2 - 1
-    main = (rows / 0.75) ** 2 + (cols / 0.95) ** 2
-    head = ((rows + 0.7) / 0.3) ** 2 + ((cols - 0.3) / 0.3) ** 2
-    mask = (main < 1) | (head < 1)
-    z = np.sqrt(np.clip(1 - np.minimum(main, head), 0, 1))
-    shade = 0.15 + 0.85 * (0.3 * -rows * np.sqrt(np.clip(1 - z**2, 0, 1)) + 0.9 * z).clip(0, 1)
-    colours = rng.uniform(0.2, 0.9, (2, 3))
-    paint = np.where((np.sin(8 * rows) > 0)[..., None], colours[0], colours[1])
-    rgb = np.where(mask[..., None], paint * shade[..., None], 0.0)
-    return composites.Cutout("body", np.clip(rgb, 0, 1), mask)
 
 
 def photo(family: str, seed: int, kind: str = "png"):

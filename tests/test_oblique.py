@@ -97,6 +97,8 @@ class TestCoarseToFine:
         assert np.isfinite(result.depth[scene.mask]).all()
 
     def test_doubled_normals_lie_on_their_cones(self):
+        """A kernel against its reference (a private name, deliberately): the normals
+        ``_double_normals`` brings up a level lie on their cones, and near the true sphere's."""
         scene = synth.scene("sphere", size=64, light=LIGHT)
         half = synth.scene("sphere", size=32, light=LIGHT)
         cos_theta = np.where(scene.mask, scene.image / scene.image.max(), 0.0)
@@ -200,9 +202,10 @@ class TestKernels:
         assert len(np.unique(caps[seeds])) == 2
 
     def test_hinge_costs_only_a_turn_against_the_convexity(self):
-        """One neighbour to the right (d = (1, 0)) and normals n = (sin phi, 0, cos phi) at two
-        azimuths on either side of it in n_x: the hinge adds hinge * shortfall^2 only to the turn
-        that goes the wrong way for the convexity (convex: n_x grows to the right)."""
+        """A compiled kernel against a hand-made case (a private name, deliberately:
+        ``_local_cost``). One neighbour to the right (d = (1, 0)) and normals n = (sin phi, 0, cos
+        phi) at two azimuths on either side of it in n_x: the hinge adds hinge * shortfall^2 only to
+        the turn that goes the wrong way for the convexity (convex: n_x grows to the right)."""
         nb = np.zeros((8, 3))
         nb[0] = (0.1, 0.0, np.sqrt(0.99))
         db = np.zeros((8, 2))
@@ -224,11 +227,12 @@ class TestKernels:
 
     @pytest.mark.parametrize("compiled", [True, False])
     def test_convexity_pull_has_no_sign_across_a_region_edge(self, compiled):
-        """A pixel on the last convex row above a region marked concave along y, with all eight
-        neighbours accepted: the three below straddle the inflection and pull neither way, so the
-        tie-break is the three above's alone (weights 1, 1/2, 1/2; convex: moving down from them
-        n_y falls, so the cost 2 kappa n_y) instead of cancelling to zero. Along x every pair is
-        convex and cancels."""
+        """A compiled kernel against a hand-made case (private names, deliberately: ``_gather``,
+        ``_fit_work``, ``_fit_pixel``). A pixel on the last convex row above a region marked concave
+        along y, with all eight neighbours accepted: the three below straddle the inflection and
+        pull neither way, so the tie-break is the three above's alone (weights 1, 1/2, 1/2; convex:
+        moving down from them n_y falls, so the cost 2 kappa n_y) instead of cancelling to zero.
+        Along x every pair is convex and cancels."""
         kappa = 0.03
         z = np.zeros((3, 3))
         normals = np.zeros((3, 3, 3))
@@ -286,6 +290,9 @@ class TestKernels:
         )
 
     def test_cone_coefficients_are_the_quadratic_up_to_a_constant(self):
+        """A compiled kernel against its reference (a private name, deliberately):
+        ``_cone_coefficients`` gives the quadratic n M n + 2 n g on the cone, evaluated directly, up
+        to a constant."""
         rng = np.random.default_rng(3)
         A = rng.normal(size=(3, 3))
         M, g = A @ A.T, rng.normal(size=3)
@@ -300,6 +307,8 @@ class TestKernels:
 
     @pytest.mark.parametrize("seed", range(20))
     def test_cone_minimum_matches_a_fine_grid(self, seed):
+        """A compiled kernel against its reference (a private name, deliberately): ``_cone_minimum``
+        finds the minimum of a 200,001-point grid, or lower, within the limit."""
         rng = np.random.default_rng(seed)
         coef = rng.normal(size=4)
         limit = rng.uniform(0.3, np.pi)

@@ -29,6 +29,8 @@ def test_silhouette_depth_is_a_sphere_for_a_disc():
 
 @pytest.mark.parametrize("light", [(0.0, 0.0, 1.0), (0.5, 0.3, 0.81)])
 def test_compiled_energy_is_the_reference(light):
+    """A compiled kernel against its reference (a private name, deliberately): a pyramid level's
+    (``_Level``) compiled energy and gradient are the reference's, every term active."""
     # a rough state (every term active: shadows, both ends of the curve, creases, the outline)
     scene = synth.scene("vase", size=48, light=light, noise=0.02)
     light = np.asarray(scene.light)
@@ -83,6 +85,8 @@ def _bilinear_matrix(mask, factor):
 
 
 def test_hierarchical_basis_is_the_sum_of_bilinear_grids():
+    """A kernel against its reference (a private name, deliberately): the hierarchical basis
+    (``_Basis``) applies what the sum of the bilinear grids' sparse matrices does."""
     rng = np.random.default_rng(0)
     mask = synth.scene("vase", size=37).mask.copy()
     mask[30:, :5] = True  # a part touching the frame's corner: the ends are held

@@ -227,6 +227,8 @@ class TestBivariate:
         assert bivariate.mean() < 1.5 and robust.mean() > 3 * bivariate.mean()  # 1.25 and 5.5 measured
 
     def test_compiled_search_matches_the_reference(self, sphere, lights):
+        """A compiled kernel against its reference (private names, deliberately):
+        ``bivariate_kernels._refine`` and ``_model_fit`` find what the reference search does."""
         from shadeform.photometric import bivariate, bivariate_kernels, lambertian
 
         images = photos(sphere, lights, albedo=0.5, specular=0.4, shininess=30, noise=0.01, seed=2)
@@ -256,8 +258,10 @@ class TestBivariate:
         assert (coefficients >= 0).all()
 
     def test_the_model_slope_is_its_derivative(self, lights):
-        """The Gauss-Newton steps' gradient of the prediction in the normal, against central
-        differences of the basis itself, for readings lit, grazing and in the lobes."""
+        """A kernel against its reference (a private name, deliberately:
+        ``bivariate_model._basis``). The Gauss-Newton steps' gradient of the prediction in the
+        normal, against central differences of the basis itself, for readings lit, grazing and in
+        the lobes."""
         from shadeform.photometric import bivariate, bivariate_model, lambertian
 
         rng = np.random.default_rng(4)

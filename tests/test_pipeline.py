@@ -494,8 +494,10 @@ class TestObliqueOnNoisyImages:
 
 
 def test_the_brightest_pixel_s_tie_goes_to_the_deepest_as_by_the_distance_transform():
-    """Among equally bright pixels the default reference is the one deepest inside the mask: the
-    same pixel as the argmax of scipy's exact distance transform (raster order on ties)."""
+    """A kernel against its reference (a private name, deliberately: ``pipeline._references``,
+    against scipy's exact distance transform). Among equally bright pixels the default reference is
+    the one deepest inside the mask: the same pixel as the argmax of scipy's exact distance
+    transform (raster order on ties)."""
     from scipy import ndimage as ndi
 
     from shadeform.pipeline import _references

@@ -285,6 +285,9 @@ class TestInput:
 
 class TestPixelAndPairWeights:
     def test_the_same_operator_gives_the_same_depth(self):
+        """A kernel against its reference (a private module, deliberately): ``_multigrid``'s pair
+        solver (``PairHierarchy``, the bilateral integrator's) gives the depth of its pixel solver
+        (``Hierarchy``, the Poisson integrator's) on the one operator both stand for."""
         # pixel weights and the pair weights they imply (the smaller of two) run the one CG
         mask = two_parts()
         normals = bumpy_normals(mask.shape, seed=11)
@@ -303,7 +306,9 @@ class TestPixelAndPairWeights:
 
 
 def test_numba_kernels_are_cached():
-    """Every compiled kernel caches its machine code on disk (compiled once, not per process)."""
+    """Kernels tested as such (a private module, deliberately: every compiled kernel of
+    ``_multigrid``). Every compiled kernel caches its machine code on disk (compiled once, not per
+    process)."""
     prefix = _multigrid.__name__ + "."
     modules = [importlib.import_module(m.name) for m in pkgutil.iter_modules(_multigrid.__path__, prefix)]
     kernels = {

@@ -346,8 +346,10 @@ class TestSrgbToLinear:
 
 
 def test_the_detail_s_interior_by_erosion_is_the_distance_transform_s():
-    """image_detail's pixels more than 2 px inside, found by an erosion, are those of the exact
-    distance transform, on blobs that touch the image's edge and have holes."""
+    """A kernel against its reference (a private name, deliberately: ``_more_than_two_inside``,
+    against scipy's distance transform). image_detail's pixels more than 2 px inside, found by an
+    erosion, are those of the exact distance transform, on blobs that touch the image's edge and
+    have holes."""
     from scipy import ndimage as ndi
 
     from shadeform.preprocess import _more_than_two_inside

@@ -103,6 +103,8 @@ class TestWindow:
 
 
 def test_the_prior_term_matches_its_reference():
+    """A compiled kernel against its reference (a private name, deliberately): a pyramid level's
+    (``_Level``) prior term, compiled, is the reference's."""
     scene = synth.scene("vase", size=40, light=(0.4, 0.2, 0.89), noise=0.02)
     rng = np.random.default_rng(8)
     prior = rng.normal(size=scene.mask.shape + (3,))

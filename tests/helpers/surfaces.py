@@ -1,4 +1,4 @@
-"""Small hand-made surfaces shared by the integration tests."""
+"""Small hand-made surfaces of known depth and normals, shared by the integration tests."""
 
 import numpy as np
 
