@@ -293,6 +293,42 @@ class TestEstimatedLight:
             reconstruct(scene.image, mask=scene.mask, light="guess")
 
 
+class TestLevel:
+    """reconstruct_on_level: a large photo's quick look on its pyramid level, the user's settings
+    (given in the photo's pixels) carried to the level."""
+
+    @staticmethod
+    def level(scene, factor):
+        h, w = scene.image.shape
+        blocks = (h // factor, factor, w // factor, factor)
+        image = scene.image.reshape(blocks).mean(axis=(1, 3))
+        return image, scene.mask.reshape(blocks).mean(axis=(1, 3)) >= 0.5
+
+    def test_the_settings_are_the_photos_divided_by_the_block_side(self):
+        scene = synth.scene("bumps", size=96)
+        image, mask = self.level(scene, 3)
+        polygon = [[30.0, 30.0], [60.0, 30.0], [60.0, 60.0], [30.0, 60.0]]
+        rec = coarse.reconstruct_on_level(
+            image, factor=3, step=1, mask=mask, light=(0, 0, 1), filter="gaussian:1.5",
+            references=[(46, 50)], concave={"regions": [{"polygon": polygon, "axis": "both"}]},
+        )  # fmt: skip
+        same = reconstruct(
+            image, mask=mask, light=(0, 0, 1), filter="gaussian:0.5", references=[(15, 16)],
+            concave={"regions": [{"polygon": (np.array(polygon) / 3).tolist(), "axis": "both"}]},
+        )  # fmt: skip
+        np.testing.assert_array_equal(rec.depth, same.depth)
+        assert rec.info["references"] == [(15, 16)]
+
+    def test_a_reference_off_the_levels_object_moves_to_its_nearest_pixel(self):
+        scene = synth.scene("sphere", size=64)
+        image, mask = self.level(scene, 2)
+        rec = coarse.reconstruct_on_level(image, factor=2, step=1, mask=mask, references=[(0, 0)])
+        row, col = rec.info["references"][0]
+        assert mask[row, col] and row + col == min(r + c for r, c in zip(*np.nonzero(mask)))
+        with pytest.raises(InputError, match="median"):  # a window that is not whole is refused
+            coarse.reconstruct_on_level(image, factor=2, step=1, mask=mask, filter="median:2.5")
+
+
 class TestPreview:
     """reconstruct_preview: the quick look at the mesh's grid that the app shows first."""
 

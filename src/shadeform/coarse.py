@@ -1,9 +1,11 @@
-"""Reconstructions on the image's grid: every ``step``-th row and column solved alone.
+"""Reconstructions on a coarser grid than the photo's: every ``step``-th row and column solved
+alone, or a pyramid level of averaged blocks.
 
 :func:`reconstruct_on_grid` solves the grid for what will only be seen on it (a relief's
 budget, :func:`shadeform.solid.grid_step`); :func:`reconstruct_preview` places that solve back
 on the input's pixels as the quick look of a mesh, and :func:`preview_step` sizes its grid to
-the solver's budget. They call :func:`shadeform.pipeline.reconstruct`, which knows nothing of
+the solver's budget. :func:`reconstruct_on_level` is a large photo's quick look, solved on its
+pyramid level (the user's filter, references and regions carried there). They call :func:`shadeform.pipeline.reconstruct`, which knows nothing of
 them.
 """
 
@@ -29,7 +31,7 @@ from shadeform.reconstruction import Reconstruction
 from shadeform.regions import Region, as_regions
 from shadeform.solvers import AUTO, choose, get_solver
 
-__all__ = ["preview_step", "reconstruct_on_grid", "reconstruct_preview"]
+__all__ = ["preview_step", "reconstruct_on_grid", "reconstruct_on_level", "reconstruct_preview"]
 
 
 def reconstruct_on_grid(
@@ -95,11 +97,7 @@ def reconstruct_on_grid(
         raise InputError(f"the object has no pixel on the grid of step {step}; use a smaller step")
     coarse = _keep_caps(image, mask, np.where(coarse_mask, image[::step, ::step], 0.0), coarse_mask, step)
 
-    # the filter, scaled to the grid, does the smoothing
-    spec = parse_filter(filter) if filter else None
-    if spec is not None and spec.kind != "none":
-        size = spec.size / step if spec.kind == "gaussian" else float(round(spec.size / step))
-        spec = Filter(spec.kind, size) if size > 0 else None
+    spec = _scaled_filter(filter, step)  # the filter, scaled to the grid, does the smoothing
     coarse_refs = None
     if references:
         coarse_refs = [_coarse_reference(item, mask, coarse_mask, step) for item in references]
@@ -277,3 +275,83 @@ def _coarse_reference(item, mask, coarse_mask, step):
         nearest = np.argmin((rows - r / step) ** 2 + (cols - c / step) ** 2)
         cr, cc = int(rows[nearest]), int(cols[nearest])
     return (cr, cc) if normal is None else (cr, cc, normal)
+
+
+def reconstruct_on_level(
+    level: np.ndarray,
+    *,
+    factor: int,
+    step: int,
+    mask: np.ndarray,
+    filter: str | Filter | None = None,
+    references: Sequence | None = None,
+    concave: Any = None,
+    **options: Any,
+) -> Reconstruction:
+    """A large photo's quick look: :func:`reconstruct_preview` of its pyramid level, the photo's
+    ``factor`` x ``factor`` blocks averaged, with the user's settings carried to the level.
+
+    Parameters
+    ----------
+    level : (H // factor, W // factor) float array
+        The level's shading image (blocks of the photo averaged, as the caller keeps it).
+    factor : int, keyword-only
+        The block side, ``>= 1``.
+    step : int, keyword-only
+        The preview grid's spacing on the level (:func:`preview_step`).
+    mask : (h, w) bool, keyword-only
+        The object on the level.
+    filter, references, concave
+        As for :func:`reconstruct`, in pixels of the full photo: the filter's size divided by
+        ``factor`` (a median's window rounded, one that is not whole left for :func:`reconstruct`
+        to refuse), a reference to the block it falls in (the nearest object pixel where that
+        block is off the object; one off the image left for :func:`reconstruct` to refuse),
+        regions' vertices divided by ``factor``.
+    **options
+        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+
+    Returns
+    -------
+    Reconstruction
+        :func:`reconstruct_preview`'s on the level: arrays of the level's shape, depth in level
+        pixels.
+    """
+    factor = whole(factor, "factor", minimum=1)
+    moved = [_level_reference(ref, mask, factor) for ref in references or ()]
+    regions = tuple(Region(region.polygon / factor, region.axis) for region in as_regions(concave))
+    return reconstruct_preview(
+        level,
+        step=step,
+        mask=mask,
+        filter=_scaled_filter(filter, factor),
+        references=moved,
+        concave=regions or None,
+        **options,
+    )
+
+
+def _scaled_filter(filter, factor: int) -> Filter | None:
+    """``filter`` (a spec or its text) for pixels ``factor`` times larger: a Gaussian's sigma
+    divided, a median's window divided and rounded (one that is not whole left as it is, for
+    :func:`reconstruct` to refuse); None where nothing is left of it."""
+    spec = parse_filter(filter) if filter else None
+    if spec is None or spec.kind == "none" or factor == 1:
+        return spec
+    if spec.kind != "gaussian" and spec.size != round(spec.size):
+        return spec
+    size = spec.size / factor if spec.kind == "gaussian" else float(round(spec.size / factor))
+    return Filter(spec.kind, size) if size > 0 else None
+
+
+def _level_reference(ref, mask: np.ndarray, factor: int) -> tuple:
+    """A reference ``(row, col[, normal])`` in the photo's pixels moved to the block it falls in
+    on the level (the nearest object pixel where that block is off the object); one off the image
+    is left as it is, for :func:`reconstruct` to refuse."""
+    row, col = min(int(ref[0]) // factor, mask.shape[0] - 1), min(int(ref[1]) // factor, mask.shape[1] - 1)
+    if row < 0 or col < 0:
+        return tuple(ref)
+    if not mask[row, col]:
+        rows, cols = np.nonzero(mask)
+        nearest = np.argmin((rows - row) ** 2 + (cols - col) ** 2)
+        row, col = int(rows[nearest]), int(cols[nearest])
+    return (row, col, *ref[2:])

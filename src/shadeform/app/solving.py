@@ -95,10 +95,9 @@ def _full_key(entry: StoredImage, params: ReconstructParams) -> tuple:
     return (entry.image_id, params.model_dump_json(exclude={"step"}))
 
 
-def _settings(params: ReconstructParams, factor: int = 1) -> dict[str, Any]:
-    """:func:`shadeform.pipeline.reconstruct`'s options for ``params`` (all but the mask); with
-    ``factor`` > 1 for the pyramid level of that block side: filter sizes, references and regions
-    in its pixels (a reference is checked against the level's mask by :func:`_level_references`)."""
+def _settings(params: ReconstructParams) -> dict[str, Any]:
+    """:func:`shadeform.pipeline.reconstruct`'s options for ``params`` (all but the mask), in the
+    photo's pixels."""
     from shadeform.light import light_from_slant_tilt
     from shadeform.preprocess import Filter
 
@@ -110,14 +109,8 @@ def _settings(params: ReconstructParams, factor: int = 1) -> dict[str, Any]:
         light = (0.0, 0.0, 1.0)
     spec = None
     if params.filter.kind != "none":
-        size = params.filter.size
-        # a window radius that is not whole stays as it is: the library says what is wrong with it
-        if factor > 1 and (params.filter.kind == "gaussian" or size == round(size)):
-            size = size / factor if params.filter.kind == "gaussian" else float(round(size / factor))
-        spec = Filter(params.filter.kind, size) if size > 0 else None
+        spec = Filter(params.filter.kind, params.filter.size) if params.filter.size > 0 else None
     regions = params.concave.model_dump()
-    for region in regions["regions"]:
-        region["polygon"] = [[x / factor, y / factor] for x, y in region["polygon"]]
     return dict(
         light=light,
         method=params.method,
@@ -135,11 +128,11 @@ def _solve_level(
     """The quick look of a large photo: solved on its pyramid level (:func:`shadeform.app.large.
     level`) at the solver's preview grid there, whatever the photo's size."""
     from shadeform.app.large import level
-    from shadeform.coarse import preview_step, reconstruct_preview
+    from shadeform.coarse import preview_step, reconstruct_on_level
     from shadeform.io.images import select_channel
 
     factor = level_factor(entry.pixels.shape)
-    settings = _settings(params, factor)
+    settings = _settings(params)
     known = state.masks.get(("level", entry.image_id, params.channel, factor))
     if known is None:
         from shadeform.masks import find_object
@@ -155,36 +148,15 @@ def _solve_level(
         mask = downsample(full.astype(np.float32), factor) >= 0.5
         if not mask.any():  # thinner than a block: the blocks it touches
             mask = downsample(full.astype(np.float32), factor) > 0
-    settings["references"] = _level_references(settings["references"], mask, factor)
     spacing = preview_step(mask, 1, method=params.method, light=settings["light"])
     key = (*full_key, "level", factor, spacing)
     if (solved := state.results.get(key)) is not None:
         return solved, True
-    rec = reconstruct_preview(image, step=spacing, mask=mask, **settings)
+    rec = reconstruct_on_level(image, factor=factor, step=spacing, mask=mask, **settings)
     depth = rec.depth[rec.mask & np.isfinite(rec.depth)] * factor
     solved = Solved(rec, "", (float(np.min(depth)), float(np.max(depth))), level=factor)
     state.results.put(key, solved, rec.normals.nbytes + rec.depth.nbytes + rec.mask.nbytes)
     return solved, False
-
-
-def _level_references(references: list, mask: np.ndarray, factor: int) -> list:
-    """The user's references ``(row, col[, normal])`` in the level's pixels, on its object (the
-    nearest object pixel where a block fell off it)."""
-    moved = []
-    for ref in references:
-        row, col = (
-            min(int(ref[0]) // factor, mask.shape[0] - 1),
-            min(int(ref[1]) // factor, mask.shape[1] - 1),
-        )
-        if row < 0 or col < 0:
-            moved.append(ref)  # off the image: reconstruct says so
-            continue
-        if not mask[row, col]:
-            rows, cols = np.nonzero(mask)
-            nearest = np.argmin((rows - row) ** 2 + (cols - col) ** 2)
-            row, col = int(rows[nearest]), int(cols[nearest])
-        moved.append((row, col, *ref[2:]))
-    return moved
 
 
 def channel_of(state: State, entry: StoredImage, channel: str) -> tuple[np.ndarray, np.ndarray, str]:
