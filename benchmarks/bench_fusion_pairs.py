@@ -13,7 +13,12 @@ model's projection into the view against its mask), the model's width and height
 (issue 35's bars: IoU >= 0.95, extents within 5 %, depth <= 1.2 x the larger side, watertight),
 and the time of the fusion (place and solid).
 
-    .venv/bin/python benchmarks/bench_fusion_pairs.py [--objects ball,pot1] [--out benchmarks/results/fusion-pairs.md]
+With ``--closed``, each object's photo alone is closed instead (:func:`shadeform.fusion.close`,
+what ``shadeform reconstruct PHOTO --closed`` runs: the photo's reconstruction mirrored as the
+back, no second photo solved, no pose refinement); the 180-degree IoU is then the mirror's, the
+same by construction, and the time is the closing's.
+
+    .venv/bin/python benchmarks/bench_fusion_pairs.py [--objects ball,pot1] [--closed] [--out FILE.md]
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import trimesh
 
 import composites
 import shadeform
-from shadeform.fusion import place, solid
+from shadeform.fusion import close, place, solid
 from shadeform.fusion.outlines import outline_iou
 from shadeform.io.atomic import atomic_write
 from shadeform.io.images import load_mask, read_photo
@@ -43,14 +48,22 @@ def pair(name: str):
     return [(photo, mask), (photo[:, ::-1].copy(), mask[:, ::-1].copy())]
 
 
-def run(name: str) -> dict:
+def run(name: str, *, closed: bool = False) -> dict:
     views = pair(name)
-    recs = [shadeform.reconstruct(image, mask=mask, light=(0.0, 0.0, 1.0)) for image, mask in views]
-    start = time.perf_counter()
-    placement = place(list(zip(recs, (0, 180))))
-    mesh = solid(placement)
-    seconds = time.perf_counter() - start
-    ious = outline_iou(mesh, placement)
+    if closed:
+        image, mask = views[0]
+        rec = shadeform.reconstruct(image, mask=mask, light=(0.0, 0.0, 1.0))
+        start = time.perf_counter()
+        mesh = close(rec)
+        seconds = time.perf_counter() - start
+        ious = [mesh.outline_iou] * 2
+    else:
+        recs = [shadeform.reconstruct(image, mask=mask, light=(0.0, 0.0, 1.0)) for image, mask in views]
+        start = time.perf_counter()
+        placement = place(list(zip(recs, (0, 180))))
+        mesh = solid(placement)
+        seconds = time.perf_counter() - start
+        ious = outline_iou(mesh, placement)
     rows, cols = np.nonzero(views[0][1])
     extent = np.ptp(mesh.vertices, axis=0)
     width, height = np.ptp(cols) + 1, np.ptp(rows) + 1
@@ -66,15 +79,21 @@ def run(name: str) -> dict:
     }
 
 
-def report(rows, seconds: float) -> str:
+def report(rows, seconds: float, *, closed: bool = False) -> str:
+    title = (
+        "# A closed model from one photo, its back the photo mirrored (DiLiGenT, `shadeform.fusion.close`)"
+        if closed
+        else "# A closed model from a photo and its mirror image (DiLiGenT, 0 and 180 degrees)"
+    )
     lines = [
-        "# A closed model from a photo and its mirror image (DiLiGenT, 0 and 180 degrees)",
+        title,
         "",
-        f"`python benchmarks/bench_fusion_pairs.py` ({platform.machine()}, Python "
+        f"`python benchmarks/bench_fusion_pairs.py{' --closed' if closed else ''}` ({platform.machine()}, Python "
         f"{platform.python_version()}, {seconds:.0f} s). Bars (issue 35): IoU >= 0.95 per view, "
         "width and height within 5 % of the mask's, depth <= 1.2 x the larger side, watertight.",
         "",
-        "| object | mask w x h | model w x h x d | IoU 0° | IoU 180° | width | height | depth / side | watertight | fusion s |",
+        "| object | mask w x h | model w x h x d | IoU 0° | IoU 180° | width | height | depth / side | watertight | "
+        + ("close s |" if closed else "fusion s |"),
         "|---|---|---|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
@@ -90,16 +109,24 @@ def report(rows, seconds: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", default=",".join(composites.DILIGENT))
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "fusion-pairs.md")
+    parser.add_argument(
+        "--closed", action="store_true", help="close each photo alone (shadeform.fusion.close)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="default: results/fusion-pairs.md (-closed.md)"
+    )
     args = parser.parse_args()
+    if args.out is None:
+        name = "fusion-closed.md" if args.closed else "fusion-pairs.md"
+        args.out = Path(__file__).parent / "results" / name
     if not composites.available():
         raise SystemExit(f"no real photographs at {composites.DATA}")
     start = time.perf_counter()
     rows = []
     for name in args.objects.split(","):
-        rows.append(run(name))
+        rows.append(run(name, closed=args.closed))
         print(rows[-1], flush=True)
-    text = report(rows, time.perf_counter() - start)
+    text = report(rows, time.perf_counter() - start, closed=args.closed)
     with atomic_write(args.out, mode="w") as handle:
         handle.write(text)
     print(text)

@@ -52,6 +52,7 @@ _EXPORTS = {
     "calibrate_lights": "shadeform.light.sphere",
     "LightCalibration": "shadeform.light.sphere",
     "fuse": "shadeform.fusion",
+    "close": "shadeform.fusion",
     "relief": "shadeform.solid",
     "Relief": "shadeform.solid",
     "maps": "shadeform.texture",

@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.markup import escape
 
@@ -135,12 +136,26 @@ def reconstruct(
             "stopped, so that the same command again solves only the missing ones.",
         ),
     ] = False,
+    closed: Annotated[
+        bool,
+        typer.Option(
+            "--closed",
+            help="A closed, watertight model: the photo is the front, the back a guess (the front "
+            "mirrored, seen from behind: right only for an object symmetric front to back). --step "
+            "is then the voxel edge in pixels. For a print in millimetres: shadeform relief --closed.",
+        ),
+    ] = False,
 ) -> None:
     """Reconstruct a mesh from one photo of a matte object under one light."""
 
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
     tile = tile_size(tiles, image, max_pixels)
+    if closed and tile is not None:
+        raise InputError(
+            "--closed fuses the whole photo's model with its guessed back in one volume, and tiles "
+            "are for photos too large to solve whole; give --tiles off (or a smaller photo)"
+        )
     if tile is not None:
         tiled_reconstruct(
             image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
@@ -171,9 +186,14 @@ def reconstruct(
             err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
         )
         pixels = photo.image
-        mesh, written, report = write_model(
-            outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
-        )
+        if closed:
+            mesh, written, report = write_closed(
+                outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+            )
+        else:
+            mesh, written, report = write_model(
+                outputs, err, timings, rec, temps, step=step, output=output, depth=depth, normals=normals
+            )
     timings["total"] = time.perf_counter() - total
 
     height, width = pixels.shape
@@ -208,7 +228,12 @@ def reconstruct(
         f"filter {info['filter']}, light {format_vector(rec.light)}{read_light(info)}"
     )
     out.print(f"  object {int(rec.mask.sum()):,} pixels in {parts}, {origin}")
-    out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
+    if closed:
+        voxel = f"voxel edge {step} pixels" if step > 1 else "voxel edge 1 pixel or coarser for big objects"
+        out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles ({voxel})")
+        print_closed(out, err, mesh)
+    else:
+        out.print(f"  mesh {mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles (step {step})")
     out.print(
         f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
         f"reconstruct {format_seconds(timings['reconstruct'])} ({stages}), mesh {format_seconds(timings['mesh'])}, "
@@ -216,6 +241,62 @@ def reconstruct(
     )
     out.print("[bold]wrote[/]")
     print_files(out, written)
+
+
+def write_closed(outputs, err, timings, rec, temps, *, step, output, depth, normals):
+    """:func:`~shadeform.cli._shell.write_model` for ``--closed``: the closed model
+    (:func:`shadeform.fusion.close`, ``step`` its voxel edge) written with the maps asked for;
+    the report says what the back is, the outline kept and whether it is watertight."""
+    import shadeform
+    from shadeform.cli._shell import write_maps
+    from shadeform.fusion import close
+
+    with stage(err, "closing the model (the back mirrored from the front)", timings, "mesh"):
+        mesh = close(rec, resolution=step if step > 1 else None)
+    with stage(err, "writing files", timings, "write"):
+        shadeform.export(mesh, temps[output])
+        written = [(output, shadeform.available_formats()[output.suffix.lower()] + ", closed")]
+        written += write_maps(rec, temps, depth=depth, normals=normals)
+    outputs.commit()
+    report = {
+        "files": {"mesh": output, "depth": depth, "normals": normals},
+        "mesh": {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "step": step},
+        "closed": closed_report(mesh),
+        "object_pixels": int(rec.mask.sum()),
+    }
+    return mesh, written, report
+
+
+def closed_report(model) -> dict:
+    """What a closed model (:class:`shadeform.fusion.Closed`) says of itself, for ``--json``."""
+    return {
+        "back": model.back,
+        "back_is_guess": True,
+        "outline_iou": model.outline_iou,
+        "watertight": model.watertight,
+        "volume": model.volume,
+    }
+
+
+def print_closed(out, err, model, unit: str = "pixels") -> None:
+    """The summary lines of a closed model: its back a guess, the outline kept, watertight."""
+    from shadeform.fusion.outlines import OUTLINE_KEPT
+
+    size = " x ".join(f"{v:.4g}" for v in np.ptp(model.vertices, axis=0))
+    out.print(
+        f"  closed model {size} {unit}, "
+        f"{'watertight' if model.watertight else 'NOT watertight'}, outline kept (IoU of its "
+        f"projection with the photo's mask) {model.outline_iou:.3f}",
+        highlight=False,
+    )
+    out.print(f"  back {model.back}", highlight=False)
+    if model.outline_iou < OUTLINE_KEPT:
+        err.print(
+            f"warning: the closed model covers the photo's outline poorly (IoU {model.outline_iou:.2f}); "
+            "check the mask",
+            soft_wrap=True,
+            highlight=False,
+        )
 
 
 def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:

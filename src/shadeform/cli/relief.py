@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.markup import escape
 
@@ -39,6 +40,7 @@ from shadeform.cli._shell import (
     write_maps,
 )
 from shadeform.cli.photos import reconstruct_options, reconstruct_photo
+from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 from shadeform.solid import MIN_WALL_MM, grid_step
 
@@ -142,6 +144,15 @@ def relief_command(
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
+    closed: Annotated[
+        bool,
+        typer.Option(
+            "--closed",
+            help="A closed object instead of a relief: the photo is the front, the back a guess (the "
+            "front mirrored, seen from behind), scaled so that the outline's longest side is --width "
+            "mm, its depth in proportion; the relief's own options (--height, --base, ...) do not apply.",
+        ),
+    ] = False,
 ) -> None:
     """Make a print-ready relief from one photo: a closed solid in millimetres with a flat base."""
     import shadeform
@@ -149,6 +160,20 @@ def relief_command(
 
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
+    if closed:
+        _refuse_relief_options(
+            {
+                "--height": height != 4.0,
+                "--base": base != 2.0,
+                "--compress": compress != 0.0,
+                "--invert": invert,
+                "--border": border != 0.0,
+                "--outline": outline != "mask",
+                "--min-wall": min_wall != MIN_WALL_MM,
+                "--max-triangles": max_triangles is not None,
+                "--full-resolution": full_resolution,
+            }
+        )
     options = check_options(
         width_mm=width,
         height_mm=height,
@@ -178,6 +203,10 @@ def relief_command(
     err = stderr_console()
     timings: dict[str, float] = {}
     total = time.perf_counter()
+    if closed:
+        solve = dict(channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **solve_options)
+        _closed_solid(err, timings, image, output, depth, normals, options["width_mm"], as_json, solve)
+        return
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
         photo, rec = reconstruct_photo(
@@ -256,6 +285,70 @@ def relief_command(
     out.print(
         f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
         f"reconstruct {format_seconds(timings['reconstruct'])}, solid {format_seconds(timings['relief'])}, "
+        f"write {format_seconds(timings['write'])}"
+    )
+    out.print("[bold]wrote[/]")
+    print_files(out, written)
+
+
+def _refuse_relief_options(given: dict[str, bool]) -> None:
+    """One line naming the relief's own options given with ``--closed``, which has no flat base,
+    no relief depth and no top to compress."""
+    names = [flag for flag, used in given.items() if used]
+    if names:
+        raise InputError(
+            f"{', '.join(names)} {'is' if len(names) == 1 else 'are'} for a relief on a flat base; "
+            "--closed makes a closed object sized by --width alone (its depth in proportion)"
+        )
+
+
+def _closed_solid(err, timings, image, output, depth, normals, width_mm, as_json, solve) -> None:
+    """``relief --closed``: the photo's closed model (:func:`shadeform.fusion.close`) in
+    millimetres (:func:`shadeform.fusion.closed.in_millimetres`), written and reported."""
+    import shadeform
+    from shadeform.cli.photos import closed_report, print_closed
+    from shadeform.fusion import close
+    from shadeform.fusion.closed import in_millimetres
+
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        temps = output_temps(outputs, output, depth, normals)
+        photo, rec = reconstruct_photo(err, timings, image, **solve)
+        with stage(err, "closing the model (the back mirrored from the front)", timings, "relief"):
+            model = in_millimetres(close(rec), width_mm=width_mm)
+        with stage(err, "writing files", timings, "write"):
+            shadeform.export(model, temps[output])
+            written = [
+                (output, shadeform.available_formats()[output.suffix.lower()] + ", millimetres, closed")
+            ]
+            written += write_maps(rec, temps, depth=depth, normals=normals)
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+    print_notes(err, photo.info, rec.info)
+    size = [float(v) for v in np.ptp(model.vertices, axis=0)]
+    if as_json:
+        print_json(
+            {
+                "command": "relief",
+                "input": {"path": image, "width": photo.image.shape[1], "height": photo.image.shape[0]},
+                "files": {"mesh": output, "depth": depth, "normals": normals},
+                "solid": {"size_mm": size, "volume_mm3": model.volume, "triangles": model.n_faces,
+                          "vertices": model.n_vertices, "width_mm": width_mm},
+                "closed": closed_report(model),
+                "light": rec.light,
+                "info": rec.info,
+                "timings": timings,
+            }
+        )  # fmt: skip
+        return
+    out = stdout_console()
+    rows, cols = photo.image.shape
+    out.print(f"[bold]closed solid[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(photo.info)})")
+    out.print(f"  volume {model.volume:,.0f} mm^3, {model.n_faces:,} triangles", highlight=False)
+    print_closed(out, err, model, unit="mm")
+    out.print(
+        f"  time {format_seconds(timings['total'])}: load {format_seconds(timings['load'])}, "
+        f"reconstruct {format_seconds(timings['reconstruct'])}, close {format_seconds(timings['relief'])}, "
         f"write {format_seconds(timings['write'])}"
     )
     out.print("[bold]wrote[/]")

@@ -11,6 +11,8 @@ What one photo leaves open (a waist read as a hill top) is settled by the other 
 silhouettes (:mod:`.settle`) and checked once the poses are refined: each view's other readings
 are tried again from the given poses, and a placement where the views clearly agree better is
 kept (:func:`_checked`).
+
+One photo alone gives a closed model too, its back a guess (:func:`close`, :mod:`.closed`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy as np
 
 from shadeform._checks import check_choice
 from shadeform.errors import InputError
+from shadeform.fusion.closed import Closed, close
 from shadeform.fusion.geometry import axis_column, parse_pose
 from shadeform.fusion.poisson import poisson_solid, require_open3d
 from shadeform.fusion.register import disagreement, refine_poses
@@ -40,7 +43,7 @@ from shadeform.fusion.volume import (
     view_offsets,
 )
 
-__all__ = ["Placement", "Rival", "fuse", "place", "solid"]
+__all__ = ["Closed", "Placement", "Rival", "close", "fuse", "place", "solid"]
 
 #: The ways :func:`fuse` turns the placed views into one surface.
 SURFACES = ("volume", "poisson")
