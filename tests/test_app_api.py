@@ -578,6 +578,23 @@ class TestExport:
             expected = shadeform.export(mesh, tmp_path / f"expected{suffix}").read_bytes()
             assert response.content == expected, suffix
 
+    def test_a_closed_model_is_the_librarys_and_says_its_back_is_guessed(self, client, tmp_path):
+        """``closed=true``: the library's :func:`shadeform.close` of the same solve (its back the
+        front mirrored), watertight, named as closed."""
+        import trimesh
+
+        image_id = client.post("/api/examples/synth:ellipsoid?size=96").json()["image_id"]
+        request = {"image_id": image_id, "params": {"step": 2}}
+        response = client.post("/api/export?format=.stl&closed=true", json=request)
+        assert response.status_code == 200, response.text
+        assert response.headers["content-disposition"] == 'attachment; filename="synth_ellipsoid_closed.stl"'
+        rec, _ = library_result("synth:ellipsoid", 96, step=2)
+        expected = shadeform.export(shadeform.close(rec, resolution=2), tmp_path / "closed.stl").read_bytes()
+        assert response.content == expected
+        (tmp_path / "got.stl").write_bytes(response.content)
+        assert trimesh.load(tmp_path / "got.stl").is_watertight
+        assert_error(client.post("/api/export?format=.stl&closed=maybe", json=request), 422, "closed")
+
     def test_suffix_without_dot_and_case(self, client, bowl):
         request = {"image_id": bowl["image_id"]}
         wrl = client.post("/api/export?format=.wrl", json=request).content

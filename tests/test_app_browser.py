@@ -123,6 +123,26 @@ def test_bowl_flips_after_drawing_a_concave_region_and_exports_it(page, tmp_path
     page.screenshot(path=str(ARTIFACTS / "app.png"), full_page=True)
 
 
+def test_export_a_closed_model_whose_back_is_said_to_be_a_guess(page, tmp_path):
+    """The Export menu's "Closed" toggle stays set while the menu is open; the download is the
+    watertight closed model and a toast says its back is a guess."""
+    import trimesh
+
+    open_example(page, "synth:ellipsoid")
+    page.click("#export-menu > button")
+    page.click("#export-closed-row")
+    assert page.is_checked("#export-closed") and page.is_visible('[data-format=".stl"]')
+    with page.expect_download(timeout=RESULT_MS) as started:
+        page.click('[data-format=".stl"]')
+    target = tmp_path / started.value.suggested_filename
+    started.value.save_as(target)
+    assert target.name.endswith("_closed.stl") and trimesh.load(target).is_watertight
+    page.wait_for_function("window.shadeform.toasts().some((t) => t.text.includes('a guess'))")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.click("#export-menu > button")
+    page.screenshot(path=str(ARTIFACTS / "export-closed.png"))
+
+
 def test_regions_file_load_move_delete_and_save(page, tmp_path):
     from shadeform.regions import parse_regions
 

@@ -206,13 +206,16 @@ export async function maskFile(imageId: string, file: Blob): Promise<MaskResult>
   return json<MaskResult>(postJson(maskUrl(imageId, 'file'), { data }));
 }
 
-/** The exported file and the name the server gave it (Content-Disposition). */
+/** The exported file and the name the server gave it (Content-Disposition); ``closed``: the
+ *  closed model, its back the front mirrored (a guess). */
 export function exportMesh(
   request: ReconstructRequest,
   suffix: string,
   signal?: AbortSignal,
+  { closed = false } = {},
 ): Promise<{ blob: Blob; filename: string }> {
-  return downloaded(postJson(`/api/export?format=${encodeURIComponent(suffix)}`, request, signal), suffix);
+  const query = `format=${encodeURIComponent(suffix)}${closed ? '&closed=true' : ''}`;
+  return downloaded(postJson(`/api/export?${query}`, request, signal), suffix);
 }
 
 // ------------------------------------------------------------------------- photo sets

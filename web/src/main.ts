@@ -335,7 +335,12 @@ class App {
     if (document.body.classList.contains('views-mode')) return exported(() => this.views.exportFormat(suffix));
     if (document.body.classList.contains('stereo-mode')) return exported(() => this.stereo.exportFormat(suffix));
     if (!this.photo.image) return void toast('Open an image first, then export its model');
-    await exported(() => api.exportMesh(this.photo.request(this.solver.nextId()), suffix));
+    const closed = $<HTMLInputElement>('export-closed').checked;
+    await exported(async () => {
+      const file = await api.exportMesh(this.photo.request(this.solver.nextId()), suffix, undefined, { closed });
+      if (closed) toast('Exported a closed model: its back is the front mirrored, a guess the photo does not show', 'info');
+      return file;
+    });
   }
 
   // ------------------------------------------------------------------ session, progress
@@ -460,7 +465,11 @@ function bindMenus(): void {
       document.querySelectorAll('.menu.open').forEach((m) => m.classList.remove('open'));
       menu.classList.toggle('open', open);
     });
-    menu.querySelector('.menu-items')!.addEventListener('click', () => menu.classList.remove('open'));
+    menu.querySelector('.menu-items')!.addEventListener('click', (event) => {
+      // a toggle in a menu (Export's "Closed") is set, not chosen: the menu stays open
+      if ((event.target as Element).closest('label.toggle')) return event.stopPropagation();
+      menu.classList.remove('open');
+    });
   }
   document.addEventListener('click', () => document.querySelectorAll('.menu.open').forEach((m) => m.classList.remove('open')));
 }

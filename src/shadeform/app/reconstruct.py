@@ -8,6 +8,7 @@ the full solve of a large photo in the background, and the model's file.
 ``GET  /api/solves/{id}[/result]``          its progress; its ``ReconstructResult`` once done
 ``DELETE /api/solves/{id}``                 cancel it
 ``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
+                                            (``&closed=true``: closed, the back a guess)
 ==========================================  ===================================================
 
 The solves themselves are :mod:`shadeform.app.solving`'s; one runs at a time (the app's
@@ -74,11 +75,17 @@ def add_reconstruct_routes(app: FastAPI, state: Any) -> None:
     async def post_export(
         body: ReconstructRequest,
         format: str = Query(..., description="A suffix from Options.formats, e.g. .wrl."),
+        closed: bool = Query(
+            False,
+            description="A closed, watertight model: the photo's model as the front, the back the "
+            "front mirrored (a guess: the photo does not show it).",
+        ),
     ) -> Response:
         from shadeform.io.exporters import available_formats
 
         suffix = format_suffix(format, available_formats())
         entry = state.image(body.image_id)
         async with state.solve_lock:
-            data = await run_in_threadpool(export_bytes, state, entry, body.params, suffix)
-        return download(data, entry.name, suffix)
+            data = await run_in_threadpool(export_bytes, state, entry, body.params, suffix, closed=closed)
+        stem = entry.name.rsplit(".", 1)[0] if "." in entry.name.lstrip(".") else entry.name
+        return download(data, stem + "_closed" if closed else entry.name, suffix)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from starlette.exceptions import HTTPException
 
-from shadeform.app.encoding import mesh_data, mesh_file, plain, png_base64
+from shadeform.app.encoding import mesh_bytes, mesh_data, mesh_file, plain, png_base64
 from shadeform.app.guard import shorten
 from shadeform.app.jobs import STAGE_WORDS
 from shadeform.app.large import downsample, level_factor
@@ -306,7 +306,16 @@ def job_info(job) -> SolveJob:
     )
 
 
-def export_bytes(state: State, entry: StoredImage, params: ReconstructParams, suffix: str) -> bytes:
-    """The model for ``params`` as a mesh file of the registry's format ``suffix``."""
+def export_bytes(
+    state: State, entry: StoredImage, params: ReconstructParams, suffix: str, *, closed: bool = False
+) -> bytes:
+    """The model for ``params`` as a mesh file of the registry's format ``suffix``; ``closed``:
+    the closed model of :func:`shadeform.fusion.close` (its back the front mirrored, a guess; the
+    voxel edge ``params.step`` pixels, as ``shadeform reconstruct --closed --step``)."""
     solved, _ = solve(state, entry, params)
+    if closed:
+        from shadeform.fusion import close
+
+        model = close(solved.reconstruction, resolution=params.step if params.step > 1 else None)
+        return mesh_bytes(model, suffix)
     return mesh_file(solved.reconstruction, params.step, suffix)
