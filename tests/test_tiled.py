@@ -20,7 +20,7 @@ import shadeform
 from shadeform import synth, tiled
 from shadeform.errors import InputError
 from shadeform.tiled import reading, tasks
-from shadeform.tiled.join import _band, _disagreement, _Grid, _offsets
+from shadeform.tiled.join import Tiling, _band, _disagreement, _offsets
 from shadeform.tiled.output import _mesh_step
 
 SIDE, SPACING, TILE, OVERLAP = 192, 48.0, 64, 32
@@ -98,7 +98,7 @@ def test_no_seams(scene, whole, result):
 def test_the_join_finds_each_tiles_offset_and_blends_without_seams(scene, tmp_path):
     """Tiles of the true depth, each shifted by its own offset (a tile's z = 0 is at its own
     reference pixel) and slightly noisy: the join recovers the offsets and the blend the depth."""
-    grid = _Grid(SIDE, SIDE, TILE, OVERLAP)
+    grid = Tiling(SIDE, SIDE, TILE, OVERLAP)
     rng = np.random.default_rng(1)
     names, shifts = {}, {}
     for i in range(grid.rows):
@@ -149,7 +149,7 @@ def test_geotiff_in_bigtiff_out_with_its_tags_and_a_mesh(scene, result, geotiff,
     assert rms(depth, scene.depth) <= 1.1 * rms(result.depth, scene.depth) + 1e-3
     # the mesh: the depth on a grid, decimated to the budget, in pixels of the input
     loaded = trimesh.load(mesh, process=False)
-    step = _mesh_step(_Grid(SIDE, SIDE, TILE, OVERLAP), 5000)
+    step = _mesh_step(Tiling(SIDE, SIDE, TILE, OVERLAP), 5000)
     assert 0.8 * 5000 <= len(loaded.faces) <= 5000 < 2 * (SIDE // step - 1) ** 2
     assert np.ptp(loaded.vertices[:, 0]) == pytest.approx(SIDE - step, abs=step)
     assert np.ptp(loaded.vertices[:, 2]) == pytest.approx(np.ptp(depth[::step, ::step]), rel=0.02)

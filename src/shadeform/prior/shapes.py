@@ -86,7 +86,7 @@ def random_shape(rng: np.random.Generator, size: int, *, kind: str | None = None
     Shape
     """
     kind = kind or KINDS[rng.choice(len(KINDS), p=ODDS)]
-    grid = _Grid(size)
+    grid = _Canvas(size)
     r = 0.25 * size  # room around the body for its attachments
     parts = [_BODIES[kind](rng, grid, r)]
     # attachments: legs, handles, heads, knobs (sheets and slabs take fewer)
@@ -111,7 +111,7 @@ def random_shape(rng: np.random.Generator, size: int, *, kind: str | None = None
     return Shape(depth, normals, mask, part, kind)
 
 
-class _Grid:
+class _Canvas:
     """Pixel-centre coordinates of a canvas: ``x`` (columns) and ``y = -row``, centred."""
 
     def __init__(self, size):

@@ -16,7 +16,7 @@ _CORNERS = ((0, 0), (0, 1), (1, 0), (1, 1))
 
 
 @dataclass(frozen=True)
-class _Grid:
+class _HeightSamples:
     """The height field sampled every ``step`` pixels: grid rows/cols in pixels, heights (mm),
     the cells kept (four corners on the domain, no pinch) and the vertex number of each point."""
 
@@ -28,7 +28,7 @@ class _Grid:
     used: np.ndarray
 
 
-def _sample(heights: np.ndarray, domain: np.ndarray, step: int) -> _Grid:
+def _sample(heights: np.ndarray, domain: np.ndarray, step: int) -> _HeightSamples:
     """Grid points every ``step`` pixels (the last row and column always in), each the height at
     its pixel. (Means over the pixels around each point were tried: on the 12 Mpx vase of
     ``benchmarks/bench_relief.py`` and on DiLiGenT's cat and buddha and MIT's deer they left the
@@ -47,7 +47,7 @@ def _sample(heights: np.ndarray, domain: np.ndarray, step: int) -> _Grid:
         for dc in (0, 1):
             used[dr : dr + n_r, dc : dc + n_c] |= cells
     vertex_id = np.cumsum(used.ravel()).reshape(used.shape) - 1
-    return _Grid(rows, cols, values, cells, vertex_id, used)
+    return _HeightSamples(rows, cols, values, cells, vertex_id, used)
 
 
 def _grid_lines(n: int, step: int) -> np.ndarray:
@@ -69,7 +69,7 @@ def _drop_pinches(cells: np.ndarray) -> None:
         c[anti] = False
 
 
-def _boundary_edges(grid: _Grid) -> np.ndarray:
+def _boundary_edges(grid: _HeightSamples) -> np.ndarray:
     """The top's boundary edges, ``(E, 2)`` vertex numbers, directed with the top on their left
     (the order they have in :func:`shadeform.mesh.cell_triangles`' triangles)."""
     cells = np.pad(grid.cells, 1)
@@ -99,7 +99,7 @@ def _walls(top_edges: np.ndarray, below: np.ndarray) -> np.ndarray:
     return np.concatenate([np.column_stack([a, a_, b_]), np.column_stack([a, b_, b])])
 
 
-def _grid_solid(grid: _Grid, width_mm, base_mm, max_triangles, print_tools):
+def _grid_solid(grid: _HeightSamples, width_mm, base_mm, max_triangles, print_tools):
     """The solid on ``grid``: vertices (mm), faces, the pixel size (mm), the grid origin
     ``(col, row)`` and whether it was simplified (to ``max_triangles``); None if it does not fit
     or the simplified top fails the checks of :func:`_checked_top`.

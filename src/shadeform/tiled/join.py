@@ -10,8 +10,9 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class _Grid:
-    """Tile ``(i, j)``: core rows ``[i t, (i + 1) t)``, halo ``o`` each side, clipped to the image."""
+class Tiling:
+    """An image cut into tiles: tile ``(i, j)`` has core rows ``[i t, (i + 1) t)``, a halo of ``o``
+    each side, clipped to the image."""
 
     height: int
     width: int
@@ -66,7 +67,7 @@ def _load(path: Path) -> np.ndarray:
     return np.load(path, mmap_mode="r")
 
 
-def _pairs(grid: _Grid):
+def _pairs(grid: Tiling):
     """Overlapping tile pairs ``((i, j), (i2, j2), rows, cols)``: neighbours and diagonals, with
     the slices (image coordinates) where both tiles' weights are not zero."""
     for i in range(grid.rows):
@@ -85,7 +86,7 @@ def _pairs(grid: _Grid):
                     yield (i, j), (i2, j2), rows, cols
 
 
-def _part(grid: _Grid, names, key, rows, cols) -> np.ndarray:
+def _part(grid: Tiling, names, key, rows, cols) -> np.ndarray:
     """Tile ``key``'s depth over image rows ``[rows)`` and columns ``[cols)``."""
     i, j = key
     window = grid.window(i, j)
@@ -95,7 +96,7 @@ def _part(grid: _Grid, names, key, rows, cols) -> np.ndarray:
     )
 
 
-def _offsets(grid: _Grid, names) -> dict:
+def _offsets(grid: Tiling, names) -> dict:
     """Each tile's offset: least squares over the median differences of overlapping tiles, zero
     for the first tile with data of every connected group of tiles."""
     from scipy import sparse
@@ -136,7 +137,7 @@ def _offsets(grid: _Grid, names) -> dict:
     return {key: float(offsets[index[key]]) for key in keys}
 
 
-def _disagreement(grid: _Grid, names, offsets) -> tuple[float, float]:
+def _disagreement(grid: Tiling, names, offsets) -> tuple[float, float]:
     """Largest and root-mean-square height difference of overlapping tiles after the offsets."""
     largest, squares, count = 0.0, 0.0, 0
     for a, b, r, c in _pairs(grid):
@@ -149,7 +150,7 @@ def _disagreement(grid: _Grid, names, offsets) -> tuple[float, float]:
     return largest, (math.sqrt(squares / count) if count else 0.0)
 
 
-def _band(grid: _Grid, names, offsets, i: int) -> np.ndarray:
+def _band(grid: Tiling, names, offsets, i: int) -> np.ndarray:
     """Core rows of tile row ``i``, all columns: the aligned tiles blended."""
     k0, k1, _, _ = grid.span(i, grid.height)
     total = np.zeros((k1 - k0, grid.width), dtype=np.float32)

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 
 from shadeform.errors import InputError
-from shadeform.tiled.join import _band, _Grid
+from shadeform.tiled.join import Tiling, _band
 
 #: Side of the output's TIFF tiles: the largest of these dividing ``tile``.
 _TIFF_TILES = (512, 256, 128, 64, 32, 16)
 
 
-def _write(grid: _Grid, names, offsets, out: Path | None, tags: dict, step: int | None, progress):
+def _write(grid: Tiling, names, offsets, out: Path | None, tags: dict, step: int | None, progress):
     """Blend band by band into ``out`` (a tiled BigTIFF) or an array; also the mesh's samples
     (every ``step``-th row and column), if ``step``, and the depth's range (:func:`_extent`).
     Returns ``(depth or None, samples or None, range)``."""
@@ -88,7 +88,7 @@ def _stack(samples: list[np.ndarray]) -> np.ndarray | None:
 # --- mesh --------------------------------------------------------------------------------------
 
 
-def _mesh_step(grid: _Grid, max_triangles: int) -> int:
+def _mesh_step(grid: Tiling, max_triangles: int) -> int:
     """Grid spacing giving about ``OVERSAMPLE * max_triangles`` triangles (two per cell)."""
     from shadeform.solid import OVERSAMPLE
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from shadeform.errors import InputError
-from shadeform.tiled.join import _disagreement, _Grid, _offsets
+from shadeform.tiled.join import Tiling, _disagreement, _offsets
 from shadeform.tiled.objects import object_mask
 from shadeform.tiled.output import _mesh_step, _write, _write_mesh
 from shadeform.tiled.reading import TiffWindows, require_dask
@@ -191,7 +191,7 @@ def reconstruct(
     dask = require_dask()
     reader, dtype, shape, tags = _source(source)
     height, width = shape
-    grid = _Grid(height, width, tile, overlap)
+    grid = Tiling(height, width, tile, overlap)
     runner = Runner(scheduler, workers)
     try:
         if progress:
@@ -467,7 +467,7 @@ def _check_work(work: Path) -> Path:
     return work
 
 
-def _check_disk(grid: _Grid, folder: Path, out: Path | None) -> None:
+def _check_disk(grid: Tiling, folder: Path, out: Path | None) -> None:
     """Refuse a run whose tiles (float32 over each tile's window) and depth map (float32,
     compressed, counted whole) cannot fit on the disk they go to."""
     # the windows are a product of row spans and column spans
