@@ -24,7 +24,7 @@ from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 
-from shadeform.app.encoding import FILE_RESPONSES, download, format_suffix, json_response
+from shadeform.app.encoding import FILE_RESPONSES, download, format_suffix, json_response, safe_stem
 from shadeform.app.schema import ReconstructRequest, ReconstructResult, SolveJob
 from shadeform.app.solving import export_bytes, find_job, job_info, reconstruct_result, start_job
 
@@ -87,5 +87,4 @@ def add_reconstruct_routes(app: FastAPI, state: Any) -> None:
         entry = state.image(body.image_id)
         async with state.solve_lock:
             data = await run_in_threadpool(export_bytes, state, entry, body.params, suffix, closed=closed)
-        stem = entry.name.rsplit(".", 1)[0] if "." in entry.name.lstrip(".") else entry.name
-        return download(data, stem + "_closed" if closed else entry.name, suffix)
+        return download(data, safe_stem(entry.name) + "_closed" if closed else entry.name, suffix)
