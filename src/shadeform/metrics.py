@@ -257,6 +257,10 @@ def _fitted(estimate, truth, fit):
     return estimate
 
 
+#: The F-score's default distance threshold, a fraction of the true diagonal (Tanks and Temples' 1 %).
+F_SCORE_THRESHOLD = 0.01
+
+
 def chamfer(points, points_true, *, translate: bool = True) -> float:
     """Symmetric Chamfer distance between two point sets, in % of the true bounding-box diagonal.
 
@@ -302,10 +306,15 @@ def chamfer(points, points_true, *, translate: bool = True) -> float:
     """
     est, ref, diagonal = _point_sets(points, points_true)
     forward, backward, _ = _registered(est, ref, translate)
+    return _chamfer(forward, backward, diagonal)
+
+
+def _chamfer(forward, backward, diagonal: float) -> float:
+    """:func:`chamfer` from the nearest distances both ways."""
     return float(100.0 * 0.5 * (forward.mean() + backward.mean()) / diagonal)
 
 
-def f_score(points, points_true, *, threshold: float = 0.01, translate: bool = True) -> float:
+def f_score(points, points_true, *, threshold: float = F_SCORE_THRESHOLD, translate: bool = True) -> float:
     """F-score of two point sets at a distance threshold, in % (Tanks and Temples [1]_).
 
     Precision is the share of points within ``threshold * diagonal`` of a true point, recall
@@ -356,7 +365,11 @@ def f_score(points, points_true, *, threshold: float = 0.01, translate: bool = T
         )
     est, ref, diagonal = _point_sets(points, points_true)
     forward, backward, _ = _registered(est, ref, translate)
-    tolerance = float(threshold) * diagonal
+    return _f_score(forward, backward, float(threshold) * diagonal)
+
+
+def _f_score(forward, backward, tolerance: float) -> float:
+    """:func:`f_score` from the nearest distances both ways and the distance threshold."""
     precision = float(np.mean(forward < tolerance))
     recall = float(np.mean(backward < tolerance))
     if precision + recall == 0:
@@ -440,9 +453,12 @@ def surface_scores(mesh, points_true, volume_true, *, samples: int = 50_000, see
     solid = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces))
     points = trimesh.sample.sample_surface(solid, int(samples), seed=seed)[0]
     closed = bool(solid.is_watertight and solid.is_winding_consistent and solid.volume > 0)
+    # one registration for both scores: chamfer and f_score each fit the same translation
+    est, ref, diagonal = _point_sets(points, points_true)
+    forward, backward, _ = _registered(est, ref, True)
     return {
-        "chamfer": chamfer(points, points_true),
-        "f_score": f_score(points, points_true),
+        "chamfer": _chamfer(forward, backward, diagonal),
+        "f_score": _f_score(forward, backward, F_SCORE_THRESHOLD * diagonal),
         "volume_error": volume_error(solid, volume_true, signed=True) if closed else float("nan"),
         "watertight": closed,
     }
@@ -540,15 +556,16 @@ def _mesh_volume(vertices, faces) -> float:
         raise InputError(f"mesh faces must be vertex indices in [0, {len(vertices)})")
     if not np.isfinite(vertices).all():
         raise InputError("mesh vertices contain NaN or inf; the volume is undefined")
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
+    # each edge as one integer key: a 1-D unique sorts ten times faster than rows (axis=0)
     undirected = np.sort(directed, axis=1)
-    _, uses = np.unique(undirected, axis=0, return_counts=True)
+    _, uses = np.unique(undirected[:, 0] * len(vertices) + undirected[:, 1], return_counts=True)
     if np.any(uses != 2):
         raise InputError(
             f"mesh is not closed ({int(np.sum(uses != 2))} edges are not shared by exactly two faces); "
             "its volume is undefined"
         )
-    if len(np.unique(directed, axis=0)) != len(directed):
+    if len(np.unique(directed[:, 0] * len(vertices) + directed[:, 1])) != len(directed):
         raise InputError("mesh faces are not wound consistently; fix their orientation first")
     v0, v1, v2 = (vertices[faces[:, k]] for k in range(3))
     return float(abs(np.einsum("ij,ij->i", v0, np.cross(v1, v2)).sum()) / 6.0)

@@ -3,6 +3,8 @@ by the fusion tests."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from shadeform import metrics, synth
@@ -30,6 +32,15 @@ def true_views(name, angles, *, size=SMALL, poses=None, seed=0):
 def scores(mesh, name, size=SMALL):
     """Chamfer (%), F-score (%), |volume error| (%), closed: 50,000 points on the mesh against
     200,000 on the true surface."""
-    truth = synth.closed_object(name, size=size)
-    got = metrics.surface_scores(mesh, truth.surface_points(200_000, seed=1)[0], truth.volume)
+    points, volume = _truth(name, size)
+    got = metrics.surface_scores(mesh, points, volume)
     return got["chamfer"], got["f_score"], abs(got["volume_error"]), got["watertight"]
+
+
+@lru_cache(maxsize=8)
+def _truth(name, size):
+    """The true surface's points and volume: the same for every mesh scored against it."""
+    truth = synth.closed_object(name, size=size)
+    points = truth.surface_points(200_000, seed=1)[0]
+    points.setflags(write=False)
+    return points, truth.volume
