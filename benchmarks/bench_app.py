@@ -52,7 +52,7 @@ CHANGES = [
     ),
     (
         "light tilt at slant 30°, propagation, refine 0: the 2002 field (new solve)",
-        "setSelect('filter-kind', 'none'); setSelect('method', 'propagation'); setSlider('refine', 0); "
+        "setSelect('filter-kind', 'none'); setSelect('solver', 'propagation'); setSlider('refine', 0); "
         "document.querySelector('#light-mode [data-mode=slant_tilt]').click(); setSlider('slant', 30)",
         "setSlider('tilt', -60 + 3 * i)",
     ),
@@ -63,7 +63,7 @@ CHANGES = [
     ),
     (
         "light tilt at slant 30°, auto = oblique (new solve)",
-        "setSelect('method', 'auto')",
+        "setSelect('solver', 'auto')",
         "setSlider('tilt', 90 + 3 * i)",
     ),
 ]

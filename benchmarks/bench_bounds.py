@@ -61,7 +61,7 @@ def real_rows() -> list[dict]:
         rows.append(
             {
                 "case": name,
-                "method": rec.info["method"],
+                "method": rec.info["solver"],
                 "applied": bound.applied,
                 "pixels": bound.pixels,
                 "max_over": bound.max_over,

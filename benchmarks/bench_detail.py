@@ -1,6 +1,6 @@
 """Benchmark: the share of outlying fine detail, renders plus noise against real photographs.
 
-``method="auto"`` takes the photo solver for a noisy image whose fine detail is not Gaussian
+``solver="auto"`` takes the photo solver for a noisy image whose fine detail is not Gaussian
 noise (:data:`shadeform.solvers.OUTLIERS`, :func:`shadeform.preprocess.image_detail`). This
 measures that share on the two groups it must tell apart and writes
 ``benchmarks/results/detail.md``:

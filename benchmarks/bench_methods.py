@@ -5,7 +5,7 @@ The grid is method x scene x light x noise:
 - methods: every registered solver (:func:`shadeform.solvers.solver_names`: the methods less "auto", which
   picks one of them by the light: its choice is reported), read when the script runs (a new
   solver is benchmarked without touching this file), with its default options, plus
-  "propagation (2002)": ``method="propagation", refine=0, integrator="paths"``, the report's
+  "propagation (2002)": ``solver="propagation", refine=0, integrator="paths"``, the report's
   algorithm exactly;
 - scenes: :data:`shadeform.synth.SCENES`, ``--size`` pixels square, true mask, true light, and the
   concave regions a user would draw (:func:`shadeform.synth.concave_regions`);
@@ -117,9 +117,9 @@ def methods() -> list[tuple[str, dict]]:
     """
     found = []
     for name in solvers.solver_names():
-        found.append((name, {"method": name}))
+        found.append((name, {"solver": name}))
         if name == "propagation":
-            found.append((LEGACY, {"method": "propagation", "refine": 0, "integrator": "paths"}))
+            found.append((LEGACY, {"solver": "propagation", "refine": 0, "integrator": "paths"}))
     return found
 
 
@@ -447,12 +447,12 @@ def full_table(rows: Sequence[Row], light: str) -> str:
 
 
 def _auto_choice(light: str, best: str | None) -> str:
-    """What ``method="auto"`` picks for a light of :data:`LIGHTS`, and whether it is the best."""
+    """What ``solver="auto"`` picks for a light of :data:`LIGHTS`, and whether it is the best."""
     directions = dict(LIGHTS)
     if light not in directions:
         return ""
     picked = solvers.choose(np.asarray(directions[light])).name
-    return f'; `method="auto"` picks {picked}' + (
+    return f'; `solver="auto"` picks {picked}' + (
         "" if picked == best else " (**not** the best measured here)"
     )
 
@@ -486,8 +486,8 @@ def report(
         f"Lights: +z, and slant 30° and 45° at tilt {TILT:g}° (from the upper right). Noise: Gaussian, "
         f"a fraction of the albedo, seed {SEED}. Depth error: RMSE as % of the true depth range after "
         "fitting the free offset; angle: mean angular error of the normals (both as `shadeform "
-        "evaluate`). Methods: every registered solver (`shadeform methods`) with its defaults (the "
-        'default `method="auto"` picks one of them by the light), and '
+        "evaluate`). Methods: every registered solver (`shadeform solvers`) with its defaults (the "
+        'default `solver="auto"` picks one of them by the light), and '
         f'"{LEGACY}" = propagation with `refine=0`, `integrator="paths"` (the report\'s algorithm). '
         "n/a: the method refuses that light (its message is below).",
         "",

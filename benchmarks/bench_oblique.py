@@ -117,7 +117,7 @@ def bar_table(size: int) -> str:
             scene.image,
             mask=scene.mask,
             light=scene.light,
-            method="propagation",
+            solver="propagation",
             refine=3,
             integrator="paths",
             concave=synth.concave_regions(name, size=size),

@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     cos_theta = np.clip(image / albedo, 0, 1)
     normals = propagate_normals(image, mask, light=light, reference=ref, albedo=albedo)
     refined = refine_by_integrability(normals, cos_theta, mask, light=light, iterations=3)
-    rec = shadeform.reconstruct(image, mask=mask, method="propagation", refine=0)
+    rec = shadeform.reconstruct(image, mask=mask, solver="propagation", refine=0)
     mesh = shadeform.to_mesh(rec, step=1)
     tmp = Path(tempfile.mkdtemp())
     glb = tmp / "model.glb"
@@ -74,14 +74,14 @@ def main(argv=None) -> int:
         (
             "total, 2002 (propagation, refine=0): reconstruct + mesh + .glb",
             lambda: shadeform.export(
-                shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, method="propagation", refine=0)),
+                shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, solver="propagation", refine=0)),
                 glb,
             ),
         ),
         (
             "total, propagation (refine=3): reconstruct + mesh + .glb",
             lambda: shadeform.export(
-                shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, method="propagation")), glb
+                shadeform.to_mesh(shadeform.reconstruct(image, mask=mask, solver="propagation")), glb
             ),
         ),
         (

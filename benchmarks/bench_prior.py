@@ -56,11 +56,11 @@ def generated(count: int, weights) -> tuple[list[str], list[dict]]:
         }
         row["learned"] = angular_error(predict(photo.image, photo.mask).normals, truth, valid)
         for light_name, light in (("known", photo.light), ("estimate", "estimate")):
-            rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, method="photo")
+            rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, solver="photo")
             row[f"photo ({light_name})"] = angular_error(rec.normals, truth, valid)
             for weight in weights:
                 learned.PRIOR = weight
-                rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, method="guided")
+                rec = shadeform.reconstruct(photo.image, mask=photo.mask, light=light, solver="guided")
                 row[f"guided {weight:g} ({light_name})"] = angular_error(rec.normals, truth, valid)
         rows.append(row)
         print(
@@ -86,7 +86,7 @@ def speed(repeats: int) -> list[tuple[str, list[float], float]]:
             (
                 f"photo to mesh, method={method}",
                 lambda m=method: shadeform.to_mesh(
-                    shadeform.reconstruct(image, mask=mask, light="estimate", method=m)
+                    shadeform.reconstruct(image, mask=mask, light="estimate", solver=m)
                 ),
             )
         )

@@ -12,7 +12,7 @@ and reports, for
 
 - the constant normal (0, 0, 1) and the silhouette-only shape
   (:func:`shadeform.solvers.photo.silhouette_depth`), which use no shading;
-- every registered solver and ``method="auto"``, with the known light and with
+- every registered solver and ``solver="auto"``, with the known light and with
   ``light="estimate"`` (the blind run);
 - on MIT-Berkeley, ``auto`` with the estimated light on the older benchmark's cleaned image (the
   photo lit nearest the camera divided by the reflectance: the shading, which no user has), the
@@ -134,17 +134,17 @@ def run_case(case, methods, shading=None):
                 row[key] = None
                 continue
             start = time.perf_counter()
-            rec = shadeform.reconstruct(case.image, mask=case.mask, light=light, method=method)
+            rec = shadeform.reconstruct(case.image, mask=case.mask, light=light, solver=method)
             row[key + " s"] = time.perf_counter() - start
             score(row, key, case, rec.normals, rec.depth)
             if method == "auto":
-                row[f"auto ({light_name}) picks"] = rec.info["method"]
+                row[f"auto ({light_name}) picks"] = rec.info["solver"]
             if light_name == "estimate" and "light error" not in row:
                 row["light error"] = real_data.light_error(rec.light, case)
                 row["confidence"] = rec.info["light_estimate"].get("confidence", float("nan"))
     if shading is not None and "auto" in methods:
         start = time.perf_counter()
-        rec = shadeform.reconstruct(shading.image, mask=shading.mask, light="estimate", method="auto")
+        rec = shadeform.reconstruct(shading.image, mask=shading.mask, light="estimate", solver="auto")
         row[SHADING + " s"] = time.perf_counter() - start
         score(row, SHADING, shading, rec.normals, rec.depth)
     return row
@@ -248,7 +248,7 @@ def main(argv=None):
         help="keep the objects already measured in the rows file beside --out (.jsonl, one JSON row per object)",
     )
     parser.add_argument(
-        "--methods",
+        "--solvers",
         help="comma-separated methods to measure again on every object, the other columns kept from "
         f"the rows file (default: measure every method; auto includes '{SHADING}')",
     )
@@ -271,7 +271,7 @@ def main(argv=None):
     rows = {}
     done = {}
     rows_file = args.out.with_suffix(".jsonl")
-    again = args.methods.split(",") if args.methods else None
+    again = args.solvers.split(",") if args.solvers else None
     if (args.resume or again) and rows_file.exists():
         for line in rows_file.read_text().splitlines():
             item = json.loads(line)

@@ -178,7 +178,7 @@ def run_chain(rows: int, cols: int) -> dict:
         found[how] = {
             **timings,
             "step": step,
-            "method": rec.info["method"],
+            "method": rec.info["solver"],
             "triangles": solid.n_faces,
             "deviation_mm": solid.deviation_mm,
             "check": check(solid),

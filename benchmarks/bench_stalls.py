@@ -40,7 +40,7 @@ kind, name, runs = sys.argv[1], sys.argv[2], int(sys.argv[3])
 if kind == "solver":
     light = (0, 0, 1) if name in ("eikonal", "auto") else light_from_slant_tilt(30, 60)
     scene = synth.scene("vase", size=512, light=light)
-    work = lambda: shadeform.reconstruct(scene.image, light=light, method=name)
+    work = lambda: shadeform.reconstruct(scene.image, light=light, solver=name)
 elif name == "bilateral-diligent":
     sys.path.insert(0, sys.argv[4])
     from bench_diligent import load
@@ -80,7 +80,7 @@ def main() -> None:
     from shadeform.integration import available_integrators
     from shadeform.io.atomic import atomic_write
 
-    cases = [("solver", name) for name in shadeform.available_methods() if name != "auto"]
+    cases = [("solver", name) for name in shadeform.available_solvers() if name != "auto"]
     cases += [("integrator", name) for name in available_integrators()] + [
         ("integrator", "bilateral-diligent")
     ]

@@ -35,7 +35,7 @@ from shadeform.io.exporters import available_formats
 from shadeform.io.images import CHANNELS, srgb_encode
 from shadeform.light import light_from_slant_tilt
 from shadeform.preprocess import FILTER_KINDS, apply_filter
-from shadeform.solvers import Problem, Solution, Solver, available_methods
+from shadeform.solvers import Problem, Solution, Solver, available_solvers
 
 ROOT = Path(__file__).resolve().parents[1]
 LOCAL = "http://127.0.0.1:8000"
@@ -133,8 +133,8 @@ def centre_minus_rim(positions: np.ndarray, size: int) -> float:
 class TestOptions:
     def test_lists_the_library(self, client):
         options = client.get("/api/options").json()
-        assert {m["name"]: m["description"] for m in options["methods"]} == available_methods()
-        assert list(available_methods())[0] == "auto"
+        assert {m["name"]: m["description"] for m in options["solvers"]} == available_solvers()
+        assert list(available_solvers())[0] == "auto"
         assert {i["name"]: i["description"] for i in options["integrators"]} == available_integrators()
         assert options["channels"] == list(CHANNELS)
         assert options["filters"] == list(FILTER_KINDS)
@@ -150,7 +150,7 @@ class TestOptions:
 
     def test_defaults_are_the_library_defaults(self, client):
         defaults = schema.ReconstructParams(**client.get("/api/options").json()["defaults"])
-        assert defaults.method == "auto" and defaults.refine == 3 and defaults.light.mode == "z"
+        assert defaults.solver == "auto" and defaults.refine == 3 and defaults.light.mode == "z"
         assert defaults.integrator is None and defaults.references == [] and defaults.concave.regions == []
 
     def test_initial_example(self):
@@ -342,12 +342,12 @@ class TestReconstruct:
 
         monkeypatch.setattr(masks, "find_object", doubtful)
         info = upload(client, png_bytes(disk_photo(40, colour=False)), name="doubtful.png").json()
-        result = reconstruct(client, info["image_id"], method="propagation").json()
+        result = reconstruct(client, info["image_id"], solver="propagation").json()
         assert "doubtful" in result["info"]["mask_warning"]
         monkeypatch.undo()
         clear = upload(client, png_bytes(disk_photo(44, colour=False)), name="clear.png").json()
         assert (
-            "mask_warning" not in reconstruct(client, clear["image_id"], method="propagation").json()["info"]
+            "mask_warning" not in reconstruct(client, clear["image_id"], solver="propagation").json()["info"]
         )
 
     def test_same_as_the_library(self, client, bowl):
@@ -369,7 +369,7 @@ class TestReconstruct:
         assert result["depth_range"] == [float(np.nanmin(rec.depth)), float(np.nanmax(rec.depth))]
         assert result["light"] == [0.0, 0.0, 1.0]
         assert (
-            result["info"]["method"] == rec.info["method"] == "eikonal" and result["info"]["cached"] is False
+            result["info"]["solver"] == rec.info["solver"] == "eikonal" and result["info"]["cached"] is False
         )
         assert {"normals", "mesh", "encode", "total"} <= set(result["timings"])
 
@@ -448,9 +448,9 @@ class TestReconstruct:
         assert result["references"][0] == [20, 30]
 
     def test_every_method_and_integrator(self, client, bowl):
-        for method in available_methods():
+        for method in available_solvers():
             for integrator in (None, *available_integrators()):
-                response = reconstruct(client, bowl["image_id"], step=4, method=method, integrator=integrator)
+                response = reconstruct(client, bowl["image_id"], step=4, solver=method, integrator=integrator)
                 assert response.status_code == 200, (method, integrator, response.text)
 
     def test_colour_channels(self, client):
@@ -467,7 +467,7 @@ class TestReconstructErrors:
             ({"step": 2.5}, ["params.step"]),
             ({"step": SIZE}, ["step must be at least 1 and below"]),
             ({"refine": -1}, ["params.refine"]),
-            ({"method": "magic"}, ["unknown method 'magic'", "propagation"]),
+            ({"solver": "magic"}, ["unknown solver 'magic'", "propagation"]),
             ({"integrator": "guess"}, ["unknown integrator 'guess'"]),
             ({"channel": "green"}, ["params.channel", "'luma'"]),
             ({"filter": {"kind": "blur", "size": 1}}, ["params.filter.kind"]),
@@ -481,7 +481,7 @@ class TestReconstructErrors:
             ({"concave": {"regions": [{"polygon": [[0, 0], [5, 5], [0, 5]], "axis": "z"}]}}, ["axis"]),
             ({"concave": [{"polygon": [], "axis": "x"}]}, ["params.concave"]),
             ({"colour": "red"}, ["params.colour", "unknown field"]),
-            ({"method": "eikonal", "light": {"mode": "slant_tilt", "slant": 30, "tilt": 0}}, ["(0, 0, 1)"]),
+            ({"solver": "eikonal", "light": {"mode": "slant_tilt", "slant": 30, "tilt": 0}}, ["(0, 0, 1)"]),
         ],
     )
     def test_bad_params(self, client, bowl, params, fragments):
@@ -620,10 +620,10 @@ class TestExport:
         )
         assert_error(
             client.post(
-                "/api/export?format=.wrl", json={"image_id": bowl["image_id"], "params": {"method": "x"}}
+                "/api/export?format=.wrl", json={"image_id": bowl["image_id"], "params": {"solver": "x"}}
             ),
             422,
-            "unknown method",
+            "unknown solver",
         )
 
 
@@ -1116,7 +1116,7 @@ def test_warm_up_runs_every_method(registries, monkeypatch):
 
     def reconstruct(image, **options):
         result = real_reconstruct(image, **options)  # a method that fails raises here
-        solved.append((options.get("method", "auto"), options.get("integrator"), image.dtype))
+        solved.append((options.get("solver", "auto"), options.get("integrator"), image.dtype))
         return result
 
     def to_mesh(result, **options):
@@ -1130,7 +1130,7 @@ def test_warm_up_runs_every_method(registries, monkeypatch):
 
     with TestClient(create_app(), base_url=LOCAL) as fresh:  # an app's options are read when it is made
         options = fresh.get("/api/options").json()
-    methods = [m["name"] for m in options["methods"]]
+    methods = [m["name"] for m in options["solvers"]]
     integrators = [None, *(i["name"] for i in options["integrators"])]
     assert "facing" in methods and len(integrators) > 2
     offered = {

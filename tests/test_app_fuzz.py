@@ -47,7 +47,7 @@ from shadeform.app.guard import Guard
 from shadeform.app.server import AppLimits, create_app
 from shadeform.integration import available_integrators
 from shadeform.photometric import METHODS as STEREO_METHODS
-from shadeform.solvers import available_methods
+from shadeform.solvers import available_solvers
 
 HOST = "127.0.0.1:8000"
 LOCAL = f"http://{HOST}"
@@ -197,9 +197,10 @@ def _aim_params(params, data, *, stereo: bool) -> None:
     if stereo:
         methods, integrators = list(STEREO_METHODS), list(available_integrators())
     else:
-        methods, integrators = ["auto", *available_methods()], [None, *available_integrators()]
-    if "method" in params:
-        params["method"] = data.draw(st.sampled_from(methods))
+        methods, integrators = ["auto", *available_solvers()], [None, *available_integrators()]
+    chosen = "method" if stereo else "solver"
+    if chosen in params:
+        params[chosen] = data.draw(st.sampled_from(methods))
     if "integrator" in params:
         params["integrator"] = data.draw(st.sampled_from(integrators))
 
@@ -419,7 +420,7 @@ NAN, INF = float("nan"), float("inf")
         ({"concave": {"regions": [{"polygon": [[NAN, 1], [2, 3], [4, 5]], "axis": "x"}]}}, "non-finite"),
         ({"concave": {"regions": [{"polygon": [[1, 1], [2, 3]], "axis": "x"}]}}, "at least 3 points"),
         ({"concave": {"regions": [{"polygon": [[1e300, 1], [2, -1e300], [4, 5]], "axis": "q"}]}}, "axis"),
-        ({"method": "nope"}, "unknown method"),
+        ({"solver": "nope"}, "unknown solver"),
         ({"integrator": ""}, "unknown integrator"),
         ({"channel": "alpha"}, "channel"),
         ({"mask": "@@@"}, "base64"),

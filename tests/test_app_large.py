@@ -290,7 +290,7 @@ def test_the_object_is_found_on_the_photos_colours(client):
     buffer = io.BytesIO()
     Image.fromarray(np.round(srgb_encode(picture) * 255).astype(np.uint8)).save(buffer, "JPEG", quality=90)
     upload = client.post("/api/images", files={"file": ("wood.jpg", buffer.getvalue(), "image/jpeg")}).json()
-    body_ = {"image_id": upload["image_id"], "request_id": 3, "params": {"method": "propagation"}}
+    body_ = {"image_id": upload["image_id"], "request_id": 3, "params": {"solver": "propagation"}}
     job = wait(client, client.post("/api/solves", json=body_).json()["job_id"])
     assert job["state"] == "done", job
     result = client.get(f"/api/solves/{job['job_id']}/result").json()

@@ -40,14 +40,14 @@ class TestReconstructFiles:
             depth=True,
             workers=workers,
             progress=lambda done, total: seen.append((done, total)),
-            method="eikonal",
+            solver="eikonal",
         )
         assert [r.photo for r in results] == photos
         assert seen[-1] == (3, 3) and len(seen) == 3
         for photo, result in zip(photos, results):
             assert result.error is None
             assert [p.name for p in result.files] == [f"{photo.stem}.ply", f"{photo.stem}_depth.tiff"]
-            rec = shadeform.reconstruct(shadeform.load_image(photo), method="eikonal")
+            rec = shadeform.reconstruct(shadeform.load_image(photo), solver="eikonal")
             mesh = shadeform.to_mesh(rec, step=2)
             assert (result.vertices, result.faces) == (mesh.n_vertices, mesh.n_faces)
             written = trimesh.load(out / f"{photo.stem}.ply", force="mesh")
@@ -106,7 +106,7 @@ class TestReconstructFiles:
         with pytest.raises(InputError, match="workers"):
             reconstruct_files(photos, out, workers=0)
         for options, match in (
-            ({"method": "magic"}, "method"),
+            ({"solver": "magic"}, "solver"),
             ({"integrator": "x"}, "integrator"),
             ({"filter": "blur:2"}, "filter"),
             ({"channel": "green"}, "channel"),
@@ -160,7 +160,7 @@ class TestBatchCommand:
         "option, value, fragment",
         [
             ("--format", "xyz", "format"),
-            ("--method", "magic", "method"),
+            ("--solver", "magic", "solver"),
             ("--integrator", "magic", "integrator"),
             ("--filter", "blur:2", "filter"),
             ("--channel", "green", "channel"),

@@ -43,7 +43,7 @@ class TestMethods:
         solvers = solver_names()
         assert set(solvers) <= set(labels) and "auto" not in labels
         assert dict(bench.methods())[bench.LEGACY] == {
-            "method": "propagation",
+            "solver": "propagation",
             "refine": 0,
             "integrator": "paths",
         }
@@ -58,7 +58,7 @@ class TestMethods:
                 description="a solver registered by the test",
             )
         )
-        assert ("newcomer", {"method": "newcomer"}) in bench.methods()
+        assert ("newcomer", {"solver": "newcomer"}) in bench.methods()
 
 
 class TestGrid:
@@ -96,7 +96,7 @@ class TestGrid:
             scene.image,
             mask=scene.mask,
             light=scene.light,
-            method="propagation",
+            solver="propagation",
             concave=synth.concave_regions("sphere", size=SIZE),
         )
         row = next(
@@ -117,7 +117,7 @@ class TestGrid:
                 scenes=("sphere",),
                 lights=LIGHTS[:1],
                 noises=(0.0,),
-                chosen=[("propagation", {"method": "propagation"})],
+                chosen=[("propagation", {"solver": "propagation"})],
                 warm=False,
             )
 
@@ -128,7 +128,7 @@ class TestMemory:
         assert found.light == "+z" and found.scene == "sphere"
         # at least the (H, W, 3) float64 normals it returns are allocated
         assert found.traced >= SIZE * SIZE * 3 * 8
-        assert bench.peak_memory("eikonal", {"method": "eikonal"}, "slant 30°", size=SIZE) is None
+        assert bench.peak_memory("eikonal", {"solver": "eikonal"}, "slant 30°", size=SIZE) is None
 
 
 class TestTiming:
@@ -160,7 +160,7 @@ class TestReport:
         )
         assert "| eikonal | slant 30° | n/a |" in text
         # the default's choice is shown beside the measured best
-        assert f'`method="auto"` picks {solvers.choose(np.array([0.0, 0.0, 1.0])).name}' in text
+        assert f'`solver="auto"` picks {solvers.choose(np.array([0.0, 0.0, 1.0])).name}' in text
 
     def test_replot_from_saved_rows(self, rows, tmp_path):
         from PIL import Image

@@ -174,7 +174,7 @@ class TestInReconstruct:
         truth, depth, normals, mask, _ = _pitted(96, pit=200.0, sigma=6.0)
         scene = synth.scene("sphere", size=96)
         registries[0].register(_solver_of(depth, normals))
-        rec = shadeform.reconstruct(scene.image, mask=mask, method="given")
+        rec = shadeform.reconstruct(scene.image, mask=mask, solver="given")
         said = rec.info["depth_bounded"]
         assert set(said) == {"pixels", "max_over"} and 0 < said["pixels"] < 0.1 and said["max_over"] > 2
         expected = bound_depth(depth, normals, mask)
@@ -185,7 +185,7 @@ class TestInReconstruct:
         scene = synth.scene("sphere", size=96)
         truth = np.where(scene.mask, scene.depth, np.nan)
         registries[0].register(_solver_of(truth, scene.normals))
-        rec = shadeform.reconstruct(scene.image, mask=scene.mask, method="given")
+        rec = shadeform.reconstruct(scene.image, mask=scene.mask, solver="given")
         assert "depth_bounded" not in rec.info
         np.testing.assert_array_equal(rec.depth, truth)
         np.testing.assert_array_equal(rec.normals, scene.normals.astype(np.float32))

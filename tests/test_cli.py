@@ -325,7 +325,7 @@ class TestBadReferencesAndLights:
 
     @pytest.mark.parametrize(
         ("option", "value"),
-        [("--channel", "alpha"), ("--method", "magic"), ("--integrator", "guess"), ("--filter", "blur:2")],
+        [("--channel", "alpha"), ("--solver", "magic"), ("--integrator", "guess"), ("--filter", "blur:2")],
     )
     def test_unknown_names(self, sphere, out, option, value):
         assert_fails(invoke(*reconstruct_args(sphere["image"], out, option, value)), out, value)
@@ -440,12 +440,12 @@ class TestReconstruct:
         files = report["files"]
         assert {Path(files[key]).name for key in ("mesh", "depth", "normals")} == {"m.glb", "d.npy", "n.png"}
         assert sorted(p.name for p in out.iterdir()) == ["d.npy", "m.glb", "n.png"]
-        assert report["info"]["method_requested"] == "auto" and report["info"]["method"] == "eikonal"
+        assert report["info"]["solver_requested"] == "auto" and report["info"]["solver"] == "eikonal"
         assert report["timings"]["total"] > 0
         assert report["mesh"]["vertices"] == len(trimesh.load(out / "m.glb", force="mesh").vertices)
 
     def test_estimated_light_and_eikonal(self, sphere, out):
-        for extra in (["--light", "estimate"], ["--method", "eikonal"]):
+        for extra in (["--light", "estimate"], ["--solver", "eikonal"]):
             result = invoke(
                 "reconstruct",
                 sphere["image"],
@@ -461,7 +461,7 @@ class TestReconstruct:
             if extra[0] == "--light":
                 assert info["light_estimate"]["slant"] < 3  # the sphere is lit from +z
             else:
-                assert info["method"] == "eikonal" and info["singular_points"]
+                assert info["solver"] == "eikonal" and info["singular_points"]
 
     def test_the_summary_says_what_ran(self, sphere, out):
         """The refinement is named only where it ran, and a light of slant 30 and tilt 90 reads
@@ -470,7 +470,7 @@ class TestReconstruct:
         for method in ("eikonal", "propagation"):
             extra = ["--slant", "30", "--tilt", "90"] if method == "propagation" else []
             result = invoke(
-                "reconstruct", sphere["image"], "-o", out / f"{method}.glb", "--method", method, *extra
+                "reconstruct", sphere["image"], "-o", out / f"{method}.glb", "--solver", method, *extra
             )
             assert result.exit_code == 0, result.output
             lines[method] = result.stdout.splitlines()[1]
@@ -546,7 +546,7 @@ class TestReconstruct:
             "poisson",
             "--refine",
             "1",
-            "--method",
+            "--solver",
             "propagation",
             "--json",
         )
@@ -672,7 +672,7 @@ def test_formats_lists_the_registry():
 
 class TestEvaluate:
     def test_table_has_every_scene(self):
-        result = invoke("evaluate", "--size", "64", "--methods", "propagation,eikonal")
+        result = invoke("evaluate", "--size", "64", "--solvers", "propagation,eikonal")
         assert result.exit_code == 0, result.output
         for name in synth.SCENES:
             assert name in result.stdout
@@ -685,9 +685,9 @@ class TestEvaluate:
             "64",
             "--scenes",
             "sphere,bowl",
-            "--methods",
+            "--solvers",
             "propagation",
-            "--methods",
+            "--solvers",
             "eikonal",
             "--json",
         )

@@ -45,7 +45,7 @@ def _dimpled_sphere(size, *, sigma, depth):
 def vase():
     """The vase lit from the upper right, its 'oblique' reconstruction and its assessment."""
     scene = synth.scene("vase", size=VASE_SIZE, light=(5, 5, 7))
-    result = shadeform.reconstruct(scene.image, mask=scene.mask, light=scene.light, method="oblique")
+    result = shadeform.reconstruct(scene.image, mask=scene.mask, light=scene.light, solver="oblique")
     confidence = assess(scene.image, scene.mask, scene.light, result.normals, albedo=result.albedo)
     (neck,) = as_regions(synth.concave_regions("vase", size=VASE_SIZE))
     neck_pixels = concave_masks([neck], scene.mask.shape)[1] & scene.mask
@@ -341,7 +341,7 @@ class TestInTheResult:
 
     def test_the_quick_look_reports_in_input_pixels(self, vase):
         scene, result, *_ = vase
-        quick = reconstruct_preview(scene.image, step=2, mask=scene.mask, light=scene.light, method="oblique")
+        quick = reconstruct_preview(scene.image, step=2, mask=scene.mask, light=scene.light, solver="oblique")
         assert quick.confidence.shape == scene.mask.shape
         assert len(quick.info["unsure"]) == 1 and quick.info["unsure"][0]["axis"] == "y"
         full, half = np.array(result.info["unsure"][0]["centre"]), np.array(quick.info["unsure"][0]["centre"])

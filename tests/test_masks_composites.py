@@ -103,14 +103,14 @@ def test_a_doubtful_mask_is_said_in_info(monkeypatch):
     luma, _, truth = photo("paper", 2)
     doubtful = FoundObject(truth, True, 0.5, 0.7, False, confidence=LOW_CONFIDENCE / 2)
     monkeypatch.setattr(pipeline, "find_object", lambda image: doubtful)
-    rec = reconstruct(luma, method="propagation")
+    rec = reconstruct(luma, solver="propagation")
     assert rec.info["mask_warning"] == doubtful.warning
     assert "doubtful" in doubtful.warning and "\n" not in doubtful.warning
 
 
 def test_a_clear_mask_has_no_warning():
     luma, _, truth = photo("paper", 2)
-    rec = reconstruct(luma, method="propagation")
+    rec = reconstruct(luma, solver="propagation")
     assert "mask_warning" not in rec.info
 
 

@@ -38,7 +38,7 @@ class TestBars:
 
     def test_sphere(self):
         scene = synth.scene("sphere", size=256, light=LIGHT)
-        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, method="oblique")
+        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, solver="oblique")
         depth, angle = errors(rec, scene)
         assert rec.info["levels"] == 1  # 256 px: marched at full size
         assert depth <= 3.0
@@ -50,7 +50,7 @@ class TestBars:
             scene.image,
             mask=scene.mask,
             light=scene.light,
-            method="oblique",
+            solver="oblique",
             concave=synth.concave_regions("vase", size=256),
         )
         depth, angle = errors(rec, scene)
@@ -59,15 +59,15 @@ class TestBars:
 
     def test_light_at_plus_z(self):
         scene = synth.scene("sphere", size=64)
-        rec = reconstruct(scene.image, mask=scene.mask, method="oblique")
+        rec = reconstruct(scene.image, mask=scene.mask, solver="oblique")
         depth, angle = errors(rec, scene)
         assert depth < 1.0 and angle < 1.0
-        assert rec.info["method"] == "oblique" and rec.info["shadowed"] == 0
+        assert rec.info["solver"] == "oblique" and rec.info["shadowed"] == 0
 
     def test_another_integrator_can_give_the_depth(self):
         scene = synth.scene("sphere", size=64, light=LIGHT)
         rec = reconstruct(
-            scene.image, mask=scene.mask, light=scene.light, method="oblique", integrator="poisson"
+            scene.image, mask=scene.mask, light=scene.light, solver="oblique", integrator="poisson"
         )
         assert rec.info["integrator"] == "poisson"
         assert errors(rec, scene)[0] < 3.0
@@ -332,7 +332,7 @@ class TestBadInput:
 
     def test_light_below_the_horizon(self):
         with pytest.raises(InputError, match="z"):
-            reconstruct(self.scene.image, mask=self.scene.mask, light=(1, 0, -1), method="oblique")
+            reconstruct(self.scene.image, mask=self.scene.mask, light=(1, 0, -1), solver="oblique")
 
     @pytest.mark.parametrize(
         "options, message",

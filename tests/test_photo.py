@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize, rosen, rosen_der
 
-from shadeform import available_methods, metrics, reconstruct, synth
+from shadeform import available_solvers, metrics, reconstruct, synth
 from shadeform.solvers.lbfgs import descend, two_loop
 from shadeform.solvers.photo import concave_start, photo_depth, response_curve, silhouette_depth
 from shadeform.solvers.photo.energy import _Level
@@ -198,7 +198,7 @@ def test_concave_regions_turn_the_bowl(light, size):
     regions = synth.concave_regions("bowl", size=size)
     errors = [
         metrics.depth_error(
-            reconstruct(scene.image, mask=scene.mask, light=scene.light, method="photo", concave=given).depth,
+            reconstruct(scene.image, mask=scene.mask, light=scene.light, solver="photo", concave=given).depth,
             scene.depth,
             scene.mask,
         )
@@ -220,17 +220,17 @@ def test_silhouette_depth_has_no_outline_on_the_frame():
 @pytest.mark.parametrize("light", [(0.0, 0.0, 1.0), (0.5, 0.3, 0.81)])
 def test_sphere(light):
     scene = synth.scene("sphere", size=96, light=light)
-    rec = reconstruct(scene.image, mask=scene.mask, light=light, method="photo")
+    rec = reconstruct(scene.image, mask=scene.mask, light=light, solver="photo")
     assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 3.0
-    assert rec.info["method"] == "photo" and rec.info["levels"] >= 1 and rec.info["response"][-1][0] == 1.0
+    assert rec.info["solver"] == "photo" and rec.info["levels"] >= 1 and rec.info["response"][-1][0] == 1.0
     assert rec.depth[rec.info["references"][0]] == 0.0
 
 
 def test_noisy_oblique_vase_beats_the_oblique_solver():
     light = (0.5, 0.5, 0.707)
     scene = synth.scene("vase", size=128, light=light, noise=0.01)
-    photo = reconstruct(scene.image, mask=scene.mask, light=light, method="photo")
-    oblique = reconstruct(scene.image, mask=scene.mask, light=light, method="oblique")
+    photo = reconstruct(scene.image, mask=scene.mask, light=light, solver="photo")
+    oblique = reconstruct(scene.image, mask=scene.mask, light=light, solver="oblique")
     error = metrics.angular_error(photo.normals, scene.normals, scene.mask)
     assert error < 8.0  # measured 6.3
     assert error < metrics.angular_error(oblique.normals, scene.normals, scene.mask)
@@ -283,7 +283,7 @@ def test_a_bent_reflectance_is_not_read_as_shape():
 
 
 def test_is_offered():
-    assert "photo" in available_methods()
+    assert "photo" in available_solvers()
 
 
 @pytest.mark.parametrize(
@@ -294,5 +294,5 @@ def test_is_offered():
 )
 def test_real_photos_beat_the_silhouette(real_data, set_name, name, bar):
     case = real_data.diligent(name) if set_name == "diligent" else real_data.mit(name)
-    rec = reconstruct(case.image, mask=case.mask, light=case.light, method="photo")
+    rec = reconstruct(case.image, mask=case.mask, light=case.light, solver="photo")
     assert real_data.angular_error(rec.normals, case) < bar

@@ -58,10 +58,10 @@ class TestBars:
 
         # eq. 7 of the 2002 report combines the propagated fields of several references
         singles = [
-            errors(reconstruct(scene.image, mask=scene.mask, references=[r], method="propagation"))
+            errors(reconstruct(scene.image, mask=scene.mask, references=[r], solver="propagation"))
             for r in refs
         ]
-        combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs, method="propagation"))
+        combined = errors(reconstruct(scene.image, mask=scene.mask, references=refs, solver="propagation"))
         assert combined[0] <= max(s[0] for s in singles) + 1e-9
         assert combined[1] <= max(s[1] for s in singles) + 1e-9
 
@@ -80,15 +80,15 @@ class TestAutoMethod:
         assert choose(None).name == "oblique"  # a light still to be estimated may be oblique
         scene = synth.scene("sphere", size=32, light=(1, 0, 3))
         rec = reconstruct(scene.image, mask=scene.mask, light=scene.light)
-        assert rec.info["method"] == "oblique" and rec.info["method_requested"] == "auto"
+        assert rec.info["solver"] == "oblique" and rec.info["solver_requested"] == "auto"
 
     def test_picks_the_guided_photo_solver_for_a_painted_noisy_object(self):
         scene = synth.scene("sphere", size=48, light=(1, 0, 3), noise=0.01)
         plain = reconstruct(scene.image, mask=scene.mask, light=scene.light)
-        assert plain.info["method"] == "oblique" and plain.info["detail"]["outliers"] < OUTLIERS
+        assert plain.info["solver"] == "oblique" and plain.info["detail"]["outliers"] < OUTLIERS
         painted = scene.image * np.where(np.random.default_rng(0).random(scene.image.shape) < 0.05, 0.5, 1.0)
         rec = reconstruct(painted, mask=scene.mask, light=scene.light)
-        assert rec.info["method"] == "guided" and rec.info["detail"]["outliers"] >= OUTLIERS
+        assert rec.info["solver"] == "guided" and rec.info["detail"]["outliers"] >= OUTLIERS
         assert rec.info["detail"]["noise"] > NOISY
 
 
@@ -103,7 +103,7 @@ class TestReconstruct:
         ref = rec.info["references"][0]
         assert rec.depth[ref] == 0  # offset rule: z = 0 at the main reference
         # the default picks the best measured solver for the light: eikonal at +z
-        assert rec.info["method_requested"] == "auto" and rec.info["method"] == "eikonal"
+        assert rec.info["solver_requested"] == "auto" and rec.info["solver"] == "eikonal"
         assert set(rec.info["timings"]) >= {"mask", "normals", "depth"}
         assert rec.albedo == pytest.approx(scene.image.max())
         with pytest.raises(dataclasses.FrozenInstanceError):
@@ -132,8 +132,8 @@ class TestReconstruct:
 
     def test_filter_helps_with_noise(self):
         scene = synth.scene("sphere", size=128, noise=0.01, seed=3)
-        raw = reconstruct(scene.image, mask=scene.mask, method="eikonal")
-        smooth = reconstruct(scene.image, mask=scene.mask, method="eikonal", filter="gaussian:1")
+        raw = reconstruct(scene.image, mask=scene.mask, solver="eikonal")
+        smooth = reconstruct(scene.image, mask=scene.mask, solver="eikonal", filter="gaussian:1")
         assert smooth.info["filter"] == "gaussian"
         assert metrics.angular_error(smooth.normals, scene.normals, scene.mask) < metrics.angular_error(
             raw.normals, scene.normals, scene.mask
@@ -208,7 +208,7 @@ class TestBadInput:
     @pytest.mark.parametrize(
         "kwargs,match",
         [
-            ({"method": "magic"}, "unknown method"),
+            ({"solver": "magic"}, "unknown solver"),
             ({"integrator": "magic"}, "unknown integrator"),
             ({"refine": -1}, "refine"),
             ({"light": (0, 0, -1)}, "z <= 0"),
@@ -233,22 +233,22 @@ class TestEikonalMethod:
     def test_vase_with_its_neck_marked(self):
         scene = synth.scene("vase", size=SIZE)
         rec = reconstruct(
-            scene.image, mask=scene.mask, method="eikonal", concave=synth.concave_regions("vase", size=SIZE)
+            scene.image, mask=scene.mask, solver="eikonal", concave=synth.concave_regions("vase", size=SIZE)
         )
-        assert rec.info["method"] == "eikonal" and rec.info["singular_points"]
+        assert rec.info["solver"] == "eikonal" and rec.info["singular_points"]
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) <= 1.0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) <= 3.0
 
     def test_integrator_can_replace_the_marching_depth(self):
         scene = synth.scene("sphere", size=96)
-        rec = reconstruct(scene.image, mask=scene.mask, method="eikonal", integrator="poisson")
+        rec = reconstruct(scene.image, mask=scene.mask, solver="eikonal", integrator="poisson")
         assert rec.info["integrator"] == "poisson"
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) < 1.0
 
     def test_needs_the_light_at_plus_z(self):
         scene = synth.scene("sphere", size=32)
         with pytest.raises(InputError, match="eikonal"):
-            reconstruct(scene.image, mask=scene.mask, method="eikonal", light=(0.3, 0, 1))
+            reconstruct(scene.image, mask=scene.mask, solver="eikonal", light=(0.3, 0, 1))
 
 
 class TestSynthConcaveRegions:
@@ -355,7 +355,7 @@ class TestPreview:
             mask=scene.mask,
             step=step,
             concave=synth.concave_regions(name, size=256),
-            method="eikonal",
+            solver="eikonal",
         )
         grid = np.zeros_like(scene.mask)
         grid[::step, ::step] = True
@@ -412,7 +412,7 @@ class TestPreview:
         full_mesh, quick_mesh = to_mesh(full, step=step), to_mesh(quick, step=step)
         np.testing.assert_array_equal(quick_mesh.faces, full_mesh.faces)
         np.testing.assert_array_equal(quick_mesh.vertices[:, :2], full_mesh.vertices[:, :2])
-        assert quick.info["preview_step"] == step and quick.info["method"] == "eikonal"
+        assert quick.info["preview_step"] == step and quick.info["solver"] == "eikonal"
         grid = scene.mask[::step, ::step]
         # measured: vase step 2 0.41 % / 1.14 deg (full solve 0.09 % / 0.50 deg); sphere step 2
         # 0.12 % / 0.44 deg, step 3 0.21 % / 0.58 deg
@@ -438,7 +438,7 @@ class TestPreview:
             scene.image,
             mask=scene.mask,
             step=2,
-            method="propagation",
+            solver="propagation",
             filter="gaussian:3",
             references=[(31, 47)],
         )
@@ -456,7 +456,7 @@ class TestPreview:
             if r % 4 and not scene.mask[::4, ::4][round(r / 4), round(c / 4)]
         )
         quick = reconstruct_preview(
-            scene.image, mask=scene.mask, step=4, references=[edge], method="propagation"
+            scene.image, mask=scene.mask, step=4, references=[edge], solver="propagation"
         )
         r, c = quick.info["references"][0]
         assert scene.mask[r, c] and abs(r - edge[0]) <= 6 and abs(c - edge[1]) <= 6
@@ -481,14 +481,14 @@ class TestPreview:
     def test_preview_step_keeps_to_the_solvers_budget(self):
         mask = np.ones((512, 512), bool)
         # step 2 leaves 65,536 grid pixels, over the eikonal budget: doubled once (16,384)
-        assert preview_step(mask, 2, method="eikonal") == 4
+        assert preview_step(mask, 2, solver="eikonal") == 4
         assert 512**2 / 4**2 <= get_solver("eikonal").preview_pixels < 512**2 / 2**2
-        assert preview_step(mask, 2, method="oblique") == 16  # 1,024 pixels
+        assert preview_step(mask, 2, solver="oblique") == 16  # 1,024 pixels
         assert preview_step(mask, 3, light=(0.5, 0.0, 0.866)) == 12  # auto under oblique light
         assert preview_step(mask, 2, light="estimate") == 16
         assert preview_step(np.ones((64, 64), bool), 1) == 1  # small enough at full resolution
         # never so coarse that the grid has fewer than 3 points across its short side
-        assert preview_step(np.ones((20, 100_000), bool), 1, method="oblique") == 4
+        assert preview_step(np.ones((20, 100_000), bool), 1, solver="oblique") == 4
 
     def test_reference_off_the_object(self):
         scene = synth.scene("sphere", size=48)
@@ -500,7 +500,7 @@ class TestAutoOnNoisyImages:
     def test_plus_z_with_noise_goes_to_the_smoothed_oblique_solver(self):
         scene = synth.scene("ellipsoid", size=128, noise=0.01)
         rec = reconstruct(scene.image, mask=scene.mask)
-        assert rec.info["method"] == "oblique" and rec.info["auto_filter"] == "gaussian:2"
+        assert rec.info["solver"] == "oblique" and rec.info["auto_filter"] == "gaussian:2"
         # measured 1.14 % / 1.47 deg (eikonal on the unfiltered image: 2.57 % / 3.41 deg)
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) < 3.0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 3.5
@@ -516,7 +516,7 @@ class TestObliqueOnNoisyImages:
         light = light_from_slant_tilt(30, 45)
         scene = synth.scene(name, size=256, light=light, noise=0.01)
         rec = reconstruct(scene.image, mask=scene.mask, light=light)
-        assert rec.info["method"] == "oblique" and rec.info["auto_filter"] == "gaussian:2"
+        assert rec.info["solver"] == "oblique" and rec.info["auto_filter"] == "gaussian:2"
         # measured 1.7 % / 1.3 deg (sphere), 1.3 % / 1.2 deg (ellipsoid); unfiltered 90-140 %
         assert metrics.depth_error(rec.depth, scene.depth, scene.mask) < 3.0
         assert metrics.angular_error(rec.normals, scene.normals, scene.mask) < 2.5

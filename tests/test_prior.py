@@ -181,7 +181,7 @@ class TestShippedModel:
     @pytest.mark.parametrize("method", ["learned", "guided"])
     def test_solvers_run_through_reconstruct(self, method):
         scene = synth.scene("sphere", size=64, light=(0.3, 0.3, 0.9), noise=0.01)
-        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, method=method)
+        rec = reconstruct(scene.image, mask=scene.mask, light=scene.light, solver=method)
         error = angular_error(rec.normals, scene.normals, scene.mask)
         assert error < 15.0
         assert np.isfinite(rec.depth[scene.mask]).all()
@@ -198,5 +198,5 @@ class TestShippedModel:
 def test_auto_reads_real_photos_as_taken_better_than_their_outline(real_data, set_name, name, bar):
     case = real_data.diligent(name) if set_name == "diligent" else real_data.mit_photo(name)
     rec = reconstruct(case.image, mask=case.mask, light="estimate")
-    assert rec.info["method"] == "guided"  # a photograph: the prior, refined by its shading
+    assert rec.info["solver"] == "guided"  # a photograph: the prior, refined by its shading
     assert real_data.angular_error(rec.normals, case) < bar

@@ -457,7 +457,7 @@ class TestRealPhotos:
     def test_valid_solids(self, real_data, name, method, options):
         kind, object_name = name.split("/")
         case = real_data.diligent(object_name) if kind == "diligent" else real_data.mit(object_name)
-        rec = shadeform.reconstruct(case.image, light=case.light, mask=case.mask, method=method, refine=0)
+        rec = shadeform.reconstruct(case.image, light=case.light, mask=case.mask, solver=method, refine=0)
         solid = shadeform.relief(rec, width_mm=80, height_mm=5, base_mm=1.5, **options)
         assert_valid_solid(solid)
         assert longest_side(solid) == pytest.approx(80.0)

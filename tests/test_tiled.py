@@ -214,7 +214,7 @@ def test_on_a_cluster_of_worker_processes(result, geotiff, tmp_path):
         ({"mask": np.ones((8, 8), bool)}, "shape"),
         ({"mask": np.zeros((64, 64), bool)}, "empty"),
         ({"scheduler": "fastest"}, "scheduler"),
-        ({"method": "magic"}, "method"),
+        ({"solver": "magic"}, "solver"),
     ],
 )
 def test_bad_options_are_one_line_input_errors(options, fragment):

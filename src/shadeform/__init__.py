@@ -38,7 +38,7 @@ _EXPORTS = {
     "load_depth": "shadeform.io.maps",
     "export": "shadeform.io.exporters",
     "available_formats": "shadeform.io.exporters",
-    "available_methods": "shadeform.solvers",
+    "available_solvers": "shadeform.solvers",
     "reconstruct": "shadeform.pipeline",
     "estimate_light": "shadeform.light",
     "LightEstimate": "shadeform.light",
@@ -76,12 +76,17 @@ _SUBMODULES = {
     "solid",
 }
 
+# old names, for one release: their module warns (DeprecationWarning) when they are asked for
+_DEPRECATED = {"available_methods": "shadeform.solvers"}
+
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 
 
 def __getattr__(name: str):
     if name in _EXPORTS:
         return getattr(importlib.import_module(_EXPORTS[name]), name)
+    if name in _DEPRECATED:
+        return getattr(importlib.import_module(_DEPRECATED[name]), name)
     if name in _SUBMODULES:
         return importlib.import_module(f"shadeform.{name}")
     raise AttributeError(f"module 'shadeform' has no attribute {name!r}")

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 
 #: How often a worker checks that its batch process still runs (seconds).
@@ -66,6 +67,7 @@ class BatchResult:
     photo_info: dict[str, Any] | None = None
 
 
+@renamed_keywords(method="solver")
 def reconstruct_files(
     photos: Sequence[str | os.PathLike],
     out_dir: str | os.PathLike,
@@ -114,7 +116,7 @@ def reconstruct_files(
     progress : callable, optional
         Called as ``progress(done, total)`` after each photo, in this process.
     **options
-        Keyword arguments of :func:`shadeform.reconstruct` (``light``, ``method``, ``filter``,
+        Keyword arguments of :func:`shadeform.reconstruct` (``light``, ``solver``, ``filter``,
         ``integrator``, ``refine``, ``concave``, ...), the same for every photo.
 
     Returns
@@ -126,7 +128,7 @@ def reconstruct_files(
     ------
     InputError
         No photos, two photos with the same name, a missing output folder, an unknown mesh
-        suffix, ``workers < 1``, ``max_pixels < 1``, an unknown ``channel``, ``method`` or ``integrator``, a
+        suffix, ``workers < 1``, ``max_pixels < 1``, an unknown ``channel``, ``solver`` or ``integrator``, a
         ``linear`` that is not a bool or None, a malformed ``filter``, or Dask not installed: all
         before any photo is read. Problems with one photo are reported in its result instead.
     """
@@ -136,7 +138,7 @@ def reconstruct_files(
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS, MAX_PIXELS
     from shadeform.preprocess import parse_filter
-    from shadeform.solvers import available_methods
+    from shadeform.solvers import available_solvers
 
     photos = [Path(p) for p in photos]
     out_dir = Path(out_dir)
@@ -158,7 +160,7 @@ def reconstruct_files(
         check_choice(channel, ("auto", *CHANNELS), "channel")
     if linear is not None and not isinstance(linear, bool):
         raise InputError(f"linear must be True, False or None (decide per photo), got {linear!r}")
-    check_choice(options.get("method", "auto"), tuple(available_methods()), "method")
+    check_choice(options.get("solver", "auto"), tuple(available_solvers()), "solver")
     if options.get("integrator") is not None:
         check_choice(options["integrator"], tuple(available_integrators()), "integrator")
     parse_filter(options.get("filter"))

@@ -22,6 +22,7 @@ from scipy import ndimage as ndi
 # there (a patched one, e.g. a test's, is the one used)
 from shadeform import pipeline
 from shadeform._checks import whole
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.light import as_light
 from shadeform.masks import FoundObject, find_object
@@ -65,7 +66,7 @@ def reconstruct_on_grid(
         As for :func:`reconstruct`, in pixels of the input image. A reference whose grid point
         falls off the coarse object moves to the nearest grid point on it.
     **options
-        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+        ``light``, ``solver``, ``integrator``, ``refine``: as for :func:`reconstruct`.
 
     Returns
     -------
@@ -145,7 +146,7 @@ def reconstruct_preview(
     mask : (H, W) bool or FoundObject, keyword-only
         As for :func:`reconstruct`.
     **options
-        ``filter``, ``references``, ``concave``, ``light``, ``method``, ``integrator``,
+        ``filter``, ``references``, ``concave``, ``light``, ``solver``, ``integrator``,
         ``refine``: as for :func:`reconstruct_on_grid`, in pixels of the input image.
 
     Returns
@@ -231,7 +232,8 @@ def _keep_caps(image, mask, coarse, coarse_mask, step: int) -> np.ndarray:
     return out
 
 
-def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: Any = (0.0, 0.0, 1.0)) -> int:
+@renamed_keywords(method="solver")
+def preview_step(mask: np.ndarray, step: int, *, solver: str = "auto", light: Any = (0.0, 0.0, 1.0)) -> int:
     """The grid spacing of a quick look (:func:`reconstruct_preview`) for a mesh of ``step``.
 
     ``step`` itself, doubled until the object's pixels on the grid fit the solver's budget
@@ -243,7 +245,7 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
         The object.
     step : int
         The mesh's grid spacing in pixels.
-    method : str, keyword-only
+    solver : str, keyword-only
         As for :func:`reconstruct`; "auto" is resolved for ``light`` on a clean image.
     light : (3,) float or "estimate", keyword-only
         As for :func:`reconstruct`; an estimated light counts as oblique.
@@ -253,11 +255,10 @@ def preview_step(mask: np.ndarray, step: int, *, method: str = "auto", light: An
     int
         A multiple of ``step``.
     """
-    if method == AUTO:
-        solver = choose(None if isinstance(light, str) else as_light(light))
-    else:
-        solver = get_solver(method)
-    budget = solver.preview_pixels
+    chosen = (
+        choose(None if isinstance(light, str) else as_light(light)) if solver == AUTO else get_solver(solver)
+    )
+    budget = chosen.preview_pixels
     count = int(np.count_nonzero(mask))
     spacing = max(int(step), 1)
     while count / spacing**2 > budget and min(mask.shape) // (2 * spacing) >= MIN_SIDE:
@@ -308,7 +309,7 @@ def reconstruct_on_level(
         block is off the object; one off the image left for :func:`reconstruct` to refuse),
         regions' vertices divided by ``factor``.
     **options
-        ``light``, ``method``, ``integrator``, ``refine``: as for :func:`reconstruct`.
+        ``light``, ``solver``, ``integrator``, ``refine``: as for :func:`reconstruct`.
 
     Returns
     -------

@@ -97,7 +97,7 @@ def load_example(name: str, *, size: int | None = None) -> tuple[np.ndarray, dic
         settings: ``light`` (3-tuple, or ``"estimate"`` for a photo whose light is not known),
         ``mask`` ((H, W) bool, or None to find it
         automatically), ``filter`` (a :func:`shadeform.preprocess.parse_filter` spec or None)
-        ``step`` (mesh step in pixels) and ``method`` (a ``reconstruct`` method).
+        ``step`` (mesh step in pixels) and ``solver`` (a ``reconstruct`` solver).
 
     Raises
     ------
@@ -138,7 +138,7 @@ def _coin(info: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
         # A low relief whose outline is a coin's edge, not an occluding contour: the 2002
         # propagation keeps the relief on a flat disc, where the photo solver (outline normals
         # in the image plane) rounds it into a dome.
-        method="propagation",
+        solver="propagation",
     )
     return image, info
 
@@ -157,7 +157,7 @@ def _synthetic(scene_name: str, size: int | None, info: dict[str, Any]) -> tuple
         mask=np.array(rendered.mask),
         filter=None,
         step=max(1, int(size) // 128),
-        method="auto",
+        solver="auto",
     )
     return rendered.image.astype(np.float32), info
 
@@ -211,7 +211,7 @@ def load_view_set_example(name: str) -> tuple[np.ndarray, np.ndarray, tuple[floa
         Each view's turntable angle in degrees (``docs/conventions.md``, "Turntable views").
     settings : dict
         What every view is best reconstructed with, as :func:`load_example` gives it: ``light``,
-        ``filter``, ``step`` and ``method``.
+        ``filter``, ``step`` and ``solver``.
 
     Raises
     ------
@@ -235,6 +235,6 @@ def load_view_set_example(name: str) -> tuple[np.ndarray, np.ndarray, tuple[floa
         "light": tuple(float(v) for v in views[0].light),
         "filter": None,
         "step": max(1, _SYNTH_SIZE // 128),
-        "method": "auto",
+        "solver": "auto",
     }
     return images, masks, tuple(float(view.angle) for view in views), settings

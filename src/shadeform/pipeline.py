@@ -1,6 +1,6 @@
 """``reconstruct()``: one call from a shading image to normals and depth.
 
-load -> (mask, filter) -> light -> solvers[method] -> depth. This module checks the user's input
+load -> (mask, filter) -> light -> solvers[solver] -> depth. This module checks the user's input
 once, at the boundary, prepares what every solver needs (:class:`shadeform.solvers.Problem`) and
 looks the solver up in the registry (:mod:`shadeform.solvers`); it knows no solver by name.
 The solves on the image's grid (quick looks, :func:`~shadeform.coarse.reconstruct_preview`) are
@@ -16,6 +16,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from shadeform._checks import StageTimer, check_choice, check_mask, shading_image, whole
+from shadeform._deprecated import renamed_keywords
 from shadeform.confidence import assess
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
@@ -30,7 +31,7 @@ from shadeform.solvers import (
     SOLVERS,
     Problem,
     Reference,
-    available_methods,
+    available_solvers,
     choose,
     get_solver,
     solver_names,
@@ -47,25 +48,26 @@ SATURATED_FRACTION = 0.9
 MAX_REFINE = 100
 
 
+@renamed_keywords(method="solver", method_options="solver_options")
 def reconstruct(
     image: np.ndarray,
     *,
     light: Sequence[float] | str = (0.0, 0.0, 1.0),
-    method: str = "auto",
+    solver: str = "auto",
     mask: np.ndarray | FoundObject | None = None,
     filter: str | Filter | None = None,
     references: Sequence | None = None,
     concave: Any = None,
     integrator: str | None = None,
     refine: int = 3,
-    method_options: Mapping[str, Any] | None = None,
+    solver_options: Mapping[str, Any] | None = None,
     progress: Callable[[str, float], None] | None = None,
 ) -> Reconstruction:
     """Recover normals and depth from one shading image.
 
     The image is checked, the object found (or the mask checked), the filter applied, the light
     settled (given or estimated), the reference pixels and the brightness ``k * albedo`` found;
-    then the solver named by ``method`` (:func:`shadeform.solvers.available_methods`) turns them
+    then the solver named by ``solver`` (:func:`shadeform.solvers.available_solvers`) turns them
     into normals and depth.
 
     Parameters
@@ -77,7 +79,7 @@ def reconstruct(
         Direction toward the light in the camera frame (``docs/conventions.md``), or
         ``"estimate"`` to estimate it and ``k * albedo`` from the image
         (:func:`shadeform.light.estimate_light`; ``info["light_estimate"]`` says how).
-    method : str
+    solver : str
         "auto" (the default: the best measured solver for the light and the image's noise and
         outlying detail, :func:`shadeform.solvers.choose`, ``info["detail"]``: "photo" for a
         noisy photograph with highlights, shadows or texture) or a registered solver: "photo"
@@ -116,10 +118,11 @@ def reconstruct(
         Iterations of the integrability refinement of the propagated field
         (:func:`shadeform.solvers.propagation.refine_by_integrability`); 0 gives the report's
         field exactly.
-    method_options : mapping, optional
+    solver_options : mapping, optional
         The solver's own options, name to value (text is read as the option's type): those its
         registry entry declares (:class:`shadeform.solvers.Solver` ``options``; ``shadeform
-        methods`` lists them). The built-in solvers declare none.
+        solvers`` lists them). The built-in solvers declare none. ``method=`` and ``method_options=``,
+        their old names, still work for one release (``DeprecationWarning``).
     progress : callable, optional, keyword-only
         Called as ``progress(stage, fraction)`` after each stage (the names of
         ``info["timings"]``), ``fraction`` the rough share of the work done (:data:`STAGE_SHARES`);
@@ -137,7 +140,7 @@ def reconstruct(
     ------
     InputError
         For every user mistake: wrong shapes, NaN, an empty, black or saturated object, a
-        reference off the object, malformed regions, unknown method names.
+        reference off the object, malformed regions, unknown solver names.
 
     Examples
     --------
@@ -154,10 +157,10 @@ def reconstruct(
     if estimate_wanted and light != "estimate":
         raise InputError(f"light must be a direction (x, y, z) or 'estimate', got {light!r}")
     light = None if estimate_wanted else as_light(light)
-    check_choice(method, tuple(available_methods()), "method")  # "auto" too, unlike get_solver's list
-    solver = None if method == AUTO else get_solver(method)
+    check_choice(solver, tuple(available_solvers()), "solver")  # "auto" too, unlike get_solver's list
+    requested, solver = solver, None if solver == AUTO else get_solver(solver)
     # a named solver's options are checked before any work; "auto"'s once it has chosen
-    settled_options = None if solver is None else SOLVERS.settle(solver.name, method_options)
+    settled_options = None if solver is None else SOLVERS.settle(solver.name, solver_options)
     if integrator is not None:
         check_choice(integrator, tuple(available_integrators()), "integrator")
     refine = whole(refine, "refine")
@@ -203,10 +206,10 @@ def reconstruct(
         if solver.denoise is None:
             noise = None
     if settled_options is None:
-        settled_options = SOLVERS.settle(solver.name, method_options)
+        settled_options = SOLVERS.settle(solver.name, solver_options)
     if not solver.takes(light):
         raise InputError(
-            f"method {solver.name!r} needs the light at (0, 0, 1); use "
+            f"solver {solver.name!r} needs the light at (0, 0, 1); use "
             f"{' or '.join(repr(s) for s in _any_light())} for other light directions"
         )
     concave_x, concave_y = concave_masks(as_regions(concave), image.shape)
@@ -249,8 +252,8 @@ def reconstruct(
     assessed = assess(shading, mask, light, normals, albedo=albedo, depth=depth)
     lap("confidence")
     info = {
-        "method": solver.name,
-        "method_requested": method,
+        "solver": solver.name,
+        "solver_requested": requested,
         "integrator": used_integrator or solver.depth,
         "refine": 0,
         "filter": user_filter.kind if user_filter else "none",
@@ -271,7 +274,7 @@ def reconstruct(
         ],
     }
     if settled_options:
-        info["method_options"] = settled_options
+        info["solver_options"] = settled_options
     if assessed.others:
         info["unsure_others"] = {"areas": assessed.others, "share": assessed.others_share}
     if bounded.applied:
@@ -462,7 +465,7 @@ def warm() -> dict[str, float]:
     start = time.perf_counter()
     image, info = load_example("coin")
     rec = reconstruct(
-        image, light=info["light"], mask=info["mask"], filter=info["filter"], method=info["method"]
+        image, light=info["light"], mask=info["mask"], filter=info["filter"], solver=info["solver"]
     )
     to_mesh(rec, step=2)
     seconds["demo"] = time.perf_counter() - start

@@ -29,7 +29,7 @@ class Reconstruction:
         ``k * albedo`` of the image model ``I = k * albedo * max(0, N . L)``; per channel for
         colour photos in photometric stereo.
     info : dict
-        What ran: method, integrator, references, iterations, timings in seconds per stage;
+        What ran: solver, integrator, references, iterations, timings in seconds per stage;
         ``info["unsure"]``: the areas whose convexity the photo cannot settle that matter most
         (:func:`shadeform.confidence.assess`), each ``{"polygon", "axis", "share", "centre"}``;
         ``info["unsure_others"]``: ``{"areas", "share"}`` of the rest, when there are more;

@@ -5,7 +5,7 @@
 
 An entry is a frozen record with a ``name`` (what users type), a one-line ``description`` and,
 optionally, ``options``: a tuple of :class:`Option` (name, type, default, help) that the command
-line (``--option NAME=VALUE``), the app's ``/api/options`` and ``shadeform methods`` read. Entries
+line (``--option NAME=VALUE``), the app's ``/api/options`` and ``shadeform solvers`` read. Entries
 are looked up by name and listed in registration order; every listing is read from the registry
 when asked, never copied at import, so an entry registered later (by a plug-in, by a test) is
 everywhere at once.

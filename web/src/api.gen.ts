@@ -43,9 +43,9 @@ export interface ReconstructParams {
   channel: Channel;
   filter: FilterParams;
   light: LightParams;
-  /** One of ``Options.methods``; "auto" is the best measured for the light. */
-  method: string;
-  /** One of ``Options.integrators``, or null for the method's own. */
+  /** One of ``Options.solvers``; "auto" is the best measured for the light. */
+  solver: string;
+  /** One of ``Options.integrators``, or null for the solver's own. */
   integrator: string | null;
   /** Integrability refinement iterations (propagation only). */
   refine: number;
@@ -68,7 +68,7 @@ export interface ReconstructRequest {
   preview: boolean;
 }
 
-/** One option of a method's own (:class:`shadeform.registry.Option`). */
+/** One option of a solver's (or another registry entry's) own (:class:`shadeform.registry.Option`). */
 export interface OptionInfo {
   name: string;
   type: "bool" | "int" | "float" | "str";
@@ -77,7 +77,7 @@ export interface OptionInfo {
   help: string;
 }
 
-/** A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`, :func:`shadeform.integration.available_integrators`). */
+/** A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_solvers`, :func:`shadeform.integration.available_integrators`). */
 export interface MethodInfo {
   name: string;
   /** One line in the user's words. */
@@ -123,7 +123,7 @@ export interface ImageInfo {
 /** What the library offers, the upload limits and the default parameters. */
 export interface Options {
   /** "auto" first, then every registered solver. */
-  methods: MethodInfo[];
+  solvers: MethodInfo[];
   integrators: MethodInfo[];
   channels: string[];
   filters: string[];

@@ -67,9 +67,9 @@ export class Panel {
   private readonly filterSize = $<HTMLInputElement>('filter-size');
   private readonly slant = $<HTMLInputElement>('slant');
   private readonly tilt = $<HTMLInputElement>('tilt');
-  private readonly method = $<HTMLSelectElement>('method');
-  private readonly methodNote = $<HTMLElement>('method-note');
-  private methodHelp: Record<string, string> = {};
+  private readonly solver = $<HTMLSelectElement>('solver');
+  private readonly solverNote = $<HTMLElement>('solver-note');
+  private solverHelp: Record<string, string> = {};
   private readonly integrator = $<HTMLSelectElement>('integrator');
   private readonly refine = $<HTMLInputElement>('refine');
   private readonly step = $<HTMLInputElement>('step');
@@ -79,8 +79,8 @@ export class Panel {
     fillSelect(this.channel, options.channels.map((c) => [c, CHANNEL_NAMES[c] ?? c]));
     fillSelect(this.filterKind, options.filters.map((f) => [f, FILTER_NAMES[f] ?? capitalised(f)]));
     // names, help lines and order come from the library's registries: a new solver shows up here
-    this.methodHelp = descriptions(options.methods);
-    fillSelect(this.method, options.methods.map((m): [string, string] => [m.name, m.name === 'auto' ? 'Auto (best measured)' : capitalised(m.name)]), this.methodHelp);
+    this.solverHelp = descriptions(options.solvers);
+    fillSelect(this.solver, options.solvers.map((m): [string, string] => [m.name, m.name === 'auto' ? 'Auto (best measured)' : capitalised(m.name)]), this.solverHelp);
     fillSelect(this.integrator, [['', 'Method default'], ...options.integrators.map((i): [string, string] => [i.name, capitalised(i.name)])],
       descriptions(options.integrators));
 
@@ -99,7 +99,7 @@ export class Panel {
     });
     this.slider(this.slant, touched);
     this.slider(this.tilt, touched);
-    this.method.addEventListener('change', () => this.emit({ method: this.method.value }));
+    this.solver.addEventListener('change', () => this.emit({ solver: this.solver.value }));
     this.integrator.addEventListener('change', () => this.emit({ integrator: this.integrator.value || null }));
     this.slider(this.refine, (v) => ({ refine: v }));
     this.slider(this.step, (v) => ({ step: v }));
@@ -176,8 +176,8 @@ export class Panel {
     this.params = structuredClone(params);
     this.channel.value = params.channel;
     this.filterKind.value = params.filter.kind;
-    this.method.value = params.method;
-    this.methodNote.textContent = this.methodHelp[params.method] ?? '';
+    this.solver.value = params.solver;
+    this.solverNote.textContent = this.solverHelp[params.solver] ?? '';
     this.integrator.value = params.integrator ?? '';
     this.refine.value = String(params.refine);
     this.step.value = String(params.step);

@@ -31,7 +31,7 @@ export function viewCard(view: View, index: number, current: FusedView | null): 
           <button class="btn small" data-act="keep" title="Make these areas the view's own concave regions: they stay when you edit it">Keep as regions</button>
         </div>
         <div class="buttons">
-          <button class="btn small" data-act="edit" title="Open this photo with its settings (mask, regions, light, method) to change them; the fused model follows">Edit</button>
+          <button class="btn small" data-act="edit" title="Open this photo with its settings (mask, regions, light, solver) to change them; the fused model follows">Edit</button>
           <button class="btn small danger" data-act="remove" title="Leave this photo out of the fused model">Remove</button>
         </div>
       </div>`;
@@ -103,13 +103,13 @@ export function fusionNote(result: FuseResult): { note: string; warnings: string
   return { note: parts.join(' '), warnings };
 }
 
-/** What a view's settings say in a few words: mask, regions, light, method. */
+/** What a view's settings say in a few words: mask, regions, light, solver. */
 function settingsText(params: Params): string {
   const parts = [params.mask ? 'your mask' : 'automatic mask'];
   const regions = params.concave.regions.length;
   if (regions) parts.push(`${regions} concave region${regions === 1 ? '' : 's'}`);
   const light = params.light;
   parts.push(light.mode === 'z' ? 'frontal light' : light.mode === 'estimate' ? 'light estimated' : `light ${light.slant.toFixed(0)}° / ${light.tilt.toFixed(0)}°`);
-  if (params.method !== 'auto') parts.push(params.method);
+  if (params.solver !== 'auto') parts.push(params.solver);
   return parts.join(' · ');
 }

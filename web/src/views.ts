@@ -1,5 +1,5 @@
 // Views: photos of one object from several sides, each reconstructed as one photo is (its own
-// mask, regions, light and method), placed in one frame and fused into one closed model on the
+// mask, regions, light and solver), placed in one frame and fused into one closed model on the
 // server. This module owns the list of views (the image pane shows them as cards: the photo with
 // the mask it was solved with, its name, its turntable angle, Edit and Remove: viewCards.ts draws
 // them), the panel group of the fusion's settings, and the fuse requests; the App gives it the 3D

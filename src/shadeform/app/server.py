@@ -4,7 +4,7 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 (all under ``/api``, JSON unless said; types in :mod:`shadeform.app.schema`):
 
 ==========================================  ===================================================
-``GET  /api/options``                       methods, integrators, formats, examples, limits
+``GET  /api/options``                       solvers, integrators, formats, examples, limits
 ``POST /api/images`` (multipart ``file``)   store an uploaded photo -> ``ImageInfo``
 ``POST /api/examples/{name}[?size=N]``      store a shipped example -> ``ImageInfo``
 ``GET  /api/images/{id}/photo.png``         the photo, 8-bit PNG
@@ -209,17 +209,17 @@ def _lifespan(warm: bool, state: State):
 
 
 def warm_up() -> None:
-    """Run every method and integrator once on a tiny scene: compiles (or loads) numba kernels."""
+    """Run every solver and integrator once on a tiny scene: compiles (or loads) numba kernels."""
     from shadeform import reconstruct, synth, to_mesh
     from shadeform.integration import available_integrators
-    from shadeform.solvers import available_methods
+    from shadeform.solvers import available_solvers
 
     scene = synth.scene("sphere", size=24)
     # float32: what uploads are (the kernels are specialised per dtype); float64: the examples
     for image in (scene.image.astype(np.float32), scene.image):
-        for method in available_methods():
+        for solver in available_solvers():
             for integrator in (None, *available_integrators()):
-                to_mesh(reconstruct(image, mask=scene.mask, method=method, integrator=integrator), step=2)
+                to_mesh(reconstruct(image, mask=scene.mask, solver=solver, integrator=integrator), step=2)
     # a shape with areas the photo cannot settle: the confidence's outlines (their first use took 1 s)
     vase = synth.scene("vase", size=64)
     reconstruct(vase.image.astype(np.float32), mask=vase.mask)

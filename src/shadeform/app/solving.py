@@ -72,7 +72,7 @@ def solve(
         mask, mask_png = user_mask(state, params.mask, image.shape)
     settings["mask"] = mask
     light = settings["light"]
-    spacing = preview_step(mask, params.step, method=params.method, light=light) if preview else 1
+    spacing = preview_step(mask, params.step, solver=params.solver, light=light) if preview else 1
     key = (*full_key, "preview", spacing) if spacing > 1 else full_key
     if spacing > 1 and (solved := state.results.get(key)) is not None:
         return solved, True
@@ -113,7 +113,7 @@ def _settings(params: ReconstructParams) -> dict[str, Any]:
     regions = params.concave.model_dump()
     return dict(
         light=light,
-        method=params.method,
+        solver=params.solver,
         filter=spec,
         references=[tuple(ref) for ref in params.references],
         concave=regions if regions["regions"] else None,
@@ -148,7 +148,7 @@ def _solve_level(
         mask = downsample(full.astype(np.float32), factor) >= 0.5
         if not mask.any():  # thinner than a block: the blocks it touches
             mask = downsample(full.astype(np.float32), factor) > 0
-    spacing = preview_step(mask, 1, method=params.method, light=settings["light"])
+    spacing = preview_step(mask, 1, solver=params.solver, light=settings["light"])
     key = (*full_key, "level", factor, spacing)
     if (solved := state.results.get(key)) is not None:
         return solved, True

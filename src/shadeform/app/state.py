@@ -277,7 +277,7 @@ def suggested_params(info: dict[str, Any]) -> dict[str, Any]:
         filter=FilterParams(kind=spec.kind, size=spec.size),
         light=light_params,
         step=int(info["step"]),
-        method=info["method"],
+        solver=info["solver"],
     ).model_dump()
 
 
@@ -308,7 +308,7 @@ def method_infos(registry) -> list[MethodInfo]:
 
 
 def app_options(limits: AppLimits, initial: StoredImage | None) -> Options:
-    """What ``/api/options`` lists: methods, integrators, formats, examples, limits, defaults."""
+    """What ``/api/options`` lists: solvers, integrators, formats, examples, limits, defaults."""
     from shadeform.app.schema import StereoParams
     from shadeform.examples import EXAMPLES, PHOTO_SET_EXAMPLES, VIEW_SET_EXAMPLES
     from shadeform.integration import INTEGRATORS
@@ -316,10 +316,10 @@ def app_options(limits: AppLimits, initial: StoredImage | None) -> Options:
     from shadeform.io.images import CHANNELS
     from shadeform.photometric import STEREO_METHODS
     from shadeform.preprocess import FILTER_KINDS
-    from shadeform.solvers import AUTO, SOLVERS, available_methods
+    from shadeform.solvers import AUTO, SOLVERS, available_solvers
 
     return Options(
-        methods=[MethodInfo(name=AUTO, description=available_methods()[AUTO]), *method_infos(SOLVERS)],
+        solvers=[MethodInfo(name=AUTO, description=available_solvers()[AUTO]), *method_infos(SOLVERS)],
         integrators=method_infos(INTEGRATORS),
         channels=list(CHANNELS),
         filters=list(FILTER_KINDS),

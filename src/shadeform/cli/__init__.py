@@ -7,9 +7,9 @@ Commands::
     shadeform relief IMAGE -o OUT.stl --width 100   photo -> print-ready solid in millimetres
     shadeform maps IMAGE --out DIR           photo -> normal, height, occlusion and curvature maps
     shadeform synth SCENE -o image.png       a synthetic image and its ground truth
-    shadeform evaluate                       error table of the methods on the synthetic scenes
+    shadeform evaluate                       error table of the solvers on the synthetic scenes
     shadeform formats                        the mesh formats -o understands
-    shadeform methods                        the solvers and integrators --method / --integrator take
+    shadeform solvers                        the solvers and integrators --solver / --integrator take
     shadeform demo                           the main job on a shipped photograph
     shadeform app [IMAGE]                    the browser app, served on 127.0.0.1
 

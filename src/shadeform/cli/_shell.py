@@ -24,7 +24,7 @@ from typer.core import TyperGroup
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet, target_name
-from shadeform.solvers import available_methods
+from shadeform.solvers import available_solvers
 
 #: Exit code of every user error (the same as a command-line usage error).
 USAGE_EXIT = 2
@@ -44,7 +44,7 @@ _NO_ARGS = getattr(sys.modules[_CLICK_ERROR.__module__], "NoArgsIsHelpError", ()
 #: The order of ``shadeform --help``'s command list: the main job first, the tools last.
 COMMAND_ORDER = (
     "reconstruct", "stereo", "fuse", "relief", "maps", "lights", "batch", "app", "demo",
-    "synth", "evaluate", "methods", "formats", "warm",
+    "synth", "evaluate", "solvers", "formats", "warm",
 )  # fmt: skip
 
 
@@ -491,9 +491,14 @@ TiltOption = Annotated[
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")]
 StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
-MethodOption = Annotated[
+# --method: the option's name before the rename, kept for one release
+SolverOption = Annotated[
     str,
-    typer.Option(help=f"Solver: {', '.join(available_methods())} (`shadeform methods` says what each does)."),
+    typer.Option(
+        "--solver",
+        "--method",
+        help=f"Solver: {', '.join(available_solvers())} (`shadeform solvers` says what each does).",
+    ),
 ]
 IntegratorOption = Annotated[
     str | None,

@@ -16,8 +16,8 @@ from shadeform.cli._shell import (
     IntegratorOption,
     JsonOption,
     MaxPixelsOption,
-    MethodOption,
     SlantOption,
+    SolverOption,
     TiltOption,
     app,
     check_outputs,
@@ -82,7 +82,7 @@ def fuse(
     tilt: TiltOption = None,
     channel: ChannelOption = "auto",
     filter: FilterOption = None,
-    method: MethodOption = "auto",
+    solver: SolverOption = "auto",
     integrator: IntegratorOption = None,
     resolution: Annotated[
         float | None,
@@ -147,7 +147,7 @@ def fuse(
             return shadeform.reconstruct(
                 images[i],
                 light=light_vector,
-                method=method,
+                solver=solver,
                 mask=object_masks[i],
                 filter=filter,
                 integrator=integrator,

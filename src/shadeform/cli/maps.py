@@ -22,10 +22,10 @@ from shadeform.cli._shell import (
     LinearOption,
     MaskFileOption,
     MaxPixelsOption,
-    MethodOption,
     ReferenceOption,
     RefineOption,
     SlantOption,
+    SolverOption,
     TiltOption,
     app,
     format_seconds,
@@ -85,7 +85,7 @@ def maps(
     concave: ConcaveOption = None,
     reference: ReferenceOption = None,
     mask: MaskFileOption = None,
-    method: MethodOption = "auto",
+    solver: SolverOption = "auto",
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     as_json: JsonOption = False,
@@ -108,7 +108,7 @@ def maps(
                          channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
     options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        method=method, filter=filter, integrator=integrator, refine=refine,
+        solver=solver, filter=filter, integrator=integrator, refine=refine,
     )  # fmt: skip
 
     err = stderr_console()
@@ -151,7 +151,7 @@ def maps(
     console = stdout_console()
     console.print(
         f"[bold]maps of[/] {escape(str(image))} ({photo.image.shape[1]}x{photo.image.shape[0]}), "
-        f"{rec.info['method']}, in {format_seconds(timings['total'])}"
+        f"{rec.info['solver']}, in {format_seconds(timings['total'])}"
     )
     print_files(console, rows)
 

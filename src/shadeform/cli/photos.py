@@ -24,10 +24,10 @@ from shadeform.cli._shell import (
     LinearOption,
     MaskFileOption,
     MaxPixelsOption,
-    MethodOption,
     ReferenceOption,
     RefineOption,
     SlantOption,
+    SolverOption,
     StepOption,
     TiltOption,
     app,
@@ -55,20 +55,20 @@ from shadeform.cli.tiles import tile_size, tiled_reconstruct
 from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 
-# a solver's own options (its registry entry's): the solver is chosen by --method, so these are read
-# by name and type only once it is known (shadeform.reconstruct(method_options=...))
-MethodOptionsOption = Annotated[
+# a solver's own options (its registry entry's): the solver is chosen by --solver, so these are read
+# by name and type only once it is known (shadeform.reconstruct(solver_options=...))
+SolverOptionsOption = Annotated[
     list[str] | None,
     typer.Option(
         "--option",
         metavar="NAME=VALUE",
-        help="An option of the solver's own (`shadeform methods` lists them); repeat for several.",
+        help="An option of the solver's own (`shadeform solvers` lists them); repeat for several.",
         show_default=False,
     ),
 ]
 
 
-def parse_method_options(texts: list[str] | None) -> dict[str, str] | None:
+def parse_solver_options(texts: list[str] | None) -> dict[str, str] | None:
     """``--option NAME=VALUE`` texts as ``{NAME: VALUE}`` (the values still text: the solver's
     registry entry reads them as their types); None when none were given."""
     options = {}
@@ -106,8 +106,8 @@ def reconstruct(
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: JsonOption = False,
-    method: MethodOption = "auto",
-    option: MethodOptionsOption = None,
+    solver: SolverOption = "auto",
+    option: SolverOptionsOption = None,
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
@@ -161,7 +161,7 @@ def reconstruct(
             image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
             keep_tiles=keep_tiles,
             refused={"--reference": reference, "--concave": concave, "--normals": normals, "--option": option},
-            light=resolve_light(light, slant, tilt), method=method, filter=filter, integrator=integrator,
+            light=resolve_light(light, slant, tilt), solver=solver, filter=filter, integrator=integrator,
             refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
         )  # fmt: skip
         return
@@ -173,8 +173,8 @@ def reconstruct(
         )
     options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        method=method, filter=filter, integrator=integrator, refine=refine,
-        method_options=parse_method_options(option),
+        solver=solver, filter=filter, integrator=integrator, refine=refine,
+        solver_options=parse_solver_options(option),
     )  # fmt: skip
 
     err = stderr_console()
@@ -224,7 +224,7 @@ def reconstruct(
     # the refinement iterations that ran (the marching and photo solvers take none)
     refined = f", refined {info['refine']} times" if info["refine"] else ""
     out.print(
-        f"  solver {info['method']}{refined}, depth by {info['integrator']}, "
+        f"  solver {info['solver']}{refined}, depth by {info['integrator']}, "
         f"filter {info['filter']}, light {format_vector(rec.light)}{read_light(info)}"
     )
     out.print(f"  object {int(rec.mask.sum()):,} pixels in {parts}, {origin}")
@@ -302,15 +302,15 @@ def print_closed(out, err, model, unit: str = "pixels") -> None:
 def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
     """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the light
     as ``--light`` or ``--slant``/``--tilt``, references, a regions file), checked before any
-    work; ``rest`` (method, filter, integrator, refine, method_options) passes through."""
+    work; ``rest`` (solver, filter, integrator, refine, solver_options) passes through."""
     from shadeform.regions import parse_regions
 
     references = [parse_reference(text) for text in reference or ()]
-    method, given = rest.get("method", "auto"), rest.get("method_options")
-    if given and method != "auto":  # a named solver's options are checked before the photo is read
+    solver, given = rest.get("solver", "auto"), rest.get("solver_options")
+    if given and solver != "auto":  # a named solver's options are checked before the photo is read
         from shadeform.solvers import SOLVERS
 
-        SOLVERS.settle(method, given)
+        SOLVERS.settle(solver, given)
     return {
         "light": resolve_light(light, slant, tilt),
         "references": references or None,
@@ -339,7 +339,7 @@ def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels,
             if mask is not None
             else None
         )
-    with stage(err, f"reconstructing ({options.get('method', 'auto')})", timings, "reconstruct"):
+    with stage(err, f"reconstructing ({options.get('solver', 'auto')})", timings, "reconstruct"):
         if object_mask is None:  # found on the photo's colours, which tell an object from its table best
             object_mask = find_object(photo.pixels)
         if grid is None:

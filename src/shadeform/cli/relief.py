@@ -21,10 +21,10 @@ from shadeform.cli._shell import (
     LinearOption,
     MaskFileOption,
     MaxPixelsOption,
-    MethodOption,
     ReferenceOption,
     RefineOption,
     SlantOption,
+    SolverOption,
     TiltOption,
     app,
     check_outputs,
@@ -140,7 +140,7 @@ def relief_command(
     ] = None,
     normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
     as_json: JsonOption = False,
-    method: MethodOption = "auto",
+    solver: SolverOption = "auto",
     integrator: IntegratorOption = None,
     refine: RefineOption = 3,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
@@ -188,7 +188,7 @@ def relief_command(
     )
     solve_options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        method=method, filter=filter, integrator=integrator, refine=refine,
+        solver=solver, filter=filter, integrator=integrator, refine=refine,
     )  # fmt: skip
 
     # a budget samples the surface every few pixels: solve only that grid, unless a per-pixel

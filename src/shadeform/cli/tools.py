@@ -35,7 +35,7 @@ from shadeform.cli._shell import (
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet
-from shadeform.solvers import available_methods
+from shadeform.solvers import available_solvers
 
 # --- synth -------------------------------------------------------------------------------------
 
@@ -119,7 +119,7 @@ def synth(
 
 #: Rows beside a solver's own (label, keyword arguments of reconstruct): the 2002 report's
 #: propagation, without the integrability refinement.
-_VARIANTS = {"propagation": (("propagation (2002, no refinement)", {"method": "propagation", "refine": 0}),)}
+_VARIANTS = {"propagation": (("propagation (2002, no refinement)", {"solver": "propagation", "refine": 0}),)}
 
 
 def _evaluated(selected: list[str] | None) -> list[tuple[str, dict]]:
@@ -131,7 +131,7 @@ def _evaluated(selected: list[str] | None) -> list[tuple[str, dict]]:
     runs = []
     for name in names or SOLVERS.names():
         SOLVERS.get(name)  # an unknown name is refused before any work, listing the registered
-        runs += [(name, {"method": name}), *_VARIANTS.get(name, ())]
+        runs += [(name, {"solver": name}), *_VARIANTS.get(name, ())]
     return runs
 
 
@@ -144,12 +144,13 @@ def evaluate(
             "--scenes", metavar="NAMES", help="Scenes to run, comma-separated or repeated; all if not given."
         ),
     ] = None,
-    methods: Annotated[
+    solvers: Annotated[
         list[str] | None,
         typer.Option(
-            "--methods",
+            "--solvers",
+            "--methods",  # its name before the rename, for one release
             metavar="NAMES",
-            help="Solvers to run (`shadeform methods`), comma-separated or repeated; every registered "
+            help="Solvers to run (`shadeform solvers`), comma-separated or repeated; every registered "
             "one if not given, each with its defaults.",
         ),
     ] = None,
@@ -179,9 +180,9 @@ def evaluate(
     for name in names:
         if name not in synth_module.SCENES:
             raise InputError(f"unknown scene {name!r}; choose from: {', '.join(synth_module.SCENES)}")
-    evaluated = _evaluated(methods)
+    evaluated = _evaluated(solvers)
 
-    runs = []  # (scene name, concave regions given, method label, reconstruct kwargs)
+    runs = []  # (scene name, concave regions given, row label, reconstruct kwargs)
     for name in names:
         marked = bool(synth_module.concave_regions(name, size=size)["regions"])
         for label, kwargs in evaluated:
@@ -214,7 +215,7 @@ def evaluate(
                     "depth_error_pct": metrics.depth_error(rec.depth, scene.depth, fit="offset"),
                     "seconds": seconds,
                     **(
-                        {"method_options": rec.info["method_options"]} if "method_options" in rec.info else {}
+                        {"solver_options": rec.info["solver_options"]} if "solver_options" in rec.info else {}
                     ),
                 }
             )
@@ -229,7 +230,7 @@ def evaluate(
         "after fitting the free offset",
     )
     table.add_column("scene")
-    table.add_column("method")
+    table.add_column("solver")
     table.add_column("angle (°)", justify="right", no_wrap=True, min_width=9)
     table.add_column("depth (%)", justify="right", no_wrap=True, min_width=9)
     table.add_column("time", justify="right", no_wrap=True, min_width=7)
@@ -320,16 +321,16 @@ def formats(
     stdout_console().print(table)
 
 
-# --- methods -----------------------------------------------------------------------------------
+# --- solvers -----------------------------------------------------------------------------------
 
 
 @app.command()
-def methods(
+def solvers(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object instead of the tables.")
     ] = False,
 ) -> None:
-    """List the solvers `reconstruct --method` takes (with their own `--option`s) and the
+    """List the solvers `reconstruct --solver` takes (with their own `--option`s) and the
     integrators of `--integrator`."""
     from shadeform.solvers import AUTO, SOLVERS
 
@@ -338,7 +339,7 @@ def methods(
             "name": AUTO,
             "lights": "any",
             "depth": "the chosen solver's",
-            "description": available_methods()[AUTO],
+            "description": available_solvers()[AUTO],
         }
     ]
     for s in SOLVERS.entries():
@@ -352,11 +353,11 @@ def methods(
             row["options"] = [option.describe() for option in s.options]
         rows.append(row)
     if as_json:
-        print_json({"command": "methods", "methods": rows, "integrators": available_integrators()})
+        print_json({"command": "solvers", "solvers": rows, "integrators": available_integrators()})
         return
-    table = Table(title="Solvers (--method)")
-    for column in ("method", "lights", "depth by", "what it does"):
-        table.add_column(column, style="bold" if column == "method" else None)
+    table = Table(title="Solvers (--solver)")
+    for column in ("solver", "lights", "depth by", "what it does"):
+        table.add_column(column, style="bold" if column == "solver" else None)
     for row in rows:
         options = "".join(
             f"\n--option {o['name']}={o['default']} ({o['type']}): {o['help']}"
@@ -371,6 +372,10 @@ def methods(
     for name, text in available_integrators().items():
         table.add_row(name, text)
     out.print(table)
+
+
+# its name before the rename, for one release
+app.command("methods", hidden=True, help="Old name of `shadeform solvers`.")(solvers)
 
 
 # --- demo --------------------------------------------------------------------------------------
@@ -405,7 +410,7 @@ def demo(
         "reconstruct",
     ):
         rec = shadeform.reconstruct(
-            image, light=info["light"], mask=info["mask"], filter=info["filter"], method=info["method"]
+            image, light=info["light"], mask=info["mask"], filter=info["filter"], solver=info["solver"]
         )
     with stage(err, "building the mesh", timings, "mesh"):
         mesh = shadeform.to_mesh(rec, step=mesh_step)

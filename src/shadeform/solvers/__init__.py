@@ -1,12 +1,12 @@
-"""The one registry of shape-from-shading solvers: method name -> :class:`Solver`.
+"""The one registry of shape-from-shading solvers: solver name -> :class:`Solver`.
 
-:func:`shadeform.reconstruct` only looks a solver up here; the CLI (``shadeform methods``,
-``--method``), the app's method picker and :func:`available_methods` are generated from the
+:func:`shadeform.reconstruct` only looks a solver up here; the CLI (``shadeform solvers``,
+``--solver``), the app's solver picker and :func:`available_solvers` are generated from the
 registry. A new solver is one module with a ``solve(problem) -> Solution`` function
 (:mod:`shadeform.solvers.problem`) and one :func:`register` line; ``docs/architecture.md`` has the
 recipe.
 
-``method="auto"`` follows one rule (:func:`choose`): the solver of lowest ``auto`` rank that takes
+``solver="auto"`` follows one rule (:func:`choose`): the solver of lowest ``auto`` rank that takes
 the light, the image's noise and its share of outlying detail.
 
 This module imports no solver: each is imported the first time it runs, so that listing the
@@ -34,14 +34,14 @@ __all__ = [
     "SOLVERS",
     "Solution",
     "Solver",
-    "available_methods",
+    "available_solvers",
     "choose",
     "get_solver",
     "register",
     "solver_names",
 ]
 
-#: The method name that asks :func:`choose` to pick a solver.
+#: The solver name that asks :func:`choose` to pick one.
 AUTO = "auto"
 
 #: Noise (standard deviation over the object's brightest value, :func:`shadeform.preprocess.noise_level`)
@@ -69,12 +69,12 @@ class Solver:
     Attributes
     ----------
     name : str
-        The method name users pass (``reconstruct(method=name)``, ``--method name``).
+        The name users pass (``reconstruct(solver=name)``, ``--solver name``).
     solve : callable or str
         ``solve(problem: Problem) -> Solution``, or ``"module:function"`` naming it (imported on
         first use).
     description : str
-        One line in the user's words, shown by ``shadeform methods`` and the app.
+        One line in the user's words, shown by ``shadeform solvers`` and the app.
     lights : {"any", "frontal"}
         The lights it takes: any direction, or only (0, 0, 1).
     integrator : str or None
@@ -91,7 +91,7 @@ class Solver:
         first. Solvers with a policy are also given the measured
         ``Problem.noise``.
     auto : int or None
-        Its rank for ``method="auto"`` (lower is preferred), or None if "auto" never picks it.
+        Its rank for ``solver="auto"`` (lower is preferred), or None if "auto" never picks it.
     max_noise : float
         "auto" passes it over on images noisier than this (relative to the brightest value).
     min_outliers : float or None
@@ -99,7 +99,7 @@ class Solver:
         detail is at least this (:data:`OUTLIERS`): the solver for real photographs.
     options : tuple of Option
         Its own options (:class:`shadeform.registry.Option`: name, type, default, help), given as
-        ``reconstruct(method_options={...})`` or ``--option NAME=VALUE`` and read by the solver as
+        ``reconstruct(solver_options={...})`` or ``--option NAME=VALUE`` and read by the solver as
         ``problem.options[NAME]`` (every one present: the user's value or the default).
     """
 
@@ -139,7 +139,7 @@ class Solver:
 
 
 #: The registered solvers (not "auto"), in registration order.
-SOLVERS: Registry[Solver] = Registry("method", Solver)
+SOLVERS: Registry[Solver] = Registry("solver", Solver)
 
 
 def register(solver: Solver) -> None:
@@ -152,13 +152,13 @@ def solver_names() -> tuple[str, ...]:
     return SOLVERS.names()
 
 
-def available_methods() -> dict[str, str]:
-    """Methods ``reconstruct`` takes: ``"auto"`` and every registered solver.
+def available_solvers() -> dict[str, str]:
+    """The solvers ``reconstruct`` takes: ``"auto"`` and every registered one.
 
     Returns
     -------
     dict of str to str
-        Method name to a one-line description, "auto" first, then in registration order.
+        Solver name to a one-line description, "auto" first, then in registration order.
     """
     rule = ", else ".join(solver.name + _conditions(solver) for solver in _ranked())
     return {
@@ -167,13 +167,13 @@ def available_methods() -> dict[str, str]:
     }
 
 
-def get_solver(method: str) -> Solver:
-    """The registered solver called ``method`` (not "auto": see :func:`choose`)."""
-    return SOLVERS.get(method)
+def get_solver(name: str) -> Solver:
+    """The registered solver called ``name`` (not "auto": see :func:`choose`)."""
+    return SOLVERS.get(name)
 
 
 def choose(light, *, noise: float = 0.0, outliers: float = 0.0) -> Solver:
-    """The solver ``method="auto"`` uses: the lowest ``auto`` rank that takes the light, the noise
+    """The solver ``solver="auto"`` uses: the lowest ``auto`` rank that takes the light, the noise
     and the outlying detail.
 
     Parameters
@@ -196,7 +196,7 @@ def choose(light, *, noise: float = 0.0, outliers: float = 0.0) -> Solver:
             continue
         if solver.takes(light) and noise <= solver.max_noise:
             return solver
-    raise LookupError("no registered solver takes this light for method='auto'")
+    raise LookupError("no registered solver takes this light for solver='auto'")
 
 
 def _ranked() -> list[Solver]:
@@ -299,3 +299,17 @@ register(
         description="for real photographs: the learned prior's shape, refined by the shading it can trust",
     )
 )
+
+
+def __getattr__(name: str):
+    # the old name of available_solvers, for one release
+    if name == "available_methods":
+        import warnings
+
+        warnings.warn(
+            "shadeform.solvers.available_methods is now available_solvers; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return available_solvers
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@ Planetary and microscopy images run to hundreds of megapixels; the whole-image p
 about 200 bytes per pixel and its eikonal solver's cost grows with the number of singular points
 times the pixels. :func:`reconstruct` cuts the image into tiles of ``tile`` pixels, each solved
 with a halo of ``overlap`` pixels on every side by :func:`shadeform.pipeline.reconstruct` (any
-method, light or filter), and joins them:
+solver, light or filter), and joins them:
 
 1. **Tiles** (the expensive part, one Dask task each): every tile reads its own window of the
    input (a TIFF is read lazily through tifffile's Zarr store, never whole), is solved, and its

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.tiled.join import Tiling, _disagreement, _offsets
 from shadeform.tiled.objects import object_mask
@@ -36,7 +37,7 @@ SEAM_FRACTION = 0.05
 #: Version of the work folder's layout; a folder of another version is refused.
 _LAYOUT = 2
 #: The options a tile passes to :func:`shadeform.pipeline.reconstruct`.
-_OPTIONS = ("light", "method", "filter", "integrator", "refine")
+_OPTIONS = ("light", "solver", "filter", "integrator", "refine")
 #: Bytes of disk a tile's depth takes per pixel of its window in the work folder (float32).
 _TILE_BYTES = 4
 #: Progress callback: ``progress(stage, done, total)``, stage one of "mask", "tiles", "join", "write".
@@ -88,6 +89,7 @@ class TiledResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
+@renamed_keywords(method="solver")
 def reconstruct(
     source,
     *,
@@ -152,7 +154,7 @@ def reconstruct(
         ``progress(stage, done, total)`` in this process: stage "mask" while the object is
         found, "tiles" after each tile, then "join" and "write" (bands of tiles).
     **options
-        ``light``, ``method``, ``filter``, ``integrator``, ``refine`` of
+        ``light``, ``solver``, ``filter``, ``integrator``, ``refine`` of
         :func:`shadeform.reconstruct`, the same for every tile. The light is a direction (not
         "estimate": a tile's estimate would differ from its neighbour's).
 
@@ -342,7 +344,7 @@ def _check_options(options: dict) -> dict:
     from shadeform.integration import available_integrators
     from shadeform.light import as_light
     from shadeform.preprocess import parse_filter
-    from shadeform.solvers import available_methods
+    from shadeform.solvers import available_solvers
 
     unknown = sorted(set(options) - set(_OPTIONS))
     if unknown:
@@ -358,7 +360,7 @@ def _check_options(options: dict) -> dict:
         )
     options = dict(options)
     options["light"] = tuple(float(v) for v in as_light(light))
-    check_choice(options.get("method", "auto"), tuple(available_methods()), "method")
+    check_choice(options.get("solver", "auto"), tuple(available_solvers()), "solver")
     if options.get("integrator") is not None:
         check_choice(options["integrator"], tuple(available_integrators()), "integrator")
     if options.get("filter") is not None:

@@ -14,7 +14,7 @@ from shadeform.app.schema.stereo import StereoParams
 
 
 class OptionInfo(_Model):
-    """One option of a method's own (:class:`shadeform.registry.Option`)."""
+    """One option of a solver's (or another registry entry's) own (:class:`shadeform.registry.Option`)."""
 
     name: str
     type: Literal["bool", "int", "float", "str"]
@@ -23,12 +23,12 @@ class OptionInfo(_Model):
 
 
 def _options_optional(schema: dict) -> None:
-    # sent only when a method has options: the built-in ones have none
+    # sent only when an entry has options: the built-in ones have none
     schema["required"] = [name for name in schema.get("required", ()) if name != "options"]
 
 
 class MethodInfo(_Model):
-    """A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_methods`,
+    """A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_solvers`,
     :func:`shadeform.integration.available_integrators`)."""
 
     model_config = ConfigDict(json_schema_extra=_options_optional)
@@ -74,7 +74,7 @@ class Limits(_Model):
 class Options(_Model):
     """What the library offers, the upload limits and the default parameters."""
 
-    methods: list[MethodInfo] = Field(description='"auto" first, then every registered solver.')
+    solvers: list[MethodInfo] = Field(description='"auto" first, then every registered solver.')
     integrators: list[MethodInfo]
     channels: list[str]
     filters: list[str]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import AliasChoices, Field
 from typing_extensions import TypeAliasType
 
 from shadeform.app.schema.common import Channel, MeshData, _Model, _PixelIndex
@@ -53,12 +53,15 @@ class ReconstructParams(_Model):
     channel: Channel = "luma"
     filter: FilterParams = Field(default_factory=FilterParams)
     light: LightParams = Field(default_factory=LightParams)
-    method: str = Field(
-        default="auto", description='One of ``Options.methods``; "auto" is the best measured for the light.'
+    solver: str = Field(
+        default="auto",
+        # "method": its name in projects saved before the rename
+        validation_alias=AliasChoices("solver", "method"),
+        description='One of ``Options.solvers``; "auto" is the best measured for the light.',
     )
     integrator: str | None = Field(
         default=None,
-        description="One of ``Options.integrators``, or null for the method's own.",
+        description="One of ``Options.integrators``, or null for the solver's own.",
     )
     refine: int = Field(
         default=3,
