@@ -56,7 +56,7 @@ system:
 # two test workers share the two cores: one BLAS thread each, or OpenBLAS's threads spin against
 # each other (the relief light fit's products ran 10-25x slower that way)
 test: system lint $(STAMP) $(JSSTAMP) $(WEBSTAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -q
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup -q
 
 # ruff: lint and formatting, checked (CI runs this through `make test`); `make format` fixes both.
 # import-linter: the layers of docs/architecture.md and no import cycle (.importlinter)

@@ -17,7 +17,7 @@ import trimesh
 from scipy import ndimage
 
 import shadeform
-from helpers.fusion import SMALL, scores, true_views
+from helpers.fusion import SMALL, fused_truth, photographed, scores, true_views
 from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.fusion import place
@@ -28,11 +28,15 @@ from shadeform.reconstruction import Reconstruction
 SIZE = 256  # the issue's bars are set at 256x256 views
 
 
-@pytest.mark.parametrize("name", ["ellipsoid", "pebble", "lumpy"])
+# tests that place the same views share them (helpers.fusion caches them per worker)
+WAISTED = pytest.mark.xdist_group("waisted-256")
+PEBBLE = pytest.mark.xdist_group("pebble-256")
+
+
+@pytest.mark.parametrize("name", ["ellipsoid", pytest.param("pebble", marks=PEBBLE), "lumpy"])
 def test_true_depths_fuse_to_the_object(name):
     angles = (0, 90, 180, 270)
-    mesh = shadeform.fuse(list(zip(true_views(name, angles, size=SIZE), angles)))
-    chamfer, fscore, volume, closed = scores(mesh, name, size=SIZE)
+    mesh, (chamfer, fscore, volume, closed) = fused_truth(name, angles, size=SIZE)
     assert closed
     assert chamfer <= 0.5 and fscore >= 95 and volume <= 3, (chamfer, fscore, volume)
     # outward normals: they point away from the object's centre
@@ -50,6 +54,7 @@ def test_photos_of_a_lumpy_sphere_from_four_sides():
     assert closed and chamfer <= 0.5 and fscore >= 95 and volume <= 3, (chamfer, fscore, volume)
 
 
+@WAISTED
 def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
     """The waisted object's front and back photos each read the waist as a third hill top and
     one lobe 25 px too deep (Chamfer over 2 %, a quarter of the volume gone); with ``resolve``
@@ -59,13 +64,12 @@ def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
     from shadeform.fusion import place, solid
 
     angles = (0, 90, 180, 270)
-    views = synth.render_views("waisted", angles, size=SIZE)
-    recs = [shadeform.reconstruct(view.image, mask=view.mask, light=(0, 0, 1)) for view in views]
+    views, recs, solve_again = photographed("waisted", angles, size=SIZE)
     asked = []
 
     def resolve(i, regions):
         asked.append(i)
-        return shadeform.reconstruct(views[i].image, mask=views[i].mask, light=(0, 0, 1), concave=regions)
+        return solve_again(i, regions)
 
     guessed = scores(shadeform.fuse(list(zip(recs, angles))), "waisted", size=SIZE)
     assert guessed[0] > 2 and guessed[2] > 20, guessed
@@ -85,6 +89,7 @@ def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
     assert placement.rivals == ()  # from the exact poses nothing else explains the photos
 
 
+@WAISTED
 def test_a_placement_the_photos_do_not_decide_names_its_rival():
     """Four views 90 degrees apart, the side views given 8.9 and 9.5 degrees off: the front and
     back photos read with the waist as a hill explain the photos with the object turned by 16.5
@@ -93,12 +98,7 @@ def test_a_placement_the_photos_do_not_decide_names_its_rival():
     from shadeform.fusion import CLEARLY
 
     angles = (0, 90, 180, 270)
-    views = synth.render_views("waisted", angles, size=SIZE)
-    recs = [shadeform.reconstruct(view.image, mask=view.mask, light=(0, 0, 1)) for view in views]
-
-    def resolve(i, regions):
-        return shadeform.reconstruct(views[i].image, mask=views[i].mask, light=(0, 0, 1), concave=regions)
-
+    _, recs, resolve = photographed("waisted", angles, size=SIZE)
     given = np.add(angles, [0.0, 8.86, 0.23, 9.52])
     placement = place(list(zip(recs, given)), resolve=resolve)
     (rival,) = placement.rivals
@@ -107,12 +107,13 @@ def test_a_placement_the_photos_do_not_decide_names_its_rival():
     assert abs(rival.turns[1] - 16.5) < 1 and abs(rival.turns[3] - 16.5) < 1
 
 
+@PEBBLE
 def test_poses_off_by_up_to_ten_degrees_are_refined():
     angles = (0, 90, 180, 270)
     recs = true_views("pebble", angles, size=SIZE)
     rng = np.random.default_rng(3)
     wrong = [0.0, *(a + rng.choice([-1, 1]) * rng.uniform(6, 10) for a in angles[1:])]
-    exact = scores(shadeform.fuse(list(zip(recs, angles))), "pebble", size=SIZE)
+    _, exact = fused_truth("pebble", angles, size=SIZE)
     refined = scores(shadeform.fuse(list(zip(recs, wrong)), refine=True), "pebble", size=SIZE)
     unrefined = scores(shadeform.fuse(list(zip(recs, wrong)), refine=False), "pebble", size=SIZE)
     assert refined[3] and refined[0] <= 0.5 and refined[1] >= 95 and refined[2] <= 3, refined
@@ -187,17 +188,14 @@ def test_placements_are_compared_on_every_piece_of_the_views():
     assert ratios[1] > 1.1 * ratios[0] and ratios[0] > 1, ratios
 
 
+@WAISTED
 def test_a_reading_chosen_at_poses_far_off_is_tried_again_from_the_given_ones(monkeypatch):
     # at these poses (each off by 6-10 degrees) the hull picked the back view's reading that
     # turns its surface (one lobe deeper), and the refinement turned that view 16.7 degrees off
     # to match it; tried again from the given poses, the right reading agrees several times
     # better and every pose comes out exact
     angles = tuple(range(0, 360, 45))
-    views = synth.render_views("waisted", angles, size=SIZE)
-    recs = [shadeform.reconstruct(view.image, mask=view.mask, light=(0, 0, 1)) for view in views]
-
-    def resolve(i, regions):
-        return shadeform.reconstruct(views[i].image, mask=views[i].mask, light=(0, 0, 1), concave=regions)
+    views, recs, resolve = photographed("waisted", angles, size=SIZE)
 
     import shadeform.fusion as fusion
 

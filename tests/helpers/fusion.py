@@ -7,6 +7,7 @@ from functools import lru_cache
 
 import numpy as np
 
+import shadeform
 from shadeform import metrics, synth
 from shadeform.reconstruction import Reconstruction
 
@@ -27,6 +28,46 @@ def true_views(name, angles, *, size=SMALL, poses=None, seed=0):
         )
         for view in views
     ]
+
+
+def photographed(name, angles, *, size=SMALL):
+    """Each view rendered (``synth.render_views``) and solved alone with the light at the camera,
+    and a ``resolve(i, regions)`` that solves view ``i`` again with concave regions, as
+    :func:`shadeform.fusion.place` asks. Cached per view: several tests place the same photos
+    (run them in one worker: ``pytest.mark.xdist_group``)."""
+    solved = [_photographed(name, float(angle), size) for angle in angles]
+
+    def resolve(i, regions):
+        key = (
+            name,
+            float(angles[i]),
+            size,
+            tuple((r.axis, np.asarray(r.polygon).tobytes()) for r in regions),
+        )
+        if key not in _RESOLVED:
+            view, _ = _photographed(*key[:3])
+            _RESOLVED[key] = shadeform.reconstruct(
+                view.image, mask=view.mask, light=(0, 0, 1), concave=regions
+            )
+        return _RESOLVED[key]
+
+    return [view for view, _ in solved], [rec for _, rec in solved], resolve
+
+
+@lru_cache(maxsize=32)
+def _photographed(name, angle, size):
+    (view,) = synth.render_views(name, (angle,), size=size)
+    return view, shadeform.reconstruct(view.image, mask=view.mask, light=(0, 0, 1))
+
+
+_RESOLVED = {}  # (name, angle, size, regions) -> the view solved again with those regions
+
+
+@lru_cache(maxsize=8)
+def fused_truth(name, angles, *, size=SMALL):
+    """The fusion of the true views at ``angles`` (``true_views``' offsets) and its :func:`scores`."""
+    mesh = shadeform.fuse(list(zip(true_views(name, angles, size=size), angles)))
+    return mesh, scores(mesh, name, size=size)
 
 
 def scores(mesh, name, size=SMALL):
