@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import stat
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -152,3 +153,25 @@ def regular_file(path: Path, what: str) -> Path:
     if not stat.S_ISREG(mode):
         raise InputError(f"{what} '{path}' is a pipe or a device, not a file; give a file")
     return path
+
+
+def renamed(value, old_value, *, name: str, old: str, where: str, default=None):
+    """A keyword's value where it was renamed and the old name still works for one release:
+    ``value`` (given as ``name``), or ``old_value`` with a :class:`DeprecationWarning` where the
+    caller gave the old keyword ``old`` (``old_value`` not None) to ``where`` (a function's name).
+
+    Raises
+    ------
+    InputError
+        If both keywords were given with different values (``value`` not its ``default``).
+    """
+    if old_value is None:
+        return value
+    warnings.warn(
+        f"{where}({old}=...) is deprecated; use {name}= (the old keyword goes in the next release)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    if value != default and value != old_value:
+        raise InputError(f"give {name} only: {old} is its old name ({where})")
+    return old_value
