@@ -284,7 +284,7 @@ export interface FuseRequest {
   /** Two to 24 views. */
   views: FuseView[];
   /** Correct the poses and depth offsets so that the views agree. */
-  refine: boolean;
+  refine_poses: boolean;
   /** Read each view's unsure areas (what its photo leaves open: ``info['unsure']``) as concave where the other views' silhouettes say so (``shadeform.fusion.settle``). */
   settle: boolean;
   /** Voxel edge in pixels; null: 1, or coarser for a big object (the library's default). */
@@ -330,7 +330,7 @@ export interface FuseResult {
   depth_fixed: boolean;
   /** Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, total. */
   timings: Record<string, number>;
-  /** What ran: ``resolution`` (the voxel edge used), ``refine``, ``settle``, ``cached`` (whether the fusion was reused). */
+  /** What ran: ``resolution`` (the voxel edge used), ``refine_poses``, ``settle``, ``cached`` (whether the fusion was reused). */
   info: Record<string, unknown>;
 }
 
@@ -517,7 +517,8 @@ export interface ProjectViewEntry {
 /** The views in a project (several sides of one object, fused) and the fusion's settings. */
 export interface ProjectViews {
   views: ProjectViewEntry[];
-  refine: boolean;
+  /** Correct the poses so that the views agree (``FuseRequest.refine_poses``). */
+  refine_poses: boolean;
   settle: boolean;
   resolution: number | null;
   showParts: boolean;
