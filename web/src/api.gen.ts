@@ -129,8 +129,8 @@ export interface Options {
   filters: string[];
   formats: FormatInfo[];
   examples: ExampleInfo[];
-  /** Photometric stereo's methods, the default first. */
-  stereo_methods: MethodInfo[];
+  /** Photometric stereo's models (``StereoParams.model``), the default first. */
+  stereo_models: MethodInfo[];
   photo_set_examples: ExampleInfo[];
   stereo_defaults: StereoParams;
   relief_defaults: ReliefParams;
@@ -200,8 +200,8 @@ export interface StereoParams {
   lights: StereoLights;
   /** The sphere's circle ``[column, row, radius]`` in pixels; null to find it (lights "sphere" only). */
   sphere: [number, number, number] | null;
-  /** One of ``Options.stereo_methods``. */
-  method: string;
+  /** The photometric model: one of ``Options.stereo_models``. */
+  model: string;
   /** One of ``Options.integrators``. */
   integrator: string;
   /** Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve. */

@@ -122,7 +122,9 @@ def integrate(
     mask = check_mask(mask, normals.shape[:2], of="the normals")
     if not np.isfinite(normals[mask]).all():
         raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
-    integrator = renamed(integrator, method, name="integrator", old="method", where="integrate", default="paths")
+    integrator = renamed(
+        integrator, method, name="integrator", old="method", where="integrate", default="paths"
+    )
     entry = INTEGRATORS.get(integrator)
     if K is not None:
         if not entry.perspective:

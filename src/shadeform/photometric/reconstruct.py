@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shadeform._checks import check_choice
+from shadeform._checks import check_choice, renamed
 from shadeform.errors import InputError
 from shadeform.photometric.stereo import photometric_stereo
 
@@ -17,7 +17,8 @@ def reconstruct_stereo(
     mask=None,
     *,
     intensities=None,
-    method: str = "bivariate",
+    model: str = "bivariate",
+    method: str | None = None,
     integrator: str = "poisson",
     sphere=None,
     refine_lights: bool = True,
@@ -27,8 +28,11 @@ def reconstruct_stereo(
 
     Parameters
     ----------
-    images, lights, intensities, method
+    images, lights, intensities, model
         As for :func:`photometric_stereo` (``lights=None``: read from the photos).
+    method : str, optional
+        Deprecated: the old name of ``model`` (a :class:`DeprecationWarning`; removed in the next
+        release).
     mask : (H, W) array_like of bool, optional
         Object pixels. Default: found in the brightest reading of each pixel over the photos, as
         :func:`shadeform.preprocess.object_mask` finds an object on a dark background.
@@ -48,7 +52,8 @@ def reconstruct_stereo(
         lights' directions (for shading a view), ``albedo`` (H, W), or (H, W, C) for colour
         photos,
         ``confidence`` the fit's (:class:`PhotometricStereo`, NaN off the mask); ``info`` holds
-        ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel),
+        ``method`` (``"photometric stereo (MODEL)"``, as :func:`shadeform.reconstruct` says what
+        ran), ``model`` (the photometric model's name), ``integrator``, ``photos``, ``lights_used`` (median per pixel),
         ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
         (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
         directions used, a list of ``[x, y, z]``) and
@@ -64,6 +69,9 @@ def reconstruct_stereo(
     from shadeform.integration import available_integrators, integrate
     from shadeform.reconstruction import Reconstruction
 
+    model = renamed(
+        model, method, name="model", old="method", where="reconstruct_stereo", default="bivariate"
+    )
     check_choice(integrator, tuple(available_integrators()), "integrator")
     start = time.perf_counter()
     if mask is None:
@@ -82,11 +90,11 @@ def reconstruct_stereo(
             if not mask.any():
                 raise InputError("the photos show nothing but the sphere; give a mask of the object")
     result = photometric_stereo(
-        images, lights, mask, intensities=intensities, method=method, refine_lights=refine_lights
+        images, lights, mask, intensities=intensities, model=model, refine_lights=refine_lights
     )
     solved = np.isfinite(result.normals[..., 0])
     normals_time = time.perf_counter()
-    depth = integrate(result.normals, solved, method=integrator)
+    depth = integrate(result.normals, solved, integrator=integrator)
     done = time.perf_counter()
     directions = np.asarray(lights if result.lights is None else result.lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
@@ -97,7 +105,8 @@ def reconstruct_stereo(
         light=mean / np.linalg.norm(mean),
         albedo=result.albedo,
         info={
-            "method": f"photometric stereo ({method})",
+            "method": f"photometric stereo ({model})",
+            "model": model,
             "integrator": integrator,
             "photos": len(directions),
             "lights_used": float(np.median(result.lights_used[solved])),
