@@ -5,7 +5,7 @@ turntable angles (256x256, light from the camera, Lambertian), every view is rec
 its photo alone (``shadeform.reconstruct``, light (0, 0, 1), the true mask), and the views are
 fused with ``resolve`` (each photo's unsure areas settled by the other views' silhouettes; the
 fuse times include those solves; ``--no-settle`` fuses without); then again with every pose but the first disturbed by up to 10 degrees (seeded) and
-``refine=True``. Scored against the object's true surface: Chamfer distance (% of the bounding
+``refine_poses=True``. Scored against the object's true surface: Chamfer distance (% of the bounding
 box's diagonal, after the free translation), F-score at 1 % of the diagonal, volume error, and
 whether the mesh is watertight (trimesh); 50,000 points sampled on the mesh against 200,000 on
 the true surface, whose sampling floor is 0.17 % Chamfer. Times: the fusion alone (the first
@@ -89,7 +89,7 @@ def run(name, count, disturbed, repeats, rng, settle=True):
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        mesh = shadeform.fuse(list(zip(recs, poses)), refine=True, resolve=again if settle else None)
+        mesh = shadeform.fuse(list(zip(recs, poses)), refine_poses=True, resolve=again if settle else None)
         times.append(time.perf_counter() - start)
     return (*score(mesh, truth), solve, float(np.median(times)), max(times), len(mesh.faces))
 
@@ -108,7 +108,7 @@ def run_both(name, count, disturbed, repeats, rng):
     meshes = {}
     for _ in range(repeats):
         start = time.perf_counter()
-        placement = place(list(zip(recs, poses)), refine=True, resolve=again)
+        placement = place(list(zip(recs, poses)), refine_poses=True, resolve=again)
         placing.append(time.perf_counter() - start)
         for surface, mesher in (("volume", solid), ("poisson", poisson_solid)):
             start = time.perf_counter()

@@ -8,7 +8,7 @@ with a note are the answers one image allows where the light itself cannot be re
 :func:`shadeform.light.estimate_light`). The same with the automatic mask (``mask=None``), the
 bar of issue 11 (sphere, ellipsoid and bumps at slants 0, 20, 40 and 60, slant within 3 degrees).
 
-Real photos, where ``../shared/data`` has them: both methods on the 96 DiLiGenT ball photos; the
+Real photos, where ``../shared/data`` has them: both cues on the 96 DiLiGenT ball photos; the
 frontal photo of each object of ``../shared/data/real`` (``real_data.py``), with its mask and with
 the automatic one: light error, confidence, medians and worst (the bars of issue 11: median <= 8,
 worst <= 30); and a held-out check (no constant tuned on it): every MIT-Berkeley photo and every
@@ -387,11 +387,11 @@ def held_out_tables():
 
 
 def round_table(size):
-    """``method="round"`` on the synthetic scenes, noise-free: exact only for round objects."""
+    """``cue="round"`` on the synthetic scenes, noise-free: exact only for round objects."""
     lines = ["| scene | max slant err ° | max tilt err ° |", "|---|---:|---:|"]
     for name in synth.SCENES:
         try:
-            label, rows = _measure((name, name, {"method": "round"}, None, _truth), size, 0.0)
+            label, rows = _measure((name, name, {"cue": "round"}, None, _truth), size, 0.0)
         except InputError:
             lines.append(f"| {name} | refused (no rings to read) | |")
             continue
@@ -402,7 +402,7 @@ def round_table(size):
 
 
 def ball_table(folder: Path):
-    """Both methods on the 96 DiLiGenT ball photos (each channel over its light's intensity)."""
+    """Both cues on the 96 DiLiGenT ball photos (each channel over its light's intensity)."""
     from shadeform.io.images import load_image_rgb, load_mask
 
     names = (folder / "filenames.txt").read_text().split()
@@ -414,21 +414,21 @@ def ball_table(folder: Path):
         gray = (load_image_rgb(folder / name) / intensities[i]).mean(axis=2)
         truth = directions[i] / np.linalg.norm(directions[i])
         true_slant, true_tilt = slant_tilt(truth)
-        for method, rows in found.items():
+        for cue, rows in found.items():
             start = time.perf_counter()
-            est = estimate_light(gray, mask, method=method)
+            est = estimate_light(gray, mask, cue=cue)
             seconds = time.perf_counter() - start
             rows.append(
                 (_angle(est.light, truth), est.slant - true_slant, _tilt_error(est.tilt, true_tilt), seconds)
             )
     lines = [
-        "| method | mean ° | median ° | max ° | mean slant err ° (signed) | mean tilt err ° | ms |",
+        "| cue | mean ° | median ° | max ° | mean slant err ° (signed) | mean tilt err ° | ms |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
-    for method, rows in found.items():
+    for cue, rows in found.items():
         rows = np.array(rows)
         lines.append(
-            f"| {method} | {rows[:, 0].mean():.2f} | {np.median(rows[:, 0]):.2f} | "
+            f"| {cue} | {rows[:, 0].mean():.2f} | {np.median(rows[:, 0]):.2f} | "
             f"{rows[:, 0].max():.2f} | {rows[:, 1].mean():+.2f} | "
             f"{rows[:, 2].mean():.2f} | {1e3 * np.median(rows[:, 3]):.0f} |"
         )
@@ -447,7 +447,7 @@ def main(argv=None) -> int:
     text = [
         "# Light estimation from one image",
         "",
-        f'`shadeform.estimate_light` (default `method="contour"`) on the synthetic scenes, '
+        f'`shadeform.estimate_light` (default `cue="contour"`) on the synthetic scenes, '
         f"{args.size}x{args.size}, albedo 1; per row the largest error over 8 tilts (0, 45, ..., "
         "315; one at slant 0), tilt errors only where the slant is at least 10°; noise-free and "
         "with 2% Gaussian noise; median time of one estimate. Bold: over the bar of issue 3 "
@@ -463,7 +463,7 @@ def main(argv=None) -> int:
         "",
         detail,
         "",
-        '## `method="round"` on the synthetic scenes',
+        '## `cue="round"` on the synthetic scenes',
         "",
         "Rings inside the silhouette, meant for photos of round objects (see the DiLiGenT ball "
         "below); noise-free, 8 tilts. Exact on the sphere, biased where cross-sections are not "

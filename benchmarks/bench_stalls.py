@@ -49,7 +49,7 @@ elif name == "bilateral-diligent":
     work = lambda: integrate_bilateral(normals, mask, K=K)
 else:
     scene = synth.scene("sphere", size=1024)
-    work = lambda: shadeform.integrate(scene.normals, scene.mask, method=name)
+    work = lambda: shadeform.integrate(scene.normals, scene.mask, integrator=name)
 work(); work()  # compiled, warm
 times = []
 for _ in range(runs):

@@ -1,4 +1,4 @@
-"""Photometric stereo benchmark: every method of the registry, real and synthetic.
+"""Photometric stereo benchmark: every photometric model of the registry, real and synthetic.
 
 Real: the seven DiLiGenT objects of ``../shared/data/real/diligent`` (8-bit crops, all 96
 photos, calibrated lights) and the 16-bit ball of ``../shared/data/diligent-ball``, each
@@ -29,7 +29,7 @@ import numpy as np
 from shadeform import synth
 from shadeform.io.atomic import atomic_write
 from shadeform.light import light_from_slant_tilt
-from shadeform.photometric import METHODS, photometric_stereo
+from shadeform.photometric import MODELS, photometric_stereo
 
 ROOT = Path(__file__).resolve().parents[1]
 BALL = ROOT.parent / "shared" / "data" / "diligent-ball"
@@ -113,9 +113,9 @@ def synthetic_rows(repeats):
             ]
         )
         cells = []
-        for method in METHODS:
+        for model in MODELS:
             result, seconds, _, _ = timed(
-                partial(photometric_stereo, images, lights, scene.mask, method=method), repeats
+                partial(photometric_stereo, images, lights, scene.mask, model=model), repeats
             )
             errors = angles(result.normals, scene.normals, scene.mask)
             cells.append((float(np.nanmean(errors)), float(np.nanmedian(errors)), seconds))
@@ -124,14 +124,14 @@ def synthetic_rows(repeats):
     return rows, len(lights)
 
 
-#: The default method with the lights and their strengths unknown (read from the photos).
+#: The default model with the lights and their strengths unknown (read from the photos).
 UNKNOWN = "bivariate, unknown lights"
 
 
-def solve_set(photos, method, repeats):
+def solve_set(photos, model, repeats):
     """``timed`` photometric stereo of a loaded photo set with its calibrated lights, or (the
-    method :data:`UNKNOWN`) with none."""
-    if method == UNKNOWN:
+    model :data:`UNKNOWN`) with none."""
+    if model == UNKNOWN:
         return timed(partial(photometric_stereo, photos.images, None, photos.mask), repeats)
     return timed(
         partial(
@@ -140,14 +140,14 @@ def solve_set(photos, method, repeats):
             photos.lights,
             photos.mask,
             intensities=photos.intensities,
-            method=method,
+            model=model,
         ),
         repeats,
     )
 
 
 def real_rows(repeats):
-    """Per object and method: mean error, pixels without a normal, photos rescaled and dropped,
+    """Per object and model: mean error, pixels without a normal, photos rescaled and dropped,
     median and worst seconds, peak MiB, object pixels."""
     import scipy.io
 
@@ -158,16 +158,16 @@ def real_rows(repeats):
         folder = REAL / name
         photos = load_photo_set([folder])
         truth = scipy.io.loadmat(folder / "Normal_gt.mat")["Normal_gt"]
-        for method in (*METHODS, UNKNOWN):
-            result, median, worst, peak = solve_set(photos, method, repeats)
+        for model in (*MODELS, UNKNOWN):
+            result, median, worst, peak = solve_set(photos, model, repeats)
             errors = angles(result.normals, truth, photos.mask)
-            if method == UNKNOWN:
+            if model == UNKNOWN:
                 given = photos.lights / np.linalg.norm(photos.lights, axis=1, keepdims=True)
                 cosines = np.clip(np.sum(result.lights * given, axis=1), -1, 1)
                 light_errors[name] = float(np.median(np.degrees(np.arccos(cosines))))
             holes = int(np.count_nonzero(~np.isfinite(result.normals[photos.mask][:, 0])))
             rows.append(
-                (name, method, float(np.nanmean(errors)), holes, len(result.photos_rescaled),
+                (name, model, float(np.nanmean(errors)), holes, len(result.photos_rescaled),
                  len(result.photos_dropped), median, worst, peak, int(photos.mask.sum()))
             )  # fmt: skip
             print(rows[-1], flush=True)
@@ -182,12 +182,12 @@ def ball_rows(repeats):
     ball = load_photo_set([BALL])
     truth = scipy.io.loadmat(BALL / "Normal_gt.mat")["Normal_gt"]
     rows = []
-    for method in METHODS:
-        result, median, worst, peak = solve_set(ball, method, repeats)
+    for model in MODELS:
+        result, median, worst, peak = solve_set(ball, model, repeats)
         errors = angles(result.normals, truth, ball.mask)
         rows.append(
             (
-                method,
+                model,
                 float(np.nanmean(errors)),
                 float(np.nanmedian(errors)),
                 median,
@@ -208,8 +208,8 @@ def main(argv=None) -> str:
     warm = synth.scene("sphere", size=32)  # first-use (compiling) costs outside the timings
     directions = np.array([light_from_slant_tilt(30, t) for t in range(0, 360, 10)])
     warm_images = np.stack([synth.render(warm.normals, warm.mask, light=d) for d in directions])
-    for method in METHODS:
-        photometric_stereo(warm_images, directions, warm.mask, method=method)
+    for model in MODELS:
+        photometric_stereo(warm_images, directions, warm.mask, model=model)
     synthetic, count = synthetic_rows(args.repeats)
     lines = [
         "# Photometric stereo",
@@ -221,7 +221,7 @@ def main(argv=None) -> str:
     ]
     if REAL.is_dir():
         rows, light_errors = real_rows(args.repeats)
-        columns = (*METHODS, UNKNOWN)
+        columns = (*MODELS, UNKNOWN)
         lines += [
             "## DiLiGenT, seven objects (8-bit crops, 96 calibrated photos each)",
             "",
@@ -241,16 +241,16 @@ def main(argv=None) -> str:
             + " |",
             "|---|" + "---:|" * (2 * len(columns) + len(PUBLISHED_OBJECTS) + 3),
         ]
-        table = {(name, method): row for row in rows for name, method in [row[:2]]}
+        table = {(name, model): row for row in rows for name, model in [row[:2]]}
         means = {m: [] for m in columns}
         for name in OBJECTS:
             cells = []
-            for method in columns:
-                means[method].append(table[name, method][2])
-                cells.append(f"{table[name, method][2]:.2f}")
+            for model in columns:
+                means[model].append(table[name, model][2])
+                cells.append(f"{table[name, model][2]:.2f}")
             cells += [f"{PUBLISHED_OBJECTS[k][name]:.2f}" for k in PUBLISHED_OBJECTS]
             holes = "/".join(str(table[name, m][3]) for m in columns)
-            default = table[name, METHODS[0]]
+            default = table[name, MODELS[0]]
             cells += [f"{light_errors[name]:.1f}", holes, f"{default[4]} / {default[5]}"]
             cells += [f"{table[name, m][6]:.2f} ({table[name, m][7]:.2f})" for m in columns]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
@@ -265,7 +265,7 @@ def main(argv=None) -> str:
         peak = max(row[8] for row in rows)
         lines += [
             "",
-            f"Holes per method in the order of the columns; peak traced memory of one solve at most {peak:,.0f} MiB.",
+            f"Holes per model in the order of the columns; peak traced memory of one solve at most {peak:,.0f} MiB.",
             "",
         ]
     if BALL.is_dir():
@@ -277,12 +277,12 @@ def main(argv=None) -> str:
             f"squares {PUBLISHED['least_squares']:.2f}, the benchmark's best classical method "
             f"(Shi et al. 2014) {PUBLISHED['best classical (Shi et al. 2014)']:.2f}.",
             "",
-            "| method | mean ° | median ° | time (s) | worst (s) | ms / Mpx | peak MiB |",
+            "| model | mean ° | median ° | time (s) | worst (s) | ms / Mpx | peak MiB |",
             "|---|---:|---:|---:|---:|---:|---:|",
         ]
-        for method, mean, median, seconds, worst, peak, pixels in ball:
+        for model, mean, median, seconds, worst, peak, pixels in ball:
             lines.append(
-                f"| {method} | {mean:.2f} | {median:.2f} | {seconds:.2f} | {worst:.2f} "
+                f"| {model} | {mean:.2f} | {median:.2f} | {seconds:.2f} | {worst:.2f} "
                 f"| {seconds * 1e3 / (pixels / 1e6):,.0f} | {peak:,.0f} |"
             )
         lines.append("")
@@ -292,8 +292,8 @@ def main(argv=None) -> str:
         "Mean / median angular error, degrees, over the object (shadowed pixels included); time "
         "of one solve (ms).",
         "",
-        "| case | " + " | ".join(f"{m} mean ° | {m} median ° | {m} ms" for m in METHODS) + " |",
-        "|---|" + "---:|" * (3 * len(METHODS)),
+        "| case | " + " | ".join(f"{m} mean ° | {m} median ° | {m} ms" for m in MODELS) + " |",
+        "|---|" + "---:|" * (3 * len(MODELS)),
     ]
     for label, _, cells in synthetic:
         lines.append(

@@ -135,8 +135,8 @@ def test_the_printed_solid_fills_the_view(browser, server, viewport):
         context.close()
 
 
-def test_threshold_and_stereo_methods_in_words(page):
-    """The mask threshold reads as a share of white (not 2.6e-3), the photo set's methods by
+def test_threshold_and_stereo_models_in_words(page):
+    """The mask threshold reads as a share of white (not 2.6e-3), the photo set's models by
     what they assume (the library's name, such as bivariate, in the tooltip only)."""
     open_example(page, "coin")
     page.click('#tools [data-tool="mask"]')
@@ -158,7 +158,7 @@ def test_threshold_and_stereo_methods_in_words(page):
     page.click('#examples-menu [data-photo-set="stereo:vase"]')
     page.wait_for_function("window.shadeform.stereo.applied() > 0", timeout=RESULT_MS)
     options = page.eval_on_selector_all(
-        "#stereo-method option",
+        "#stereo-model option",
         "(os) => os.map((o) => ({ value: o.value, text: o.textContent, title: o.title }))",
     )
     assert {o["value"] for o in options} >= {"bivariate", "robust", "least_squares"}

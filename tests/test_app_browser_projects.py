@@ -196,7 +196,7 @@ def test_photo_set_and_views_projects_reopen_in_another_browser(page, browser, a
     page.click("#examples-menu > button")
     page.click('#examples-menu [data-photo-set="stereo:vase"]')
     page.wait_for_function("window.shadeform.stereo.applied() > 0", timeout=FIRST_RESULT_MS)
-    page.select_option("#stereo-method", "robust")
+    page.select_option("#stereo-model", "robust")
     set_id = wait_for_autosave(page)["ids"]["photo_set"]
     info = page.evaluate("window.shadeform.stereo.info()")
     page.click("#examples-menu > button")
@@ -229,8 +229,8 @@ def test_photo_set_and_views_projects_reopen_in_another_browser(page, browser, a
         other.wait_for_function("window.shadeform.stereo.applied() > 0", timeout=RESULT_MS)
         assert other.evaluate("document.body.classList.contains('stereo-mode')")
         assert other.evaluate("window.shadeform.stereo.info()") == info
-        assert other.evaluate("window.shadeform.stereo.params().method") == "robust"
-        assert other.input_value("#stereo-method") == "robust"
+        assert other.evaluate("window.shadeform.stereo.params().model") == "robust"
+        assert other.input_value("#stereo-model") == "robust"
 
         other.click("#project-menu > button")
         other.click('#project-menu [data-action="open-recent"]')

@@ -145,10 +145,14 @@ def test_view_photos_a_bad_angle_that_stays_and_a_reload(page, tmp_path):
     assert page.input_value('#views-list [data-index="1"] input') == "95"
     # a server that forgot an uploaded view's photo: the page says which, and stays usable
     page.wait_for_function("window.shadeform.sessionSaved()", timeout=RESULT_MS)  # the reload's own save
+    assert page.is_checked("#views-refine-poses")
+    # (and saved before the rename: the poses' refinement as "refine", here off)
     page.evaluate(
         """() => {
         const session = JSON.parse(localStorage.getItem('shadeform.session.v1'));
         session.views.views[2].image.image_id = 'forgotten';
+        delete session.views.refine_poses;
+        session.views.refine = false;
         localStorage.setItem('shadeform.session.v1', JSON.stringify(session));
     }"""
     )
@@ -156,6 +160,7 @@ def test_view_photos_a_bad_angle_that_stays_and_a_reload(page, tmp_path):
     page.evaluate("window.shadeform.ready")
     page.wait_for_function("window.shadeform.views.error() !== null", timeout=RESULT_MS)
     assert "no longer has view 3's photo" in views(page, "error()")
+    assert not page.is_checked("#views-refine-poses")
 
 
 def test_the_open_photo_is_added_as_a_view_with_its_settings(page):

@@ -145,6 +145,16 @@ class TestExampleSet:
         assert [view["cached"] for view in again["views"]] == [True] * 4
         assert "place" not in again["timings"] and again["mesh"]["positions"] == first["mesh"]["positions"]
 
+    def test_refine_poses_and_its_old_name_refine(self, client, view_set):
+        kept = fused(client, views_of(view_set), refine_poses=False)
+        assert kept["info"]["refine_poses"] is False and "refine" not in kept["info"]
+        # "refine", the old name, is still read (saved projects): the same request, fused once
+        old = fused(client, views_of(view_set), refine=False)
+        assert old["info"]["refine_poses"] is False and old["info"]["cached"] is True
+        assert old["mesh"]["positions"] == kept["mesh"]["positions"]
+        both = fuse(client, views_of(view_set), refine_poses=False, refine=True)
+        assert both.status_code == 422  # one name or the other, not both
+
     def test_export_is_the_librarys_file(self, client, view_set, library, tmp_path):
         _, mesh = library
         body = {"views": views_of(view_set), "resolution": RESOLUTION}

@@ -46,7 +46,7 @@ from shadeform import synth
 from shadeform.app.guard import Guard
 from shadeform.app.server import AppLimits, create_app
 from shadeform.integration import available_integrators
-from shadeform.photometric import METHODS as STEREO_METHODS
+from shadeform.photometric import MODELS as STEREO_MODELS
 from shadeform.solvers import available_solvers
 
 HOST = "127.0.0.1:8000"
@@ -195,10 +195,10 @@ def _aim_params(params, data, *, stereo: bool) -> None:
     if not isinstance(params, dict):
         return
     if stereo:
-        methods, integrators = list(STEREO_METHODS), list(available_integrators())
+        methods, integrators = list(STEREO_MODELS), list(available_integrators())
     else:
         methods, integrators = ["auto", *available_solvers()], [None, *available_integrators()]
-    chosen = "method" if stereo else "solver"
+    chosen = "model" if stereo else "solver"
     if chosen in params:
         params[chosen] = data.draw(st.sampled_from(methods))
     if "integrator" in params:

@@ -102,8 +102,8 @@ def test_a_document_is_stored_with_every_field(tmp_path):
     assert back["photo_set"] is None and back["views"] is None and back["name"] is None
 
 
-def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
-    photo = photo_document()
+def views_and_photo_set(photo):
+    """A views project's ``views`` and a photo set project's ``photo_set``, beside ``photo``."""
     info = photo["image"]["info"]
     source = photo["image"]["source"]
     views = {
@@ -111,7 +111,7 @@ def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
             {"image": {**info, "name": f"v{i}.png"}, "source": source, "angle": 90.0 * i, "params": {}}
             for i in range(5)
         ],
-        "refine": True,
+        "refine_poses": True,
         "settle": False,
         "resolution": 2,
         "showParts": True,
@@ -133,6 +133,12 @@ def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
         },
         "params": {"lights": "file"},
     }
+    return views, photo_set
+
+
+def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
+    photo = photo_document()
+    views, photo_set = views_and_photo_set(photo)
     base = {key: photo[key] for key in ("format", "version", "view")}
     with client_for(tmp_path / "s.sqlite3") as client:
         assert client.put("/api/projects/views", json={**base, "views": views}).status_code == 200
@@ -143,6 +149,24 @@ def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
     assert listed["views"]["image"] == "5 views: v0.png, v1.png, v2.png and 2 more"
     assert (listed["set"]["kind"], listed["set"]["name"]) == ("photo_set", "cat")
     assert listed["set"]["image"] == "12 photos: 0.png, 1.png, 2.png and 9 more"
+
+
+def test_projects_saved_with_the_old_names_are_taken_in_the_new(tmp_path):
+    """A project saved before the renames (a photo set's ``method``, the views' ``refine``) is
+    taken, and kept in today's names (``model``, ``refine_poses``)."""
+    photo = photo_document()
+    views, photo_set = views_and_photo_set(photo)
+    del views["refine_poses"]
+    views["refine"] = False
+    photo_set["params"] = {"lights": "file", "method": "robust"}
+    base = {key: photo[key] for key in ("format", "version", "view")}
+    with client_for(tmp_path / "s.sqlite3") as client:
+        assert client.put("/api/projects/views", json={**base, "views": views}).status_code == 200
+        assert client.put("/api/projects/set", json={**base, "photo_set": photo_set}).status_code == 200
+        back = client.get("/api/projects/views").json()["document"]["views"]
+        assert back["refine_poses"] is False and "refine" not in back
+        back = client.get("/api/projects/set").json()["document"]["photo_set"]["params"]
+        assert back["model"] == "robust" and "method" not in back
 
 
 def test_projects_outlive_a_restart_with_the_same_sessions_file(tmp_path):

@@ -212,13 +212,14 @@ def test_bad_photo_sets_get_one_line(client, lit_sphere):
     assert "not text" in one_line_error(post_set(client, files, lights=binary), 422)
     mask = ("mask.png", png16(np.ones((10, 10))), "image/png")
     one_line_error(post_set(client, files, lights=text, mask=mask), 422)
-    # a set without a light file asked to use one; an unknown set; an unknown method
+    # a set without a light file asked to use one; an unknown set; an unknown model
     bare = post_set(client, files).json()["photoset_id"]
     detail = one_line_error(client.post("/api/stereo", json={"photoset_id": bare}), 422)
     assert "without a light file" in detail
     one_line_error(client.post("/api/stereo", json={"photoset_id": "nope"}), 404)
-    body = {"photoset_id": bare, "params": {"lights": "unknown", "method": "magic"}}
-    assert "bivariate" in one_line_error(client.post("/api/stereo", json=body), 422)
+    body = {"photoset_id": bare, "params": {"lights": "unknown", "model": "magic"}}
+    detail = one_line_error(client.post("/api/stereo", json=body), 422)
+    assert "unknown photometric stereo model 'magic'" in detail and "bivariate" in detail
     body = {"photoset_id": bare, "params": {"lights": "bogus"}}
     one_line_error(client.post("/api/stereo", json=body), 422)
     one_line_error(client.post("/api/photosets/examples/stereo:nope"), 404)
@@ -277,15 +278,15 @@ class TestNamesAndLooks:
         assert lit.any() and np.all(shown[lit] > 105)
 
 
-def test_a_method_registered_after_the_server_started_is_taken(client, lit_sphere):
-    from shadeform.photometric import STEREO_METHODS, StereoMethod, register
+def test_a_model_registered_after_the_server_started_is_taken(client, lit_sphere):
+    from shadeform.photometric import STEREO_MODELS, StereoModel, register
 
     files, lights, scene = lit_sphere
     photoset = post_set(client, files, lights=("lights.txt", light_text(lights), "text/plain"))
     assert photoset.status_code == 201, photoset.text
-    body = {"photoset_id": photoset.json()["photoset_id"], "params": {"method": "woodham"}}
+    body = {"photoset_id": photoset.json()["photoset_id"], "params": {"model": "woodham"}}
     assert "bivariate" in one_line_error(client.post("/api/stereo", json=body), 422)
-    with STEREO_METHODS.restored():
-        register(StereoMethod("woodham", "shadeform.photometric.lambertian:least_squares", "a copy"))
+    with STEREO_MODELS.restored():
+        register(StereoModel("woodham", "shadeform.photometric.lambertian:least_squares", "a copy"))
         result = client.post("/api/stereo", json=body)
     assert result.status_code == 200, result.text

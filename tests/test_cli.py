@@ -832,15 +832,24 @@ class TestStereo:
             photo_set["lights"],
             "-o",
             out / "m.glb",
-            "--method",
+            "--model",
             "least_squares",
             "--json",
         )
         assert result.exit_code == 0, result.output
         report = json.loads(result.stdout)
         assert report["command"] == "stereo" and report["info"]["photos"] == 6
-        assert report["info"]["method"] == "photometric stereo (least_squares)"
+        assert report["info"]["solver"] == "photometric stereo (least_squares)"
+        assert report["info"]["model"] == "least_squares"
         assert sorted(p.name for p in out.iterdir()) == ["m.glb"]
+
+    def test_the_old_option_method_still_names_the_model(self, photo_set, out):
+        args = ("stereo", *photo_set["photos"], "--lights", photo_set["lights"], "--json")
+        old = invoke(*args, "-o", out / "a.ply", "--method", "robust")
+        new = invoke(*args, "-o", out / "b.ply", "--model", "robust")
+        assert old.exit_code == new.exit_code == 0, old.output + new.output
+        assert json.loads(old.stdout)["info"]["model"] == json.loads(new.stdout)["info"]["model"] == "robust"
+        assert (out / "a.ply").read_bytes() == (out / "b.ply").read_bytes()
 
     def test_light_file_with_comments_and_commas(self, photo_set, inputs, out):
         rows = np.loadtxt(photo_set["lights"])
@@ -879,7 +888,8 @@ class TestStereo:
         assert_fails(invoke("stereo", *photo_set["photos"], "-o", out / "m.glb"), out, "--lights")
 
     @pytest.mark.parametrize(
-        "option, value", [("--method", "magic"), ("--integrator", "magic"), ("--channel", "magic")]
+        "option, value",
+        [("--model", "magic"), ("--method", "magic"), ("--integrator", "magic"), ("--channel", "magic")],
     )
     def test_unknown_choice_before_any_work(self, photo_set, out, monkeypatch, option, value):
         from shadeform import photoset

@@ -228,9 +228,29 @@ class TestBadInput:
         with pytest.raises(InputError, match="frame"):
             estimate_light(ramp, np.ones(ramp.shape, dtype=bool))
 
-    def test_unknown_method(self, scene):
-        with pytest.raises(InputError, match="contour, round"):
-            estimate_light(scene.image, scene.mask, method="pentland")
+    def test_unknown_cue(self, scene):
+        with pytest.raises(
+            InputError, match="unknown light estimation cue 'pentland'; choose one of: contour, round"
+        ):
+            estimate_light(scene.image, scene.mask, cue="pentland")
+
+    def test_the_old_keyword_method_warns_and_gives_the_same_estimate(self, scene):
+        new = estimate_light(scene.image, scene.mask, cue="round")
+        with pytest.warns(DeprecationWarning, match="cue="):
+            old = estimate_light(scene.image, scene.mask, method="round")
+        assert old.evidence == new.evidence == "round"
+        np.testing.assert_array_equal(old.light, new.light)
+        assert (old.albedo, old.confidence) == (new.albedo, new.confidence)
+        with pytest.raises(TypeError, match="both method= and cue="):
+            estimate_light(scene.image, scene.mask, cue="round", method="contour")
+
+    def test_estimation_methods_is_a_deprecated_alias(self):
+        import shadeform.light as light
+        from shadeform.light import estimate
+
+        for module in (light, estimate):
+            with pytest.warns(DeprecationWarning, match="ESTIMATION_CUES"):
+                assert module.ESTIMATION_METHODS == module.ESTIMATION_CUES == ("contour", "round")
 
     def test_convex_must_be_a_bool(self, scene):
         with pytest.raises(InputError, match="convex"):
@@ -244,7 +264,7 @@ class TestBadInput:
 
 @pytest.fixture(scope="module")
 def ball_errors():
-    """Angular errors (degrees) of ``method="round"`` on every 16th DiLiGenT ball photo."""
+    """Angular errors (degrees) of ``cue="round"`` on every 16th DiLiGenT ball photo."""
     from shadeform.io.images import load_image_rgb, load_mask
 
     names = (DILIGENT_BALL / "filenames.txt").read_text().split()
@@ -254,7 +274,7 @@ def ball_errors():
     found = []
     for i in range(0, len(names), 16):
         gray = (load_image_rgb(DILIGENT_BALL / names[i]) / intensities[i]).mean(axis=2)
-        est = estimate_light(gray, mask, method="round")
+        est = estimate_light(gray, mask, cue="round")
         truth = directions[i] / np.linalg.norm(directions[i])
         found.append(math.degrees(math.acos(min(1.0, float(est.light @ truth)))))
     return np.array(found)

@@ -114,8 +114,8 @@ def test_poses_off_by_up_to_ten_degrees_are_refined():
     rng = np.random.default_rng(3)
     wrong = [0.0, *(a + rng.choice([-1, 1]) * rng.uniform(6, 10) for a in angles[1:])]
     _, exact = fused_truth("pebble", angles, size=SIZE)
-    refined = scores(shadeform.fuse(list(zip(recs, wrong)), refine=True), "pebble", size=SIZE)
-    unrefined = scores(shadeform.fuse(list(zip(recs, wrong)), refine=False), "pebble", size=SIZE)
+    refined = scores(shadeform.fuse(list(zip(recs, wrong)), refine_poses=True), "pebble", size=SIZE)
+    unrefined = scores(shadeform.fuse(list(zip(recs, wrong)), refine_poses=False), "pebble", size=SIZE)
     assert refined[3] and refined[0] <= 0.5 and refined[1] >= 95 and refined[2] <= 3, refined
     assert refined[0] <= exact[0] + 0.05
     assert unrefined[0] > 2 * refined[0]  # the refinement did the work
@@ -173,7 +173,7 @@ def test_placements_are_compared_on_every_piece_of_the_views():
     from shadeform.fusion.register import _samples, disagreement
 
     angles = tuple(range(0, 360, 45))
-    truth = place(list(zip(true_views("waisted", angles), angles)), refine=False)
+    truth = place(list(zip(true_views("waisted", angles), angles)), refine_poses=False)
     views = list(truth.views)
     hidden = views[1].mask & ~views[1].trusted
     every = _samples(views[1], every_piece=True)
@@ -224,7 +224,7 @@ def test_a_pose_given_at_the_promised_ten_degrees_may_be_refined_past_them():
     from shadeform.fusion import CORRECTED, _beyond
 
     angles = tuple(range(0, 360, 45))
-    truth = place(list(zip(true_views("waisted", angles), angles)), refine=False)
+    truth = place(list(zip(true_views("waisted", angles), angles)), refine_poses=False)
     views, spacing = list(truth.views), truth.grid.spacing
     given = [turntable(a) for a in angles]
     given[4] = turntable(angles[4] + 9.95)
@@ -252,7 +252,7 @@ def test_disagreement_leaves_out_what_another_view_cannot_see():
 
     angles = (0, 90, 180, 270)
     recs = true_views("waisted", angles)
-    placement = place(list(zip(recs, angles)), refine=False)
+    placement = place(list(zip(recs, angles)), refine_poses=False)
     views = list(placement.views)
     loss, scale = disagreement(views, turntable=True)
     fit = _Fit(views, True)
@@ -281,7 +281,7 @@ def test_the_refinement_jacobian_is_the_residuals_derivative(on_turntable):
     poses = (
         angles if on_turntable else [_shifted(turntable(a), [0.3, 0.13 * a / 90 - 0.2, 0.1]) for a in angles]
     )
-    views = list(place(list(zip(recs, poses)), refine=False).views)
+    views = list(place(list(zip(recs, poses)), refine_poses=False).views)
     fit = _Fit(views, on_turntable)
     r, jacobian = fit.residuals(views, jacobian=True)
     # per block (pair of views): the silhouette distances, then the tangent-plane gaps
@@ -318,8 +318,8 @@ def _shifted(pose, translation):
 def test_matrices_give_what_their_angles_give():
     angles = (0, 120, 240)
     recs = true_views("ellipsoid", angles)
-    by_angle = shadeform.fuse(list(zip(recs, angles)), refine=False)
-    by_matrix = shadeform.fuse(list(zip(recs, [turntable(a) for a in angles])), refine=False)
+    by_angle = shadeform.fuse(list(zip(recs, angles)), refine_poses=False)
+    by_matrix = shadeform.fuse(list(zip(recs, [turntable(a) for a in angles])), refine_poses=False)
     volumes = [trimesh.Trimesh(m.vertices, m.faces).volume for m in (by_angle, by_matrix)]
     assert abs(volumes[0] / volumes[1] - 1) < 0.005
     assert abs(len(by_angle.faces) - len(by_matrix.faces)) < 0.01 * len(by_angle.faces)
@@ -447,6 +447,43 @@ def test_cli_warns_when_the_photos_fit_another_placement(tmp_path, monkeypatch):
     assert report["rivals"] == [{"turns": [0.0, 16.5, 0.0, 16.4], "ratio": 1.06}]
 
 
+@pytest.mark.parametrize(
+    "flag, refine_poses",
+    [
+        ("--refine-poses", True),
+        ("--keep-poses", False),
+        ("--refine", True),
+        ("--no-refine", False),
+        (None, True),
+    ],
+)
+def test_cli_refine_poses_and_its_old_names(tmp_path, flag, refine_poses):
+    # parsed only: --refine/--no-refine, the old names of --refine-poses/--keep-poses, still taken
+    from typer.main import get_command
+
+    from shadeform.cli import app
+
+    args = ["a.png", "b.png", "--angles", "0,90", "-o", str(tmp_path / "m.ply"), *([flag] if flag else [])]
+    command = get_command(app).commands["fuse"]
+    assert command.make_context("fuse", args).params["refine_poses"] is refine_poses
+
+
+def test_the_old_keyword_refine_warns_and_gives_the_same_result():
+    angles = (0, 120, 240)
+    views = list(zip(true_views("ellipsoid", angles, size=SMALL), angles))
+    new = place(views, refine_poses=False)
+    with pytest.warns(DeprecationWarning, match="refine_poses="):
+        old = place(views, refine=False)
+    np.testing.assert_array_equal(np.array(old.transforms()), np.array(new.transforms()))
+    mesh = shadeform.fuse(views, refine_poses=False)
+    with pytest.warns(DeprecationWarning, match="fuse"):
+        again = shadeform.fuse(views, refine=False)
+    np.testing.assert_array_equal(again.vertices, mesh.vertices)
+    np.testing.assert_array_equal(again.faces, mesh.faces)
+    with pytest.raises(TypeError, match="both refine= and refine_poses="):
+        place(views, refine_poses=False, refine=True)
+
+
 def test_evaluate_fuse_prints_the_table():
     import json
 
@@ -509,7 +546,7 @@ def test_cli_settles_the_waist_and_takes_regions_per_view(tmp_path):
         Image.fromarray(np.rint(np.array(view.image) * 65535).astype(np.uint16)).save(tmp_path / names[-1])
     truth = synth.closed_object("waisted", size=SIZE).volume
     photos = [str(tmp_path / n) for n in names]
-    common = ["--angles", "0,90,180,270", "--resolution", "2", "--no-refine", "--json"]
+    common = ["--angles", "0,90,180,270", "--resolution", "2", "--keep-poses", "--json"]
 
     def run(*args):
         result = CliRunner().invoke(app, ["fuse", *args])
@@ -539,10 +576,12 @@ def test_views_from_opposite_sides_only_do_not_fix_the_depth():
     """Front and back views see the width and height twice and the depth never: the placement
     says so (the CLI warns), and a view from the side, or one off the line by more than a pose's
     correction, fixes it."""
-    assert not place(list(zip(true_views("waisted", (0, 180)), (0, 180))), refine=False).depth_fixed
-    assert not place(list(zip(true_views("waisted", (0, 185)), (0, 185))), refine=False).depth_fixed
-    assert place(list(zip(true_views("waisted", (0, 90)), (0, 90))), refine=False).depth_fixed
-    assert place(list(zip(true_views("waisted", (0, 180, 270)), (0, 180, 270))), refine=False).depth_fixed
+    assert not place(list(zip(true_views("waisted", (0, 180)), (0, 180))), refine_poses=False).depth_fixed
+    assert not place(list(zip(true_views("waisted", (0, 185)), (0, 185))), refine_poses=False).depth_fixed
+    assert place(list(zip(true_views("waisted", (0, 90)), (0, 90))), refine_poses=False).depth_fixed
+    assert place(
+        list(zip(true_views("waisted", (0, 180, 270)), (0, 180, 270))), refine_poses=False
+    ).depth_fixed
 
 
 @pytest.mark.parametrize("name", ["pebble", "lumpy"])

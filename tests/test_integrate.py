@@ -75,14 +75,23 @@ class TestIntegratePoisson:
 class TestIntegrate:
     def test_dispatch_and_default_origin(self):
         scene = synth.scene("sphere", size=32)
-        for method in ("paths", "poisson"):
-            z = integrate(scene.normals, scene.mask, method=method)
+        for integrator in ("paths", "poisson"):
+            z = integrate(scene.normals, scene.mask, integrator=integrator)
             assert np.isfinite(z[scene.mask]).all() and np.isnan(z[~scene.mask]).all()
+
+    def test_the_old_keyword_method_warns_and_gives_the_same_depth(self):
+        scene = synth.scene("sphere", size=32)
+        new = integrate(scene.normals, scene.mask, integrator="poisson")
+        with pytest.warns(DeprecationWarning, match="integrator="):
+            old = integrate(scene.normals, scene.mask, method="poisson")
+        np.testing.assert_array_equal(old, new)
+        with pytest.raises(TypeError, match="both method= and integrator="):
+            integrate(scene.normals, scene.mask, integrator="fourier", method="poisson")
 
     def test_errors(self):
         scene = synth.scene("sphere", size=32)
-        with pytest.raises(InputError, match="unknown integration method"):
-            integrate(scene.normals, scene.mask, method="magic")
+        with pytest.raises(InputError, match="unknown integrator 'magic'"):
+            integrate(scene.normals, scene.mask, integrator="magic")
         with pytest.raises(InputError, match="not on the mask"):
             integrate(scene.normals, scene.mask, origin=(0, 0))
         with pytest.raises(InputError, match=r"\(H, W, 3\)"):
@@ -94,22 +103,22 @@ class TestIntegrate:
 
 
 class TestPublicIntegrate:
-    def test_top_level_name_and_every_method(self):
+    def test_top_level_name_and_every_integrator(self):
         import shadeform
 
         scene = synth.scene("sphere", size=48)
         inner = scene.mask & (scene.normals[..., 2] > 0.3)
-        for method in ("paths", "poisson", "bilateral"):
-            z = shadeform.integrate(scene.normals, inner, method=method, origin=(24, 24))
+        for integrator in ("paths", "poisson", "bilateral"):
+            z = shadeform.integrate(scene.normals, inner, integrator=integrator, origin=(24, 24))
             assert z[24, 24] == pytest.approx(0, abs=1e-9)
             truth = scene.depth - scene.depth[24, 24]
-            assert np.nanmax(np.abs(z - truth)[inner]) < 0.05 * np.ptp(truth[inner]), method
+            assert np.nanmax(np.abs(z - truth)[inner]) < 0.05 * np.ptp(truth[inner]), integrator
 
     def test_perspective_needs_bilateral(self):
         scene = synth.scene("sphere", size=32)
         K = np.array([[100.0, 0, 16], [0, 100.0, 16], [0, 0, 1]])
-        with pytest.raises(InputError, match="bilateral"):
-            integrate(scene.normals, scene.mask, method="poisson", K=K)
+        with pytest.raises(InputError, match="needs integrator='bilateral'"):
+            integrate(scene.normals, scene.mask, integrator="poisson", K=K)
 
 
 class TestIntegrateFourier:
@@ -148,6 +157,6 @@ class TestIntegrateFourier:
         x, y = pixel_xy(mask.shape)
         truth = 0.01 * x**2 - 0.02 * y**2 + 0.003 * x * y
         zx, zy = 0.02 * x + 0.003 * y, -0.04 * y + 0.003 * x
-        z = integrate(normals_of(zx, zy), mask, method="fourier", origin=(10, 10))
+        z = integrate(normals_of(zx, zy), mask, integrator="fourier", origin=(10, 10))
         np.testing.assert_allclose(z[mask], (truth - truth[10, 10])[mask], atol=1e-8)
         assert np.isnan(z[~mask]).all()

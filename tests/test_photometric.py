@@ -44,7 +44,7 @@ class TestPhotometricStereo:
         assert result.normals.shape == sphere.mask.shape + (3,)
         assert result.albedo.shape == sphere.mask.shape
         assert result.lights_used.shape == sphere.mask.shape
-        assert result.method == "bivariate"
+        assert result.model == "bivariate"
         assert np.isnan(result.normals[~sphere.mask]).all()
         assert (result.lights_used[~sphere.mask] == 0).all()
 
@@ -52,7 +52,7 @@ class TestPhotometricStereo:
         lights = np.vstack([[0, 0, 1], ring(5, 25)])
         images = photos(sphere, lights, albedo=0.8)
         lit = sphere.mask & (np.einsum("hwc,nc->nhw", sphere.normals, lights) > 0).all(axis=0)
-        result = photometric_stereo(images, lights, sphere.mask, method="least_squares")
+        result = photometric_stereo(images, lights, sphere.mask, model="least_squares")
         assert angles(result.normals, sphere.normals, lit).max() < 1e-5
         np.testing.assert_allclose(result.albedo[lit], 0.8, atol=1e-6)
         assert (result.lights_used[lit] == 6).all()
@@ -61,8 +61,8 @@ class TestPhotometricStereo:
         lights = ring(3, 15, start=10)
         images = photos(sphere, lights)
         lit = sphere.mask & (np.einsum("hwc,nc->nhw", sphere.normals, lights) > 0).all(axis=0)
-        for method in ("least_squares", "robust"):
-            result = photometric_stereo(images, lights, sphere.mask, method=method)
+        for model in ("least_squares", "robust"):
+            result = photometric_stereo(images, lights, sphere.mask, model=model)
             assert angles(result.normals, sphere.normals, lit).max() < 1e-5
 
     def test_robust_leaves_attached_shadows_out(self, sphere):
@@ -74,7 +74,7 @@ class TestPhotometricStereo:
         shading = np.einsum("hwc,nc->nhw", sphere.normals, lights)
         reached = sphere.mask & ((shading > 0.15).sum(axis=0) >= 4)
         robust = photometric_stereo(images, lights, sphere.mask)
-        plain = photometric_stereo(images, lights, sphere.mask, method="least_squares")
+        plain = photometric_stereo(images, lights, sphere.mask, model="least_squares")
         assert np.median(angles(robust.normals, sphere.normals, reached)) < 1e-4
         assert angles(plain.normals, sphere.normals, reached).mean() > 1.0
 
@@ -85,7 +85,7 @@ class TestPhotometricStereo:
         )
         images = photos(sphere, lights, albedo=0.7, specular=0.5, shininess=50)
         robust = photometric_stereo(images, lights, sphere.mask)
-        plain = photometric_stereo(images, lights, sphere.mask, method="least_squares")
+        plain = photometric_stereo(images, lights, sphere.mask, model="least_squares")
         robust_err = angles(robust.normals, sphere.normals, sphere.mask).mean()
         assert robust_err < 1.5
         assert angles(plain.normals, sphere.normals, sphere.mask).mean() > 2 * robust_err
@@ -161,10 +161,10 @@ def grazing():
 class TestNoHoles:
     """Pixels fewer than three usable lights reach: their own readings plus their neighbours."""
 
-    @pytest.mark.parametrize("method", ["bivariate", "robust", "least_squares"])
-    def test_every_pixel_of_the_mask(self, grazing, method):
+    @pytest.mark.parametrize("model", ["bivariate", "robust", "least_squares"])
+    def test_every_pixel_of_the_mask(self, grazing, model):
         sphere, lights, images, lit = grazing
-        result = photometric_stereo(images, lights, sphere.mask, method=method)
+        result = photometric_stereo(images, lights, sphere.mask, model=model)
         assert np.isfinite(result.normals[sphere.mask]).all()
         assert np.isfinite(result.albedo[sphere.mask]).all()
         np.testing.assert_allclose(np.linalg.norm(result.normals[sphere.mask], axis=1), 1.0)
@@ -172,7 +172,7 @@ class TestNoHoles:
 
     def test_filled_pixels_are_close_and_say_so(self, grazing):
         sphere, lights, images, lit = grazing
-        result = photometric_stereo(images, lights, sphere.mask, method="robust")
+        result = photometric_stereo(images, lights, sphere.mask, model="robust")
         few = sphere.mask & (result.lights_used < 3)
         many = sphere.mask & (result.lights_used == 4)
         assert few.sum() > 500 and many.sum() > 500
@@ -220,7 +220,7 @@ class TestBivariate:
             photometric_stereo(images, lights, sphere.mask).normals, sphere.normals, sphere.mask
         )
         robust = angles(
-            photometric_stereo(images, lights, sphere.mask, method="robust").normals,
+            photometric_stereo(images, lights, sphere.mask, model="robust").normals,
             sphere.normals,
             sphere.mask,
         )
@@ -325,7 +325,7 @@ class TestBivariate:
         lights = ring(8, 30)
         images = photos(sphere, lights, albedo=0.7, specular=0.3, shininess=20)
         a = photometric_stereo(images, lights, sphere.mask)
-        b = photometric_stereo(images, lights, sphere.mask, method="robust")
+        b = photometric_stereo(images, lights, sphere.mask, model="robust")
         np.testing.assert_array_equal(a.normals, b.normals)
 
 
@@ -346,7 +346,7 @@ class TestPhotosThatContradict:
         sphere, lights, images = scene
         wrong = images.copy()
         wrong[:6] *= 0.7  # six photos 30 % dimmer than their calibration says
-        result = photometric_stereo(wrong, lights, sphere.mask, method="robust")
+        result = photometric_stereo(wrong, lights, sphere.mask, model="robust")
         assert [i for i, _ in result.photos_rescaled] == list(range(6)) and result.photos_dropped == ()
         # measured from a fit the faulty photos pulled: 0.73-0.75
         np.testing.assert_allclose([f for _, f in result.photos_rescaled], 0.7, rtol=0.08)
@@ -356,7 +356,7 @@ class TestPhotosThatContradict:
 
         try:
             audit.FAULTY = np.inf  # the same fit without the audit
-            blind = photometric_stereo(wrong, lights, sphere.mask, method="robust")
+            blind = photometric_stereo(wrong, lights, sphere.mask, model="robust")
         finally:
             audit.FAULTY = 3.0
         assert (
@@ -364,14 +364,14 @@ class TestPhotosThatContradict:
         )
         brighter = images.copy()
         brighter[:6] *= 1.4
-        result = photometric_stereo(brighter, lights, sphere.mask, method="robust")
+        result = photometric_stereo(brighter, lights, sphere.mask, model="robust")
         np.testing.assert_allclose([f for _, f in result.photos_rescaled], 1.4, rtol=0.03)
 
     def test_wrong_directions_are_dropped(self, scene):
         sphere, lights, images = scene
         wrong = lights.copy()
         wrong[[3, 17]] = wrong[[17, 3]] * [-1, -1, 1]  # two photos' lights swapped and turned round
-        result = photometric_stereo(images, wrong, sphere.mask, method="robust")
+        result = photometric_stereo(images, wrong, sphere.mask, model="robust")
         assert result.photos_dropped == (3, 17)
         inner = sphere.mask & (sphere.normals[..., 2] > 0.5)
         assert angles(result.normals, sphere.normals, inner).mean() < 0.5
@@ -383,31 +383,76 @@ class TestPhotosThatContradict:
 
 
 class TestRegistry:
-    def test_a_method_registered_later_is_listed_and_taken(self, sphere):
+    def test_a_model_registered_later_is_listed_and_taken(self, sphere):
         import shadeform.photometric as photometric
-        from shadeform.photometric import STEREO_METHODS, StereoMethod, available_stereo_methods, register
+        from shadeform.photometric import STEREO_MODELS, StereoModel, available_stereo_models, register
 
         lights = ring(6, 40.0)
-        with STEREO_METHODS.restored():
+        with STEREO_MODELS.restored():
             register(
-                StereoMethod(
+                StereoModel(
                     "woodham", "shadeform.photometric.lambertian:least_squares", "a copy", drops_photos=False
                 )
             )
-            assert "woodham" in photometric.METHODS and "woodham" in available_stereo_methods()
-            from shadeform.photometric import METHODS  # importable, and read when imported
+            assert "woodham" in photometric.MODELS and "woodham" in available_stereo_models()
+            from shadeform.photometric import MODELS  # importable, and read when imported
 
-            assert METHODS[-1] == "woodham"
-            result = photometric_stereo(photos(sphere, lights), lights, sphere.mask, method="woodham")
+            assert MODELS[-1] == "woodham"
+            result = photometric_stereo(photos(sphere, lights), lights, sphere.mask, model="woodham")
             assert np.isfinite(result.normals[sphere.mask]).all()
-        assert "woodham" not in photometric.METHODS
-        assert photometric.METHODS == ("bivariate", "robust", "least_squares")
+        assert "woodham" not in photometric.MODELS
+        assert photometric.MODELS == ("bivariate", "robust", "least_squares")
 
     def test_available_methods_is_a_deprecated_alias(self):
-        from shadeform.photometric import available_methods, available_stereo_methods
+        from shadeform.photometric import available_methods, available_stereo_models
 
-        with pytest.warns(DeprecationWarning, match="available_stereo_methods"):
-            assert available_methods() == available_stereo_methods()
+        with pytest.warns(DeprecationWarning, match="available_stereo_models"):
+            assert available_methods() == available_stereo_models()
+
+    @pytest.mark.parametrize(
+        "old, new",
+        [
+            ("STEREO_METHODS", "STEREO_MODELS"),
+            ("StereoMethod", "StereoModel"),
+            ("METHODS", "MODELS"),
+        ],
+    )
+    @pytest.mark.parametrize("where", ["shadeform.photometric", "shadeform.photometric.registry"])
+    def test_the_old_names_warn_and_are_the_new(self, old, new, where):
+        import importlib
+
+        module = importlib.import_module(where)
+        with pytest.warns(DeprecationWarning, match=new) as caught:
+            value = getattr(module, old)
+        assert caught[0].filename == __file__  # the warning points at the caller
+        assert value == getattr(module, new)
+
+    def test_available_stereo_methods_is_a_deprecated_alias(self):
+        from shadeform.photometric import available_stereo_methods, available_stereo_models
+
+        with pytest.warns(DeprecationWarning, match="available_stereo_models"):
+            assert available_stereo_methods() == available_stereo_models()
+
+    def test_the_old_keyword_method_warns_and_gives_the_same_result(self, sphere):
+        from shadeform.photometric import reconstruct_stereo
+
+        lights = ring(4, 25)
+        images = photos(sphere, lights)
+        new = photometric_stereo(images, lights, sphere.mask, model="robust")
+        with pytest.warns(DeprecationWarning, match="model="):
+            old = photometric_stereo(images, lights, sphere.mask, method="robust")
+        assert old.model == "robust"
+        np.testing.assert_array_equal(old.normals, new.normals)
+        with pytest.warns(DeprecationWarning, match="PhotometricStereo.model"):
+            assert new.method == "robust"
+        with pytest.raises(TypeError, match="both method= and model="):
+            photometric_stereo(images, lights, sphere.mask, model="robust", method="least_squares")
+        rec = reconstruct_stereo(images, lights, sphere.mask, model="robust")
+        with pytest.warns(DeprecationWarning, match="reconstruct_stereo"):
+            old = reconstruct_stereo(images, lights, sphere.mask, method="robust")
+        np.testing.assert_array_equal(old.depth, rec.depth)
+        assert old.info["model"] == rec.info["model"] == "robust"
+        assert rec.info["solver"] == "photometric stereo (robust)"
 
 
 class TestPhotometricStereoErrors:
@@ -442,7 +487,7 @@ class TestPhotometricStereoErrors:
     @pytest.mark.parametrize(
         "options, match",
         [
-            ({"method": "magic"}, "method"),
+            ({"model": "magic"}, "unknown model 'magic'"),
             ({"min_shading": 1.0}, "min_shading"),
             ({"highlight_angle": -1}, "highlight_angle"),
             ({"iterations": 1.5}, "iterations"),
@@ -476,8 +521,8 @@ def test_diligent_ball():
         "channel_from": "auto",
     }
     bivariate = photometric_stereo(images, lights, mask, intensities=strengths)
-    robust = photometric_stereo(images, lights, mask, intensities=strengths, method="robust")
-    plain = photometric_stereo(images, lights, mask, intensities=strengths, method="least_squares")
+    robust = photometric_stereo(images, lights, mask, intensities=strengths, model="robust")
+    plain = photometric_stereo(images, lights, mask, intensities=strengths, model="least_squares")
     assert abs(angles(plain.normals, truth, mask).mean() - 4.10) < 0.3
     assert angles(robust.normals, truth, mask).mean() < 2.0
     # the calibrated lights' slant is found 7 % short: 1.14 degrees measured, 1.79 as given
@@ -503,7 +548,7 @@ def test_real_diligent_every_pixel(name):
     (7 of 9 objects had holes before), and only bear's faulty first photos rescaled."""
     photos, truth = _real(name)
     result = photometric_stereo(
-        photos.images, photos.lights, photos.mask, intensities=photos.intensities, method="robust"
+        photos.images, photos.lights, photos.mask, intensities=photos.intensities, model="robust"
     )
     assert np.isfinite(result.normals[photos.mask]).all() and np.isfinite(result.albedo[photos.mask]).all()
     rescaled = [i for i, _ in result.photos_rescaled]
@@ -525,7 +570,7 @@ def test_real_diligent_reflectance_model(name, bivariate_bar, robust_at_least):
     photos, truth = _real(name)
     args = (photos.images, photos.lights, photos.mask)
     bivariate = photometric_stereo(*args, intensities=photos.intensities)
-    robust = photometric_stereo(*args, intensities=photos.intensities, method="robust")
+    robust = photometric_stereo(*args, intensities=photos.intensities, model="robust")
     assert angles(bivariate.normals, truth, photos.mask).mean() < bivariate_bar
     assert angles(robust.normals, truth, photos.mask).mean() > robust_at_least
 
@@ -647,12 +692,12 @@ class TestUnknownLights:
                 for i, (light, k) in enumerate(zip(lights, strengths))
             ]
         )
-        result = photometric_stereo(images, None, scene.mask, method="robust")
+        result = photometric_stereo(images, None, scene.mask, model="robust")
         light_errors = np.degrees(np.arccos(np.clip(np.sum(result.lights * lights, axis=1), -1, 1)))
         # measured: normals 1.2-1.8 degrees, lights' median 0.8-1.0
         assert angles(result.normals, scene.normals, scene.mask).mean() < 3.0
         assert np.median(light_errors) < 2.0
-        known = photometric_stereo(images, lights, scene.mask, method="robust")
+        known = photometric_stereo(images, lights, scene.mask, model="robust")
         assert known.lights is None
 
     def test_too_few_photos(self, sphere):

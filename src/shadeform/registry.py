@@ -1,6 +1,6 @@
 """One kind of registry for every family of interchangeable parts: the solvers
 (:mod:`shadeform.solvers`), the integrators (:mod:`shadeform.integration`), the mesh exporters
-(:mod:`shadeform.io.exporters`) and the photometric-stereo methods
+(:mod:`shadeform.io.exporters`) and the photometric-stereo models
 (:mod:`shadeform.photometric.registry`) are each one :class:`Registry`.
 
 An entry is a frozen record with a ``name`` (what users type), a one-line ``description`` and,

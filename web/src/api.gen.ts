@@ -129,8 +129,8 @@ export interface Options {
   filters: string[];
   formats: FormatInfo[];
   examples: ExampleInfo[];
-  /** Photometric stereo's methods, the default first. */
-  stereo_methods: MethodInfo[];
+  /** Photometric stereo's models (``StereoParams.model``), the default first. */
+  stereo_models: MethodInfo[];
   photo_set_examples: ExampleInfo[];
   stereo_defaults: StereoParams;
   relief_defaults: ReliefParams;
@@ -200,8 +200,8 @@ export interface StereoParams {
   lights: StereoLights;
   /** The sphere's circle ``[column, row, radius]`` in pixels; null to find it (lights "sphere" only). */
   sphere: [number, number, number] | null;
-  /** One of ``Options.stereo_methods``. */
-  method: string;
+  /** The photometric model: one of ``Options.stereo_models``. */
+  model: string;
   /** One of ``Options.integrators``. */
   integrator: string;
   /** Mesh granularity: pixels per vertex. Changing only this re-meshes without a new solve. */
@@ -284,7 +284,7 @@ export interface FuseRequest {
   /** Two to 24 views. */
   views: FuseView[];
   /** Correct the poses and depth offsets so that the views agree. */
-  refine: boolean;
+  refine_poses: boolean;
   /** Read each view's unsure areas (what its photo leaves open: ``info['unsure']``) as concave where the other views' silhouettes say so (``shadeform.fusion.settle``). */
   settle: boolean;
   /** Voxel edge in pixels; null: 1, or coarser for a big object (the library's default). */
@@ -330,7 +330,7 @@ export interface FuseResult {
   depth_fixed: boolean;
   /** Seconds per stage: reconstruct (the views solved anew), place, solid, parts, encode, total. */
   timings: Record<string, number>;
-  /** What ran: ``resolution`` (the voxel edge used), ``refine``, ``settle``, ``cached`` (whether the fusion was reused). */
+  /** What ran: ``resolution`` (the voxel edge used), ``refine_poses``, ``settle``, ``cached`` (whether the fusion was reused). */
   info: Record<string, unknown>;
 }
 
@@ -517,7 +517,8 @@ export interface ProjectViewEntry {
 /** The views in a project (several sides of one object, fused) and the fusion's settings. */
 export interface ProjectViews {
   views: ProjectViewEntry[];
-  refine: boolean;
+  /** Correct the poses so that the views agree (``FuseRequest.refine_poses``). */
+  refine_poses: boolean;
   settle: boolean;
   resolution: number | null;
   showParts: boolean;

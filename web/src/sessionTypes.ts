@@ -25,7 +25,7 @@ export interface View {
 /** What a reload needs to show the views again. */
 export interface ViewsSaved {
   views: View[];
-  refine: boolean;
+  refine_poses: boolean;
   settle: boolean;
   resolution: number | null;
   showParts: boolean;

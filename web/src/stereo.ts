@@ -136,7 +136,7 @@ export class StereoSession {
 
   private open(info: PhotoSetInfo, params?: StereoParams): void {
     this.info = info;
-    this.params = { ...structuredClone(this.options.stereo_defaults), ...(params ?? info.suggested) };
+    this.params = { ...structuredClone(this.options.stereo_defaults), ...currentNames(params ?? info.suggested) };
     this.result = null;
     this.maps = null;
     this.photo = null;
@@ -214,10 +214,10 @@ export class StereoSession {
   // ------------------------------------------------------------------------- panel
 
   private buildPanel(): void {
-    const method = $<HTMLSelectElement>('stereo-method');
+    const model = $<HTMLSelectElement>('stereo-model');
     const integrator = $<HTMLSelectElement>('stereo-integrator');
-    fillStereoChoices(method, integrator, this.options);
-    method.addEventListener('change', () => this.change({ method: method.value }));
+    fillStereoChoices(model, integrator, this.options);
+    model.addEventListener('change', () => this.change({ model: model.value }));
     integrator.addEventListener('change', () => this.change({ integrator: integrator.value }));
     for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-lights button')) {
       button.addEventListener('click', () => {
@@ -246,7 +246,7 @@ export class StereoSession {
   }
 
   private showParams(): void {
-    $<HTMLSelectElement>('stereo-method').value = this.params.method;
+    $<HTMLSelectElement>('stereo-model').value = this.params.model;
     $<HTMLSelectElement>('stereo-integrator').value = this.params.integrator;
     for (const button of document.querySelectorAll<HTMLButtonElement>('#stereo-lights button')) {
       button.classList.toggle('on', button.dataset.lights === this.params.lights);
@@ -482,4 +482,11 @@ export class StereoSession {
       },
     };
   }
+}
+
+/** Saved parameters in today's names: a session or project saved before the rename holds the
+ * photometric model as `method` (the server takes either; sent both, it refuses the request). */
+function currentNames(params: StereoParams): StereoParams {
+  const { method, ...rest } = params as StereoParams & { method?: string };
+  return method === undefined || rest.model !== undefined ? rest : { ...rest, model: method };
 }

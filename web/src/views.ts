@@ -72,7 +72,7 @@ export function parseAngle(text: string): number | null {
 
 export class ViewsSession {
   views: View[] = [];
-  refine = true;
+  refinePoses = true;
   settle = true;
   resolution: number | null = DEFAULT_RESOLUTION;
   showParts = true;
@@ -164,7 +164,8 @@ export class ViewsSession {
   /** The views a reloaded page had (the server may have forgotten their photos). */
   restore(saved: ViewsSaved): void {
     this.views = structuredClone(saved.views);
-    this.refine = saved.refine ?? true;
+    // `refine`: the name a session or project saved before the rename holds it under
+    this.refinePoses = saved.refine_poses ?? (saved as { refine?: boolean }).refine ?? true;
     this.settle = saved.settle ?? true;
     this.resolution = saved.resolution === undefined ? DEFAULT_RESOLUTION : saved.resolution;
     this.showParts = saved.showParts ?? true;
@@ -176,7 +177,7 @@ export class ViewsSession {
   session(): ViewsSaved {
     return {
       views: structuredClone(this.views),
-      refine: this.refine,
+      refine_poses: this.refinePoses,
       settle: this.settle,
       resolution: this.resolution,
       showParts: this.showParts,
@@ -224,7 +225,7 @@ export class ViewsSession {
   request(): FuseRequest {
     return {
       views: this.views.map((view) => ({ image_id: view.image.image_id, angle: view.angle, params: structuredClone(view.params) })),
-      refine: this.refine,
+      refine_poses: this.refinePoses,
       settle: this.settle,
       resolution: this.resolution,
       request_id: ++this.requestCounter,
@@ -338,7 +339,7 @@ export class ViewsSession {
       this.host.changed();
       this.solve();
     });
-    for (const [id, key] of [['views-refine', 'refine'], ['views-settle', 'settle']] as const) {
+    for (const [id, key] of [['views-refine-poses', 'refinePoses'], ['views-settle', 'settle']] as const) {
       const box = $<HTMLInputElement>(id);
       box.addEventListener('change', () => {
         this[key] = box.checked;
@@ -417,7 +418,7 @@ export class ViewsSession {
     list.replaceChildren(...cards);
     $('views-empty').hidden = this.views.length > 0;
     $<HTMLSelectElement>('views-resolution').value = this.resolution === null ? 'auto' : String(this.resolution);
-    $<HTMLInputElement>('views-refine').checked = this.refine;
+    $<HTMLInputElement>('views-refine-poses').checked = this.refinePoses;
     $<HTMLInputElement>('views-settle').checked = this.settle;
     $<HTMLInputElement>('parts-toggle').checked = this.showParts;
     const first = this.views[0]?.image;

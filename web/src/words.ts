@@ -1,5 +1,5 @@
 // Plain words for what the panel shows: a brightness threshold as a share of white, the photo
-// set's methods by what they do (the library's own name kept in the tooltip), and the notes a
+// set's models by what they assume (the library's own name kept in the tooltip), and the notes a
 // result's info carries that a newcomer needs explained (a depth pulled back, unsure areas not
 // listed). The numbers come from the server; only their wording lives here.
 
@@ -18,31 +18,31 @@ export function thresholdWords(value: number, dark: boolean): string {
 }
 
 /**
- * The photo set's methods (``Options.stereo_methods``) by what they assume of the surface; the
- * library's name and its description go in the option's tooltip. A method not listed here shows
- * its own name.
+ * The photo set's photometric models (``Options.stereo_models``) by what they assume of the
+ * surface; the library's name and its description go in the option's tooltip. A model not listed
+ * here shows its own name.
  */
-const STEREO_METHOD_WORDS: Record<string, string> = {
+const STEREO_MODEL_WORDS: Record<string, string> = {
   bivariate: 'Glossy or matte',
   robust: 'Matte, skip glints',
   least_squares: 'Matte, every photo',
 };
 
-/** The photo set's Method and Integrator choices, from the server's registries. */
+/** The photo set's Reflectance (photometric model) and Integrator choices, from the server's registries. */
 export function fillStereoChoices(
-  method: HTMLSelectElement,
+  model: HTMLSelectElement,
   integrator: HTMLSelectElement,
-  options: { stereo_methods: Array<{ name: string; description: string }>; integrators: Array<{ name: string; description: string }> },
+  options: { stereo_models: Array<{ name: string; description: string }>; integrators: Array<{ name: string; description: string }> },
 ): void {
-  method.append(...stereoMethodOptions(options.stereo_methods));
+  model.append(...stereoModelOptions(options.stereo_models));
   integrator.append(...integratorOptions(options.integrators));
 }
 
-/** The photo set's Method choices: what each assumes, its name and description in the tooltip. */
-export function stereoMethodOptions(entries: Array<{ name: string; description: string }>): HTMLOptionElement[] {
+/** The photo set's Reflectance choices (photometric models): what each assumes, its name and description in the tooltip. */
+export function stereoModelOptions(entries: Array<{ name: string; description: string }>): HTMLOptionElement[] {
   return entries.map(({ name, description }) => {
-    const option = new Option(STEREO_METHOD_WORDS[name] ?? name.replace(/_/g, ' '), name);
-    option.title = `${capitalised(description)} (the CLI's: shadeform stereo --method ${name})`;
+    const option = new Option(STEREO_MODEL_WORDS[name] ?? name.replace(/_/g, ' '), name);
+    option.title = `${capitalised(description)} (the CLI's: shadeform stereo --model ${name})`;
     return option;
   });
 }

@@ -169,7 +169,7 @@ def _resolver(state, entries: list, body: FuseRequest):
 
 def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]]) -> tuple[_Fused, bool]:
     """The fused model of the solved views (cached per views, angles, parameters but ``step``,
-    refine, settle and resolution), and whether it was reused."""
+    refine_poses, settle and resolution), and whether it was reused."""
     from shadeform.fusion import place, solid
     from shadeform.fusion.outlines import outline_iou
     from shadeform.mesh import solid_measures
@@ -179,7 +179,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
         tuple(
             (view.image_id, view.params.model_dump_json(exclude={"step"}), view.angle) for view in body.views
         ),
-        body.refine,
+        body.refine_poses,
         body.settle,
         body.resolution,
     )
@@ -191,7 +191,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
     placement = place(
         list(zip(recs, [view.angle for view in body.views])),
         resolution=body.resolution,
-        refine=body.refine,
+        refine_poses=body.refine_poses,
         resolve=_resolver(state, entries, body) if body.settle else None,
     )
     placed = time.perf_counter()
@@ -258,7 +258,12 @@ def _result(state, entries: list, body: FuseRequest) -> FuseResult:
         rivals=[list(turns) for turns in fused.rivals],
         depth_fixed=fused.depth_fixed,
         timings=timings,
-        info={"resolution": fused.spacing, "refine": body.refine, "settle": body.settle, "cached": cached},
+        info={
+            "resolution": fused.spacing,
+            "refine_poses": body.refine_poses,
+            "settle": body.settle,
+            "cached": cached,
+        },
     )
 
 

@@ -314,7 +314,7 @@ def app_options(limits: AppLimits, initial: StoredImage | None) -> Options:
     from shadeform.integration import INTEGRATORS
     from shadeform.io.exporters import available_formats
     from shadeform.io.images import CHANNELS
-    from shadeform.photometric import STEREO_METHODS
+    from shadeform.photometric import STEREO_MODELS
     from shadeform.preprocess import FILTER_KINDS
     from shadeform.solvers import AUTO, SOLVERS, available_solvers
 
@@ -325,7 +325,7 @@ def app_options(limits: AppLimits, initial: StoredImage | None) -> Options:
         filters=list(FILTER_KINDS),
         formats=[FormatInfo(suffix=s, description=d) for s, d in available_formats().items()],
         examples=[ExampleInfo(name=name, title=title) for name, title in EXAMPLES.items()],
-        stereo_methods=method_infos(STEREO_METHODS),
+        stereo_models=method_infos(STEREO_MODELS),
         photo_set_examples=[
             ExampleInfo(name=name, title=title) for name, title in PHOTO_SET_EXAMPLES.items()
         ],

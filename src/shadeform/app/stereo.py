@@ -336,16 +336,16 @@ def _solve(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedS
     """The photometric stereo result for these parameters, from the cache when only ``step``
     changed."""
     from shadeform.integration import available_integrators
-    from shadeform.photometric import STEREO_METHODS, reconstruct_stereo
+    from shadeform.photometric import STEREO_MODELS, reconstruct_stereo
 
     key = (entry.photoset_id, params.model_dump_json(exclude={"step"}))
     solved = state.results.get(key)
     if solved is not None:
         return solved, True
-    if params.method not in STEREO_METHODS:
+    if params.model not in STEREO_MODELS:
         raise InputError(
-            f"unknown photometric stereo method {params.method!r}; choose one of: "
-            f"{', '.join(STEREO_METHODS.names())}"
+            f"unknown photometric stereo model {params.model!r}; choose one of: "
+            f"{', '.join(STEREO_MODELS.names())}"
         )
     if params.integrator not in available_integrators():
         raise InputError(
@@ -377,7 +377,7 @@ def _solve(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedS
         lights,
         entry.mask,
         intensities=strengths,
-        method=params.method,
+        model=params.model,
         integrator=params.integrator,
         sphere=circle,
     )

@@ -88,9 +88,14 @@ def fuse(
         float | None,
         typer.Option(min=0.25, max=64, help="Voxel edge in pixels (default: 1, or coarser for big objects)."),
     ] = None,
-    refine: Annotated[
+    refine_poses: Annotated[
         bool,
-        typer.Option("--refine/--no-refine", help="Correct the poses and offsets so that the views agree."),
+        typer.Option(
+            "--refine-poses/--keep-poses",
+            "--refine/--no-refine",  # their old names, still taken
+            help="Correct the poses and offsets so that the views agree, or keep them as given "
+            "(--refine/--no-refine: the old names).",
+        ),
     ] = True,
     axis: Annotated[
         float | None,
@@ -176,7 +181,7 @@ def fuse(
             placement = place(
                 list(zip(recs, [entry.pose for entry in entries])),
                 resolution=resolution,
-                refine=refine,
+                refine_poses=refine_poses,
                 axis=axis,
                 resolve=solve if settle else None,
             )
@@ -252,7 +257,7 @@ def fuse(
         err.print(
             f"warning: the photos fit another placement about as well ({', '.join(turned)}), and the "
             "model may be wrong there; add a photo between two views (e.g. at 45 degrees) or give "
-            "the angles exactly (--no-refine keeps them)",
+            "the angles exactly (--keep-poses keeps them)",
             soft_wrap=True,
             highlight=False,
         )

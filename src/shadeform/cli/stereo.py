@@ -83,11 +83,14 @@ def stereo(
             "(uncalibrated; far less accurate than known lights).",
         ),
     ] = False,
-    method: Annotated[
+    model: Annotated[
         str,
         typer.Option(
-            help="bivariate (a reflectance model per pixel: gloss, falloff, shadows weighted out), "
-            "robust (Lambertian, shadows and highlights left out) or least_squares (Woodham)."
+            "--model",
+            "--method",  # its old name, still taken
+            help="The photometric model: bivariate (a reflectance model per pixel: gloss, falloff, "
+            "shadows weighted out), robust (Lambertian, shadows and highlights left out) or "
+            "least_squares (Woodham). --method is its old name.",
         ),
     ] = "bivariate",
     keep_lights: Annotated[
@@ -131,7 +134,7 @@ def stereo(
     The lights come from a light file (``--lights``, also RTI ``.lp``), a shiny sphere in the
     photos (``--sphere``), or are found from the photos themselves (``--unknown-lights``)."""
     from shadeform._checks import check_choice
-    from shadeform.photometric import STEREO_METHODS, reconstruct_stereo
+    from shadeform.photometric import STEREO_MODELS, reconstruct_stereo
     from shadeform.photoset import load_photo_set
 
     # everything the user typed is checked before the photos are read
@@ -139,7 +142,7 @@ def stereo(
     for path, what in ((albedo, "an albedo map to"), (confidence, "a confidence map to")):
         if path is not None:
             check_suffix(path, (".png",), what)
-    STEREO_METHODS.get(method)  # an unknown name is refused here, listing the registered
+    STEREO_MODELS.get(model)  # an unknown name is refused here, listing the registered
     check_choice(integrator, tuple(available_integrators()), "integrator")
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -160,13 +163,13 @@ def stereo(
                 sphere=circle,
                 max_pixels=max_pixels,
             )
-        with stage(err, f"photometric stereo ({method}) and depth ({integrator})", timings, "reconstruct"):
+        with stage(err, f"photometric stereo ({model}) and depth ({integrator})", timings, "reconstruct"):
             rec = reconstruct_stereo(
                 photos.images,
                 photos.lights,
                 photos.mask,
                 intensities=photos.intensities,
-                method=method,
+                model=model,
                 integrator=integrator,
                 sphere=photos.sphere,
                 refine_lights=not keep_lights,
@@ -195,7 +198,7 @@ def stereo(
     out = stdout_console()
     out.print(
         f"[bold]reconstructed[/] {len(photos.paths)} photos ({width}x{height}, {describe_photo(photos.info)}) "
-        f"by {rec.info['method']}, {integrator} integration"
+        f"by {rec.info['solver']}, {integrator} integration"
     )
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shadeform._checks import check_choice
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.fusion.closed import Closed, close
 from shadeform.fusion.geometry import axis_column, parse_pose
@@ -75,11 +76,12 @@ TRIALS_PER_VIEW = 2
 TRUNCATION_VOXELS = 3.0
 
 
+@renamed_keywords(refine="refine_poses")
 def fuse(
     views: Sequence,
     *,
     resolution: float | None = None,
-    refine: bool = True,
+    refine_poses: bool = True,
     axis: float | None = None,
     resolve: Callable[[int, list], object] | None = None,
     surface: str = "volume",
@@ -97,10 +99,10 @@ def fuse(
     resolution : float, optional
         Voxel edge in pixels; default: 1, or coarser so that the grid has at most
         :data:`MAX_VOXELS` voxels.
-    refine : bool
+    refine_poses : bool
         Correct the poses and depth offsets so that the views agree (:mod:`.register`): each
         view's points inside the others' silhouettes, overlapping surfaces at one depth. Poses
-        off by up to 10 degrees are corrected this way.
+        off by up to 10 degrees are corrected this way. False takes the poses as given.
     axis : float, optional
         The turntable axis's column in the images; default: found from the silhouettes
         (:func:`shadeform.fusion.geometry.axis_column`).
@@ -109,7 +111,7 @@ def fuse(
         list of :class:`shadeform.regions.Region`) marked concave besides the user's. Given, the
         areas each photo could not settle (``info["unsure"]``) are read as concave where the
         other views' silhouettes say so (:mod:`.settle`): a waist between two lobes, which one
-        photo reads as a third hill top. With ``refine``, the readings are then tried again
+        photo reads as a third hill top. With ``refine_poses``, the readings are then tried again
         from the given poses and kept where the views clearly agree better (:func:`_checked`).
     surface : {"volume", "poisson"}
         How the placed views become one surface: ``"volume"``, their truncated signed distance
@@ -134,7 +136,7 @@ def fuse(
     """
     if check_choice(surface, SURFACES, "surface") == "poisson":
         require_open3d(load=False)  # before the placement's seconds, not after
-    placement = place(views, resolution=resolution, refine=refine, axis=axis, resolve=resolve)
+    placement = place(views, resolution=resolution, refine_poses=refine_poses, axis=axis, resolve=resolve)
     return solid(placement, surface=surface)
 
 
@@ -218,11 +220,12 @@ class Placement:
         return out
 
 
+@renamed_keywords(refine="refine_poses")
 def place(
     views: Sequence,
     *,
     resolution: float | None = None,
-    refine: bool = True,
+    refine_poses: bool = True,
     axis: float | None = None,
     resolve: Callable[[int, list], object] | None = None,
 ) -> Placement:
@@ -249,7 +252,7 @@ def place(
         resolve = _remembered(resolve)
     # settled before the poses are refined (a lobe read tens of pixels too deep pulls them off)
     # and again after (at poses 10 degrees off the hull may not show which reading is right)
-    for round_ in range(2 if resolve is not None and refine else 1):
+    for round_ in range(2 if resolve is not None and refine_poses else 1):
         if resolve is not None:
             if round_:
                 inside = _shared(placed, grid)
@@ -257,18 +260,23 @@ def place(
             if round_ and all(new is old for new, old in zip(chosen, readings)):
                 break
             placed, readings = _replaced(placed, readings, chosen, grid, column0), chosen
-        if refine:
-            placed = refine_poses(placed, turntable=turntable)
-    if resolve is not None and refine:
+        if refine_poses:
+            placed = _refined(placed, turntable=turntable)
+    if resolve is not None and refine_poses:
         given = [pose.matrix for pose in poses]
         placed, readings, concave, rivals = _checked(
             placed, readings, concave, recs, given, grid, column0, resolve, turntable=turntable
         )
     else:
         rivals = ()
-    if refine and not hull(placed, grid).any():
+    if refine_poses and not hull(placed, grid).any():
         raise InputError("the views share no volume at the refined poses; check the angles")
     return Placement(tuple(placed), grid, column0, tuple(readings), tuple(concave), rivals)
+
+
+def _refined(views, **keywords):
+    """This package's ``refine_poses``, looked up when called (place's flag hides it; tests replace it)."""
+    return refine_poses(views, **keywords)
 
 
 def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, turntable):

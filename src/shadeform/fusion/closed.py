@@ -112,7 +112,7 @@ def close(reconstruction, *, back: str = "mirror", resolution: float | None = No
     placement = place(
         [(reconstruction, 0.0), (mirrored(reconstruction), 180.0)],
         resolution=resolution,
-        refine=False,
+        refine_poses=False,
         axis=centre,
     )
     mesh = solid(placement)

@@ -1,4 +1,4 @@
-"""Depth from normals: ``integrate(normals, mask, method=...)``, and the registry of integrators.
+"""Depth from normals: ``integrate(normals, mask, integrator=...)``, and the registry of integrators.
 
 Integrators
 -----------
@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shadeform._checks import check_mask
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.registry import Option, Registry, load
 
@@ -43,7 +44,8 @@ class Integrator:
     Attributes
     ----------
     name : str
-        What users pass (``integrate(method=name)``, ``--integrator name``).
+        What users pass (``integrate(integrator=name)``, ``reconstruct(integrator=name)``,
+        ``--integrator name``).
     function : callable or str
         ``function(normals, mask, *, origin) -> depth`` (``(H, W)``, NaN off the mask, ``z = 0`` at
         ``origin``), or ``"module:function"`` naming it (imported on first use).
@@ -68,7 +70,7 @@ class Integrator:
 
 
 #: The registered integrators, in registration order.
-INTEGRATORS: Registry[Integrator] = Registry("integration method", Integrator)
+INTEGRATORS: Registry[Integrator] = Registry("integrator", Integrator)
 
 
 def register(integrator: Integrator) -> None:
@@ -81,11 +83,12 @@ def available_integrators() -> dict[str, str]:
     return INTEGRATORS.descriptions()
 
 
+@renamed_keywords(method="integrator")
 def integrate(
     normals: np.ndarray,
     mask: np.ndarray,
     *,
-    method: str = "paths",
+    integrator: str = "paths",
     origin: tuple[int, int] | None = None,
     K: np.ndarray | None = None,
 ) -> np.ndarray:
@@ -96,7 +99,7 @@ def integrate(
     normals : (H, W, 3) float
         Unit normals in the camera frame (``docs/conventions.md``), finite on the mask.
     mask : (H, W) bool
-    method : str
+    integrator : str
         A registered integrator (:func:`available_integrators`): "paths", "poisson", "fourier",
         "bilateral".
     origin : (int, int), optional
@@ -117,20 +120,21 @@ def integrate(
     mask = check_mask(mask, normals.shape[:2], of="the normals")
     if not np.isfinite(normals[mask]).all():
         raise InputError("normals have NaN inside the mask; fill them or leave those pixels out of the mask")
-    integrator = INTEGRATORS.get(method)
+    entry = INTEGRATORS.get(integrator)
     if K is not None:
-        if not integrator.perspective:
+        if not entry.perspective:
             perspective = [i.name for i in INTEGRATORS.entries() if i.perspective]
             raise InputError(
-                f"a perspective camera (K) needs method={' or '.join(map(repr, perspective))}, not {method!r}"
+                f"a perspective camera (K) needs integrator={' or '.join(map(repr, perspective))}, "
+                f"not {integrator!r}"
             )
-        return integrator.load()(normals, mask, K=K)
+        return entry.load()(normals, mask, K=K)
     if origin is None:
         origin = np.unravel_index(np.argmax(np.where(mask, normals[..., 2], -np.inf)), mask.shape)
     origin = (int(origin[0]), int(origin[1]))
     if not (0 <= origin[0] < mask.shape[0] and 0 <= origin[1] < mask.shape[1]) or not mask[origin]:
         raise InputError(f"origin (row {origin[0]}, col {origin[1]}) is not on the mask")
-    return integrator.load()(normals, mask, origin=origin)
+    return entry.load()(normals, mask, origin=origin)
 
 
 register(

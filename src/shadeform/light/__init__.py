@@ -33,7 +33,7 @@ from shadeform.light.vectors import as_light, light_from_slant_tilt, parse_light
 _LAZY = {
     "LightEstimate": "shadeform.light.estimate",
     "estimate_light": "shadeform.light.estimate",
-    "ESTIMATION_METHODS": "shadeform.light.estimate",
+    "ESTIMATION_CUES": "shadeform.light.estimate",
     "MIN_OBJECT_PIXELS": "shadeform.light.estimate",
     "CONFIDENCE_ANGLE": "shadeform.light.estimate",
 }
@@ -50,6 +50,13 @@ __all__ = [
 
 
 def __getattr__(name: str):
+    if name == "ESTIMATION_METHODS":  # the old name of ESTIMATION_CUES: warns each time, never cached
+        import warnings
+
+        from shadeform.light import estimate
+
+        warnings.warn(estimate._OLD_CUES, DeprecationWarning, stacklevel=2)
+        return estimate.ESTIMATION_CUES
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value

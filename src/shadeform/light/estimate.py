@@ -12,11 +12,13 @@ turns the one it takes into a :class:`LightEstimate` with its confidence.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from shadeform._checks import check_choice, check_mask, shading_image
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.light._evidence import (
     CONFIDENCE_ANGLE,
@@ -31,10 +33,12 @@ from shadeform.light.relief import read_relief
 from shadeform.light.rings import read_rings
 from shadeform.light.vectors import light_from_slant_tilt
 
-__all__ = ["LightEstimate", "estimate_light", "ESTIMATION_METHODS", "MIN_OBJECT_PIXELS", "CONFIDENCE_ANGLE"]
+__all__ = ["LightEstimate", "estimate_light", "ESTIMATION_CUES", "MIN_OBJECT_PIXELS", "CONFIDENCE_ANGLE"]
 
-#: What :func:`estimate_light` reads the light from.
-ESTIMATION_METHODS = ("contour", "round")
+#: The cues :func:`estimate_light` can read the light from (its ``cue``): ``"contour"``, the
+#: occluding contour (or, without one, a flat base's relief); ``"round"``, the rings inside a
+#: round object.
+ESTIMATION_CUES = ("contour", "round")
 
 # A mask none of whose pixels lies this far (pixels) from its edge is all outline: the outline's
 # normals and sub-pixel positions come from the mask smoothed over 2 pixels, the top's level from
@@ -93,13 +97,14 @@ class LightEstimate:
         return self.confidence < 0.5
 
 
-def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = True) -> LightEstimate:
+@renamed_keywords(method="cue")
+def estimate_light(image, mask=None, *, cue: str = "contour", convex: bool = True) -> LightEstimate:
     """Estimate the direction and brightness of a distant light from one shading image.
 
     Lambertian surface of uniform albedo, one distant light, orthographic camera, attached shadows
     (``I = k * albedo * max(0, N . L)``); only object pixels are read.
 
-    ``method="contour"`` (default) reads, in order of reliability:
+    ``cue="contour"`` (default) reads, in order of reliability:
 
     1. **The occluding contour.** Where the silhouette of a smooth object is an occluding contour,
        the normal is the silhouette's outward 2-D normal ``b``, so the intensity there is
@@ -154,7 +159,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
        perpendicular frequency line [6]_; that tilt is biased by tens of degrees below a slant
        of 45 (``benchmarks/results/light.md``).
 
-    ``method="round"`` suits photographs of round objects: real materials darken toward the
+    ``cue="round"`` suits photographs of round objects: real materials darken toward the
     occluding contour (Fresnel), which biases the contour's slant low. It fits rings at one
     distance inside the silhouette, between 15% and 85% of the way to the deepest point: on a
     sphere, or any object with round cross-sections, a ring's normals share one slant ``theta``
@@ -169,8 +174,9 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
         maximum). Use :func:`shadeform.load_image` with a ``channel`` for colour photos.
     mask : (H, W) array_like of bool, optional
         Object pixels; default :func:`shadeform.preprocess.object_mask`.
-    method : {"contour", "round"}, optional
-        What to read the light from (see above).
+    cue : {"contour", "round"}, optional
+        What the estimate reads (see above, :data:`ESTIMATION_CUES`): the occluding contour
+        (else a flat base's relief), or the rings inside a round object.
     convex : bool, optional
         Whether the object bulges toward the camera. A concave surface (a bowl seen from above,
         a relief of dents) lit from one side gives exactly the image of its convex twin lit from
@@ -191,7 +197,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
         all four sides of the image (no outline in view, or the mask is the background) unless
         the object is a relief of round features on a flat base filling the frame; an object
         whose outline has fewer than 20 pixels off the image frame (unless it is a relief on a
-        flat base); an unknown ``method``.
+        flat base); an unknown ``cue``.
 
     Notes
     -----
@@ -209,7 +215,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     - outline readings (``limb``, ``limb-brightest``, ``rim``): a jackknife over eight sectors of
       the outline, the whole reading made again with each left out (decisions a sector tips
       count too), in quadrature with the angle between the lights the top and the brightest
-      point give; for ``limb``, also the angle to the rings' light (``method="round"``), which
+      point give; for ``limb``, also the angle to the rings' light (``cue="round"``), which
       the darkening of real materials toward the outline does not bias;
     - ``relief``: the covariance of the fitted ``L_xy / L_z`` (the residual's variance times the
       inverse of ``J^T J``);
@@ -226,7 +232,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     alike.
 
     **What one image cannot tell.**
-    What one image cannot tell, whatever the method: a cylinder seen side-on looks the same
+    What one image cannot tell, whatever the cue: a cylinder seen side-on looks the same
     under every light in the plane through its axis and the viewer, up to ``k``, so only the
     light's component across the axis is recovered (the estimate is the least slanted light that
     explains the image); a saddle ``z = x^2 - y^2`` looks like a dome lit from the tilt mirrored
@@ -260,7 +266,7 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
     (True, 'limb')
     """
     image, mask = _estimation_input(image, mask)
-    method = check_choice(method, ESTIMATION_METHODS, "light estimation method")
+    cue = check_choice(cue, ESTIMATION_CUES, "light estimation cue")
     if not isinstance(convex, (bool, np.bool_)):
         raise InputError(f"convex must be True or False, got {convex!r}")
     levels = measure_levels(image, mask)
@@ -292,12 +298,12 @@ def estimate_light(image, mask=None, *, method: str = "contour", convex: bool = 
                 f"the object's outline has only {boundary.rows.size} pixels off the image frame; "
                 "frame the whole object with a margin of background"
             )
-    elif method == "round":
+    elif cue == "round":
         reading = read_rings(image, mask, levels)
         if reading is None:
             raise InputError(
-                "too few lit rings inside the object for method='round' (is it dark, tiny or "
-                "lit from behind?); try method='contour'"
+                "too few lit rings inside the object for cue='round' (is it dark, tiny or "
+                "lit from behind?); try cue='contour'"
             )
     else:
         reading = read_relief(image, mask, levels, image[boundary.rows, boundary.cols])
@@ -370,3 +376,14 @@ def _estimate(reading: Reading, convex: bool, info: dict) -> LightEstimate:
         confidence=confidence(reading.spread),
         info=info | {"spread": float(reading.spread)},
     )
+
+
+def __getattr__(name: str):
+    # the old name of ESTIMATION_CUES, for one release
+    if name == "ESTIMATION_METHODS":
+        warnings.warn(_OLD_CUES, DeprecationWarning, stacklevel=2)
+        return ESTIMATION_CUES
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+_OLD_CUES = "ESTIMATION_METHODS is deprecated; use ESTIMATION_CUES (the old name goes in the next release)"

@@ -1,4 +1,4 @@
-"""The light from rings inside a round object (``method="round"``).
+"""The light from rings inside a round object (``cue="round"`` of :func:`~shadeform.light.estimate.estimate_light`).
 
 Real materials darken toward the occluding contour (Fresnel), which biases the contour's slant
 low on photographs. On a sphere, and approximately on any object with round cross-sections, the

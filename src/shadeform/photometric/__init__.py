@@ -6,9 +6,9 @@ non-coplanar lights reach it, ``g = rho n`` is the least-squares solution of ``L
 1980): ``n = g / |g|``, ``rho = |g|``.
 
 Real objects break that model: attached and cast shadows, specular highlights and a falloff
-that is not the cosine (``benchmarks/results/stereo.md``). The methods, one module each in a
-registry (:data:`STEREO_METHODS`, :func:`register`, :func:`available_stereo_methods`;
-``shadeform stereo --method``):
+that is not the cosine (``benchmarks/results/stereo.md``). The models (what the fit per pixel
+assumes of the surface), one module each in a registry (:data:`STEREO_MODELS`, :func:`register`,
+:func:`available_stereo_models`; ``photometric_stereo(model=...)``, ``shadeform stereo --model``):
 
 - ``"bivariate"`` (the default, :mod:`.bivariate`): a low-order reflectance model per pixel
   (powers of ``n . l`` and gloss lobes round the half vector), readings it cannot explain
@@ -51,7 +51,7 @@ References
 .. [4] B. Shi et al., "A benchmark dataset and evaluation for non-Lambertian and uncalibrated
    photometric stereo", IEEE PAMI 41(2), 2019 (DiLiGenT).
 
-Modules: :mod:`.registry` (the methods), :mod:`.stereo` (:func:`photometric_stereo`: the fit over
+Modules: :mod:`.registry` (the models), :mod:`.stereo` (:func:`photometric_stereo`: the fit over
 the set), :mod:`.audit` (photos that contradict the rest), :mod:`.holes` (holes filled from
 neighbours), :mod:`.reconstruct` (:func:`reconstruct_stereo`: normals, then depth), and the fits:
 :mod:`.lambertian`, :mod:`.bivariate`, :mod:`.uncalibrated`.
@@ -59,6 +59,7 @@ neighbours), :mod:`.reconstruct` (:func:`reconstruct_stereo`: normals, then dept
 
 from __future__ import annotations
 
+from shadeform.photometric import registry as _registry
 from shadeform.photometric.audit import AGREE as AGREE
 from shadeform.photometric.audit import FAULTY as FAULTY
 from shadeform.photometric.audit import TOLERANCE as TOLERANCE
@@ -67,12 +68,13 @@ from shadeform.photometric.lambertian import ITERATIONS as ITERATIONS
 from shadeform.photometric.lambertian import MIN_SHADING as MIN_SHADING
 from shadeform.photometric.reconstruct import reconstruct_stereo
 from shadeform.photometric.registry import (
-    STEREO_METHODS,
-    StereoMethod,
+    STEREO_MODELS,
+    StereoModel,
     available_methods,
-    available_stereo_methods,
+    available_stereo_models,
     register,
 )
+from shadeform.photometric.registry import available_stereo_methods as available_stereo_methods  # warns
 from shadeform.photometric.stereo import CHUNK as CHUNK
 from shadeform.photometric.stereo import SAMPLE as SAMPLE
 from shadeform.photometric.stereo import SLANT_SAMPLE as SLANT_SAMPLE
@@ -80,12 +82,12 @@ from shadeform.photometric.stereo import UNCALIBRATED_PIXELS as UNCALIBRATED_PIX
 from shadeform.photometric.stereo import PhotometricStereo, photometric_stereo
 
 __all__ = [
-    "METHODS",
-    "STEREO_METHODS",
+    "MODELS",
+    "STEREO_MODELS",
     "PhotometricStereo",
-    "StereoMethod",
+    "StereoModel",
     "available_methods",
-    "available_stereo_methods",
+    "available_stereo_models",
     "photometric_stereo",
     "reconstruct_stereo",
     "register",
@@ -93,7 +95,10 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    # METHODS follows the registry (a method registered after import is in it)
-    if name == "METHODS":
-        return STEREO_METHODS.names()
+    # MODELS follows the registry (a model registered after import is in it); the old names
+    # (METHODS, STEREO_METHODS, StereoMethod) warn there
+    if name == "MODELS":
+        return STEREO_MODELS.names()
+    if name in _registry._DEPRECATED:
+        return _registry._old_name(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -7,17 +7,19 @@ from __future__ import annotations
 import numpy as np
 
 from shadeform._checks import check_choice
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.photometric.stereo import photometric_stereo
 
 
+@renamed_keywords(method="model")
 def reconstruct_stereo(
     images,
     lights=None,
     mask=None,
     *,
     intensities=None,
-    method: str = "bivariate",
+    model: str = "bivariate",
     integrator: str = "poisson",
     sphere=None,
     refine_lights: bool = True,
@@ -27,7 +29,7 @@ def reconstruct_stereo(
 
     Parameters
     ----------
-    images, lights, intensities, method
+    images, lights, intensities, model
         As for :func:`photometric_stereo` (``lights=None``: read from the photos).
     mask : (H, W) array_like of bool, optional
         Object pixels. Default: found in the brightest reading of each pixel over the photos, as
@@ -48,7 +50,8 @@ def reconstruct_stereo(
         lights' directions (for shading a view), ``albedo`` (H, W), or (H, W, C) for colour
         photos,
         ``confidence`` the fit's (:class:`PhotometricStereo`, NaN off the mask); ``info`` holds
-        ``method``, ``integrator``, ``photos``, ``lights_used`` (median per pixel),
+        ``solver`` (``"photometric stereo (MODEL)"``, as :func:`shadeform.reconstruct` says what
+        ran), ``model`` (the photometric model's name), ``integrator``, ``photos``, ``lights_used`` (median per pixel),
         ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
         (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
         directions used, a list of ``[x, y, z]``) and
@@ -82,11 +85,11 @@ def reconstruct_stereo(
             if not mask.any():
                 raise InputError("the photos show nothing but the sphere; give a mask of the object")
     result = photometric_stereo(
-        images, lights, mask, intensities=intensities, method=method, refine_lights=refine_lights
+        images, lights, mask, intensities=intensities, model=model, refine_lights=refine_lights
     )
     solved = np.isfinite(result.normals[..., 0])
     normals_time = time.perf_counter()
-    depth = integrate(result.normals, solved, method=integrator)
+    depth = integrate(result.normals, solved, integrator=integrator)
     done = time.perf_counter()
     directions = np.asarray(lights if result.lights is None else result.lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
@@ -97,7 +100,8 @@ def reconstruct_stereo(
         light=mean / np.linalg.norm(mean),
         albedo=result.albedo,
         info={
-            "method": f"photometric stereo ({method})",
+            "solver": f"photometric stereo ({model})",
+            "model": model,
             "integrator": integrator,
             "photos": len(directions),
             "lights_used": float(np.median(result.lights_used[solved])),

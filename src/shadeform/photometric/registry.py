@@ -1,7 +1,11 @@
-"""The photometric-stereo methods (:mod:`shadeform.photometric`'s description): one
-:class:`StereoMethod` each in :data:`STEREO_METHODS`, added by :func:`register`; a new method is
-one module and one ``register(...)`` line below (``shadeform stereo --method`` and the app list
-them from here, when asked: a method registered later is listed and taken too).
+"""The photometric-stereo models (:mod:`shadeform.photometric`'s description): one
+:class:`StereoModel` each in :data:`STEREO_MODELS`, added by :func:`register`; a new model is
+one module and one ``register(...)`` line below (``shadeform stereo --model`` and the app list
+them from here, when asked: a model registered later is listed and taken too).
+
+The names this module had before (``StereoMethod``, ``STEREO_METHODS``,
+``available_stereo_methods``, ``METHODS``) still work, with a :class:`DeprecationWarning`, for
+one release.
 """
 
 from __future__ import annotations
@@ -12,23 +16,23 @@ from dataclasses import dataclass
 from shadeform.registry import Option, Registry
 
 __all__ = [
-    "METHODS",  # noqa: F822 (given by __getattr__, read from the registry when asked)
-    "STEREO_METHODS",
-    "StereoMethod",
+    "MODELS",  # noqa: F822 (given by __getattr__, read from the registry when asked)
+    "STEREO_MODELS",
+    "StereoModel",
     "available_methods",
-    "available_stereo_methods",
+    "available_stereo_models",
     "register",
 ]
 
 
 @dataclass(frozen=True)
-class StereoMethod:
-    """One photometric-stereo method of the registry.
+class StereoModel:
+    """One photometric-stereo model of the registry: what the fit per pixel assumes of the surface.
 
     Attributes
     ----------
     name : str
-        What users pass (``photometric_stereo(method=name)``, ``shadeform stereo --method``).
+        What users pass (``photometric_stereo(model=name)``, ``shadeform stereo --model``).
     fit : str
         ``"module:function"`` naming ``fit(lights (N, 3), readings (N, P), *, min_shading,
         highlight_cos, iterations) -> (g (P, 3), usable (N, P) bool)``: per pixel ``g`` = albedo
@@ -39,12 +43,12 @@ class StereoMethod:
         Whether photos that contradict the others are left out first.
     slant_scale : str, optional
         ``"module:function"`` naming ``slant_scale(lights (N, 3), readings (N, P), start (P, 3))
-        -> float``: the factor on the given lights' ``tan(slant)`` that the method's model
-        explains a sample of readings best with (1 where they cannot tell); None: the method
-        takes the lights as given.
+        -> float``: the factor on the given lights' ``tan(slant)`` that the model explains a
+        sample of readings best with (1 where they cannot tell); None: the model takes the
+        lights as given.
     options : tuple of Option
         Options of its own (:class:`shadeform.registry.Option`), listed by the app's
-        ``/api/options``; no caller passes any yet, and the built-in methods declare none.
+        ``/api/options``; no caller passes any yet, and the built-in models declare none.
     """
 
     name: str
@@ -55,41 +59,74 @@ class StereoMethod:
     options: tuple[Option, ...] = ()
 
 
-#: The registered methods, the default first.
-STEREO_METHODS: Registry[StereoMethod] = Registry("method", StereoMethod)
+#: The registered models, the default first.
+STEREO_MODELS: Registry[StereoModel] = Registry("model", StereoModel)
 
 
-def register(method: StereoMethod) -> None:
-    """Add a method (its module is imported when first used)."""
-    STEREO_METHODS.register(method)
+def register(model: StereoModel) -> None:
+    """Add a model (its module is imported when first used)."""
+    STEREO_MODELS.register(model)
 
 
-def available_stereo_methods() -> dict[str, str]:
-    """The registered methods, the default first: name -> one-line description."""
-    return STEREO_METHODS.descriptions()
+def available_stereo_models() -> dict[str, str]:
+    """The registered models, the default first: name -> one-line description."""
+    return STEREO_MODELS.descriptions()
 
 
 def available_methods() -> dict[str, str]:
-    """Deprecated alias of :func:`available_stereo_methods` (``shadeform.available_methods`` lists
+    """Deprecated alias of :func:`available_stereo_models` (``shadeform.available_methods`` lists
     the solvers); removed in the next release."""
     warnings.warn(
-        "shadeform.photometric.available_methods is deprecated; use available_stereo_methods "
+        "shadeform.photometric.available_methods is deprecated; use available_stereo_models "
         "(shadeform.available_methods lists the one-photo solvers)",
         DeprecationWarning,
         stacklevel=2,
     )
-    return available_stereo_methods()
+    return available_stereo_models()
+
+
+def available_stereo_methods() -> dict[str, str]:
+    """Deprecated alias of :func:`available_stereo_models`; removed in the next release."""
+    warnings.warn(
+        "shadeform.photometric.available_stereo_methods is deprecated; use available_stereo_models",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return available_stereo_models()
+
+
+#: Old names read through the module's ``__getattr__``: old name -> (new name, its value when asked).
+_DEPRECATED = {
+    "STEREO_METHODS": ("STEREO_MODELS", lambda: STEREO_MODELS),
+    "StereoMethod": ("StereoModel", lambda: StereoModel),
+    "METHODS": ("MODELS", lambda: STEREO_MODELS.names()),
+}
+
+
+def _old_name(name: str):
+    """The value of the deprecated name ``name`` (a key of :data:`_DEPRECATED`), with a
+    :class:`DeprecationWarning` pointing at the code that asked for it (through a module's
+    ``__getattr__``)."""
+    new, value = _DEPRECATED[name]
+    warnings.warn(
+        f"shadeform.photometric.{name} is deprecated; use {new} (removed in the next release)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return value()
 
 
 def __getattr__(name: str):
-    # METHODS follows the registry: read when asked, not copied at import
-    if name == "METHODS":
-        return STEREO_METHODS.names()
+    # MODELS follows the registry: read when asked, not copied at import
+    if name == "MODELS":
+        return STEREO_MODELS.names()
+    if name in _DEPRECATED:
+        return _old_name(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 register(
-    StereoMethod(
+    StereoModel(
         "bivariate",
         "shadeform.photometric.bivariate:fit",
         "a reflectance model per pixel (falloff and gloss lobes), shadows and outliers weighted out",
@@ -97,14 +134,14 @@ register(
     )
 )
 register(
-    StereoMethod(
+    StereoModel(
         "robust",
         "shadeform.photometric.lambertian:robust",
         "Lambertian, with each pixel's shadows and highlights left out",
     )
 )
 register(
-    StereoMethod(
+    StereoModel(
         "least_squares",
         "shadeform.photometric.lambertian:least_squares",
         "Lambertian, every reading (Woodham 1980)",

@@ -1,21 +1,23 @@
 """Photometric stereo over a set of photos (:mod:`shadeform.photometric`'s description): the
-input checks, the lights read or refined, the photos audited, the method's fit per pixel in
+input checks, the lights read or refined, the photos audited, the model's fit per pixel in
 chunks, the holes filled, albedo per channel and the confidence.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from shadeform._checks import check_mask
+from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.photometric import lambertian
 from shadeform.photometric.audit import _audit
 from shadeform.photometric.holes import _fill
 from shadeform.photometric.lambertian import HIGHLIGHT_ANGLE, ITERATIONS, MIN_SHADING
-from shadeform.photometric.registry import STEREO_METHODS
+from shadeform.photometric.registry import STEREO_MODELS
 from shadeform.registry import load
 
 #: Pixels solved at once: bounds the memory of the (images x pixels) arrays.
@@ -44,8 +46,9 @@ class PhotometricStereo:
         the lights' strengths; NaN outside the mask.
     lights_used : (H, W) int
         How many images the final fit used at each pixel (0 outside the mask).
-    method : str
-        The method's name (:data:`~shadeform.photometric.registry.STEREO_METHODS`).
+    model : str
+        The photometric model's name (:data:`~shadeform.photometric.registry.STEREO_MODELS`);
+        ``method``, its old name, still reads it (with a :class:`DeprecationWarning`).
     confidence : (H, W) float64
         In [0, 1], the share of the set's information about the normal that its fit had (module
         description); 0 outside the mask.
@@ -65,21 +68,32 @@ class PhotometricStereo:
     normals: np.ndarray
     albedo: np.ndarray
     lights_used: np.ndarray
-    method: str
+    model: str
     confidence: np.ndarray
     photos_dropped: tuple[int, ...] = ()
     photos_rescaled: tuple[tuple[int, float], ...] = ()
     lights: np.ndarray | None = None
     light_scale: float = 1.0
 
+    @property
+    def method(self) -> str:
+        """Deprecated: :attr:`model`, the photometric model's name (removed in the next release)."""
+        warnings.warn(
+            "PhotometricStereo.method is deprecated; use PhotometricStereo.model",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.model
 
+
+@renamed_keywords(method="model")
 def photometric_stereo(
     images,
     lights=None,
     mask=None,
     *,
     intensities=None,
-    method: str = "bivariate",
+    model: str = "bivariate",
     min_shading: float = MIN_SHADING,
     highlight_angle: float = HIGHLIGHT_ANGLE,
     iterations: int = ITERATIONS,
@@ -99,8 +113,9 @@ def photometric_stereo(
         Object pixels. Default: every pixel that is non-zero in some photo.
     intensities : (N,) or (N, C) array_like, optional
         Strength of each photo's light (per channel): the photos are divided by it.
-    method : {"bivariate", "robust", "least_squares"}
-        The fit per pixel (module description).
+    model : {"bivariate", "robust", "least_squares"}
+        The photometric model: what the fit per pixel assumes of the surface (module
+        description; :func:`~shadeform.photometric.available_stereo_models`).
     min_shading : float
         Robust fit (and the bivariate fit's start): smallest ``n . l`` an image must have at a
         pixel to count there, in [0, 1).
@@ -110,7 +125,7 @@ def photometric_stereo(
     iterations : int
         The same: classify-and-refit rounds, >= 0.
     refine_lights : bool
-        With given lights and a method that models gloss (``"bivariate"``): correct a slant
+        With given lights and a model of gloss (``"bivariate"``): correct a slant
         error common to all the lights, as a chrome sphere read slightly too large or small
         makes (:func:`shadeform.photometric.bivariate.slant_scale`); the factor found is
         ``light_scale`` of the result. False takes the lights exactly as given.
@@ -151,7 +166,7 @@ def photometric_stereo(
     0.6
     """
     stack, lights, mask, scale = _check(images, lights, mask, intensities)
-    entry = STEREO_METHODS.get(method)
+    entry = STEREO_MODELS.get(model)
     if not (np.isfinite(min_shading) and 0 <= min_shading < 1):
         raise InputError(f"min_shading must be in [0, 1), got {min_shading!r}")
     if not (np.isfinite(highlight_angle) and 0 <= highlight_angle < 90):
@@ -262,7 +277,7 @@ def photometric_stereo(
         normals=image(normals, np.nan),
         albedo=image(albedo if channels else albedo[:, 0], np.nan),
         lights_used=image(used, 0, np.int64),
-        method=method,
+        model=model,
         confidence=image(confidence, 0.0),
         photos_dropped=tuple(int(i) for i in np.setdiff1d(np.arange(len(lights)), kept)),
         photos_rescaled=tuple(

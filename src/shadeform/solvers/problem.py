@@ -106,7 +106,7 @@ class Problem:
         return integrate(
             normals,
             self.mask if mask is None else mask,
-            method=self.integrator,
+            integrator=self.integrator,
             origin=self.main if origin is None else origin,
         )
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import Field
+from pydantic import AliasChoices, Field
 
 from shadeform.app.schema.common import MeshData, _Model
 from shadeform.app.schema.reconstruct import ConcaveRegion, ImageInfo, ReconstructParams
@@ -32,8 +32,11 @@ class FuseRequest(_Model):
     """Several views of one object fused into one closed model (or its export)."""
 
     views: list[FuseView] = Field(min_length=2, max_length=24, description="Two to 24 views.")
-    refine: bool = Field(
-        default=True, description="Correct the poses and depth offsets so that the views agree."
+    refine_poses: bool = Field(
+        default=True,
+        # "refine", its old name, still read for one release
+        validation_alias=AliasChoices("refine_poses", "refine"),
+        description="Correct the poses and depth offsets so that the views agree.",
     )
     settle: bool = Field(
         default=True,
@@ -109,7 +112,7 @@ class FuseResult(_Model):
         "total.",
     )
     info: dict[str, Any] = Field(
-        description="What ran: ``resolution`` (the voxel edge used), ``refine``, ``settle``, ``cached`` "
+        description="What ran: ``resolution`` (the voxel edge used), ``refine_poses``, ``settle``, ``cached`` "
         "(whether the fusion was reused).",
     )
 

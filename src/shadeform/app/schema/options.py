@@ -80,7 +80,9 @@ class Options(_Model):
     filters: list[str]
     formats: list[FormatInfo]
     examples: list[ExampleInfo]
-    stereo_methods: list[MethodInfo] = Field(description="Photometric stereo's methods, the default first.")
+    stereo_models: list[MethodInfo] = Field(
+        description="Photometric stereo's models (``StereoParams.model``), the default first."
+    )
     photo_set_examples: list[ExampleInfo]
     stereo_defaults: StereoParams
     relief_defaults: ReliefParams = Field(default_factory=lambda: ReliefParams())

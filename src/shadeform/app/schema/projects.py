@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import AliasChoices, Field, model_validator
 
 from shadeform.app.schema.common import _Model
 from shadeform.app.schema.reconstruct import ImageInfo, ReconstructParams
@@ -71,7 +71,12 @@ class ProjectViews(_Model):
     """The views in a project (several sides of one object, fused) and the fusion's settings."""
 
     views: list[ProjectViewEntry] = Field(min_length=1, max_length=24)
-    refine: bool = True
+    refine_poses: bool = Field(
+        default=True,
+        # "refine", its old name: projects saved before the rename open
+        validation_alias=AliasChoices("refine_poses", "refine"),
+        description="Correct the poses so that the views agree (``FuseRequest.refine_poses``).",
+    )
     settle: bool = True
     resolution: float | None = Field(default=None, ge=0.25, le=64, allow_inf_nan=False)
     showParts: bool = True

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import AliasChoices, Field
 from typing_extensions import TypeAliasType
 
 from shadeform.app.schema.common import MeshData, _Model
@@ -26,7 +26,12 @@ class StereoParams(_Model):
         description="The sphere's circle ``[column, row, radius]`` in pixels; null to find it (lights "
         '"sphere" only).',
     )
-    method: str = Field(default="bivariate", description="One of ``Options.stereo_methods``.")
+    model: str = Field(
+        default="bivariate",
+        # "method", its old name, still read: projects saved before the rename open
+        validation_alias=AliasChoices("model", "method"),
+        description="The photometric model: one of ``Options.stereo_models``.",
+    )
     integrator: str = Field(default="poisson", description="One of ``Options.integrators``.")
     step: int = Field(
         default=2,

@@ -115,5 +115,5 @@ def _prior_depth(normals, mask):
     # pixel spans tens of pixels of depth
     bounded[..., 2] = np.maximum(bounded[..., 2], 0.2)
     bounded /= np.linalg.norm(bounded, axis=-1, keepdims=True)
-    depth = integrate(bounded, mask, method="poisson")
+    depth = integrate(bounded, mask, integrator="poisson")
     return np.where(mask, depth - np.nanmin(depth[mask]), 0.0)
