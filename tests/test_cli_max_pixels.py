@@ -107,7 +107,7 @@ def one_error_line(result) -> str:
 
 # The commands that read no photo or mask of the user's (a new command reading one must take
 # --max-pixels, or be listed here knowingly).
-NO_PHOTOS = {"synth", "evaluate", "formats", "methods", "demo", "warm"}
+NO_PHOTOS = {"synth", "evaluate", "formats", "solvers", "methods", "demo", "warm"}
 
 
 def test_every_photo_command_takes_it():

@@ -95,7 +95,7 @@ def test_installed_without_node_the_app_serves_the_client(wheel, tmp_path):
         assert code.status_code == 200 and "javascript" in code.headers["content-type"]
         assert len(code.content) > 100_000  # the client with three.js, not a stub
         options = httpx.get(url + "api/options", timeout=10)
-        assert options.status_code == 200 and "methods" in options.json()
+        assert options.status_code == 200 and "solvers" in options.json()
     finally:
         app.terminate()
         app.wait(timeout=30)
