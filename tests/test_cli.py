@@ -25,6 +25,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 import shadeform
+from helpers.photosets import write_photo_set
 from shadeform import metrics, synth
 from shadeform.cli import app
 from shadeform.errors import InputError
@@ -775,15 +776,7 @@ def photo_set(tmp_path_factory) -> dict:
     """A sphere under six lights: 16-bit photos, a light file and the truth."""
     folder = tmp_path_factory.mktemp("stereo")
     scene = synth.scene("sphere", size=SIZE)
-    lights = np.array(
-        [[0, 0, 1.0]] + [list(shadeform.light.light_from_slant_tilt(30, t)) for t in (0, 72, 144, 216, 288)]
-    )
-    photos = []
-    for i, light in enumerate(lights):
-        path = folder / f"{i:03d}.png"
-        save_gray(synth.render(scene.normals, scene.mask, light=light, albedo=0.8), path, bitdepth=16)
-        photos.append(path)
-    np.savetxt(folder / "light_directions.txt", lights)
+    photos = write_photo_set(folder, scene.normals, scene.mask)
     return {"folder": folder, "photos": photos, "lights": folder / "light_directions.txt", "scene": scene}
 
 

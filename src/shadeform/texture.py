@@ -79,15 +79,25 @@ LEGEND = {
     "curvature": (8, "curvature: mid-grey flat, brighter convex edges, darker cavities"),
 }
 ALBEDO = (8, "albedo: the photo with its shading and uneven lighting divided out")
+#: A photo set's albedo map, from its photometric stereo (:func:`albedo_map`).
+STEREO_ALBEDO = (16, "albedo: the surface's own colour read by the photometric stereo, linear{white}")
+#: The albedo map's white: this percentile of the object's albedo (a few specks may clip).
+ALBEDO_WHITE_PERCENTILE = 99.5
 
 
-def legend(relief_px: float | None = None, *, material: bool = False) -> dict[str, tuple[int, str]]:
-    """Each map's bits per sample and legend line (:data:`LEGEND`, and :data:`ALBEDO` for the
-    material mode); the height's with its range in pixels when known: ``shadeform maps`` and the app
-    write it beside the maps."""
+def legend(
+    relief_px: float | None = None, *, albedo: str | None = None, white: float | None = None
+) -> dict[str, tuple[int, str]]:
+    """Each map's bits per sample and legend line (:data:`LEGEND`), the height's with its range in
+    pixels when known: ``shadeform maps`` and the app write it beside the maps. ``albedo``:
+    ``"material"`` adds the material mode's albedo (:data:`ALBEDO`), ``"stereo"`` a photo set's
+    (:data:`STEREO_ALBEDO`, with its ``white`` when known)."""
     shown = "" if relief_px is None else f" ({relief_px:.3g} px of relief)"
-    every = {**LEGEND, "albedo": ALBEDO} if material else LEGEND
-    return {name: (bits, text.format(range=shown)) for name, (bits, text) in every.items()}
+    every = dict(LEGEND)
+    if albedo is not None:
+        every["albedo"] = {"material": ALBEDO, "stereo": STEREO_ALBEDO}[albedo]
+    white_text = "" if white is None else f", white = {white:.4g} ({ALBEDO_WHITE_PERCENTILE:g}th percentile)"
+    return {name: (bits, text.format(range=shown, white=white_text)) for name, (bits, text) in every.items()}
 
 
 #: Azimuths the occlusion is averaged over (every 22.5 degrees); not swept.
@@ -124,7 +134,9 @@ def maps(reconstruction, *, reach: float | None = None) -> dict[str, np.ndarray]
     -------
     dict of str to ndarray
         ``normal_opengl``, ``normal_directx`` (H, W, 3); ``height``, ``ambient_occlusion``,
-        ``curvature`` (H, W); all float64 in [0, 1] (:data:`MAPS`).
+        ``curvature`` (H, W); all float64 in [0, 1] (:data:`MAPS`). A reconstruction whose albedo
+        is per pixel (a photo set's photometric stereo; one photo's is one number) adds
+        ``albedo`` (H, W) or (H, W, 3) (:func:`albedo_map`).
     """
     normals, depth, mask = _check(reconstruction.normals, reconstruction.depth, reconstruction.mask)
     opengl = np.where(mask[..., None], (normals + 1.0) / 2.0, [0.5, 0.5, 1.0])
@@ -135,13 +147,44 @@ def maps(reconstruction, *, reach: float | None = None) -> dict[str, np.ndarray]
     k = curvature(normals, mask)
     scale = np.percentile(np.abs(k[mask]), CURVATURE_PERCENTILE)
     shown = 0.5 + 0.5 * np.tanh(k / scale) if scale > 0 else np.full(k.shape, 0.5)
-    return {
+    made = {
         "normal_opengl": opengl,
         "normal_directx": directx,
         "height": height,
         "ambient_occlusion": ambient_occlusion(depth, mask, reach=reach),
         "curvature": np.where(mask, shown, 0.5),
     }
+    albedo = np.asarray(getattr(reconstruction, "albedo", 0.0), dtype=np.float64)
+    if albedo.ndim >= 2:
+        made["albedo"] = albedo_map(albedo, mask)[0]
+    return made
+
+
+def albedo_map(albedo: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
+    """A per-pixel albedo as an image: its :data:`ALBEDO_WHITE_PERCENTILE` on the object white,
+    0 off it, and the value that became white.
+
+    Parameters
+    ----------
+    albedo : (H, W) or (H, W, 3) float
+        Linear, any scale (photometric stereo's: the light's strength times the surface's).
+        Three equal channels (grey photos) give a grey map.
+    mask : (H, W) bool
+
+    Returns
+    -------
+    (H, W) or (H, W, 3) float64 in [0, 1], float
+    """
+    albedo = np.nan_to_num(np.asarray(albedo, dtype=np.float64))
+    if (
+        albedo.ndim == 3
+        and np.array_equal(albedo[..., 0], albedo[..., 1])
+        and np.array_equal(albedo[..., 0], albedo[..., 2])
+    ):
+        albedo = albedo[..., 0]
+    values = np.where(mask if albedo.ndim == 2 else mask[..., None], albedo, 0.0)
+    white = float(np.percentile(values[mask], ALBEDO_WHITE_PERCENTILE)) if mask.any() else 0.0
+    return np.clip(values / white, 0.0, 1.0) if white > 0 else values, white
 
 
 def default_reach(mask: np.ndarray) -> float:

@@ -228,6 +228,14 @@ def stage(console: Console, text: str, timings: dict[str, float], name: str) -> 
     timings[name] = time.perf_counter() - start
 
 
+def refuse_options(given: dict[str, bool], reason: str) -> None:
+    """One line naming the options the user gave (``{"--flag": given, ...}``) that do not apply
+    here: ``"--a, --b are <reason>"``; nothing when none was given."""
+    named = [flag for flag, on in given.items() if on]
+    if named:
+        raise InputError(f"{', '.join(named)} {'is' if len(named) == 1 else 'are'} {reason}")
+
+
 def resolve_light(light: str | None, slant: float | None, tilt: float | None) -> np.ndarray | str:
     from shadeform.light import as_light, light_from_slant_tilt, parse_light
 

@@ -31,6 +31,7 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
+from shadeform.cli.sets import is_photo_set, load_set, solve_set
 from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 
@@ -39,7 +40,11 @@ from shadeform.io.atomic import OutputSet
 def fuse(
     photos: Annotated[
         list[Path] | None,
-        typer.Argument(help="Photos of the object from several sides (or give --views).", show_default=False),
+        typer.Argument(
+            help="Photos of the object from several sides (or give --views); a view may be a folder "
+            "holding a photo set under several lights (photometric stereo per view, the better route).",
+            show_default=False,
+        ),
     ] = None,
     output: Annotated[
         Path,
@@ -122,7 +127,10 @@ def fuse(
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
-    """Fuse photos of one object from several sides into one closed, watertight model."""
+    """Fuse photos of one object from several sides into one closed, watertight model.
+
+    A view given as a folder holding a photo set (its lights in light_directions.txt or an .lp
+    file) is solved by photometric stereo, which needs no light, solver or concave regions."""
     import shadeform
     from shadeform._checks import check_choice
     from shadeform.fusion import SURFACES, place, solid
@@ -148,7 +156,10 @@ def fuse(
         images, object_masks, drawn, recs = [], [], [], []
 
         def solve(i: int, extra=()):
-            """View ``i`` solved, with ``extra`` concave regions besides the ones drawn for it."""
+            """View ``i`` solved, with ``extra`` concave regions besides the ones drawn for it (a
+            photo set's is unambiguous: its photometric stereo, solved once)."""
+            if is_photo_set(entries[i].photo):
+                return recs[i]
             return shadeform.reconstruct(
                 images[i],
                 light=light_vector,
@@ -163,6 +174,22 @@ def fuse(
             task = bar.add_task("views", total=len(entries))
             lap = time.perf_counter()
             for i, entry in enumerate(entries):
+                if is_photo_set(entry.photo):
+                    if entry.concave is not None:
+                        raise InputError(
+                            f"view {i + 1} ({entry.photo.name}) is a photo set: its photometric stereo "
+                            "tells convex from concave itself; drop its concave regions"
+                        )
+                    photos = load_set(
+                        entry.photo, mask=entry.mask, linear=None, channel=channel, max_pixels=max_pixels
+                    )
+                    rec = solve_set(photos, integrator=integrator)
+                    images.append(None)
+                    object_masks.append(rec.mask)
+                    drawn.append([])
+                    recs.append(rec)
+                    bar.advance(task)
+                    continue
                 photo = read_photo(entry.photo, channel=channel, max_pixels=max_pixels)
                 images.append(photo.image)
                 object_masks.append(

@@ -1,5 +1,6 @@
 """``shadeform maps``: one photo -> texture maps (normal, height, ambient occlusion, curvature);
-with ``--material``, of a textured surface filling the frame (and its albedo)."""
+with ``--material``, of a textured surface filling the frame (and its albedo); of a photo set's
+folder, its photometric stereo's (and its albedo)."""
 
 from __future__ import annotations
 
@@ -36,16 +37,15 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import reconstruct_options, reconstruct_photo
+from shadeform.cli.photos import reconstruct_options
+from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source, refuse_one_photo_options
 from shadeform.io.atomic import OutputSet
-from shadeform.texture import LEGEND, legend
+from shadeform.texture import LEGEND, albedo_map, legend
 
 
 @app.command()
 def maps(
-    image: Annotated[
-        Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
-    ],
+    image: PhotoOrSetArgument,
     out: Annotated[Path, typer.Option("--out", help="Folder for the maps (created if missing).")],
     only: Annotated[
         str | None,
@@ -93,7 +93,8 @@ def maps(
 ) -> None:
     """Make texture maps of one photo: normals, height, ambient occlusion and curvature as PNGs.
 
-    Normal maps in both the OpenGL and the DirectX convention; each file is named after the photo."""
+    Normal maps in both the OpenGL and the DirectX convention; each file is named after the photo.
+    A folder holding a photo set gives its photometric stereo's maps, with its albedo."""
     import shadeform
     from shadeform.errors import InputError
     from shadeform.io.maps import save_gray
@@ -102,7 +103,17 @@ def maps(
         raise InputError(
             "--tile makes material maps tile; add --material (a photo of a surface filling the frame)"
         )
-    wanted = _wanted(only, [*LEGEND, "albedo"] if material else list(LEGEND))
+    photo_set = is_photo_set(image)
+    if photo_set:
+        refuse_one_photo_options(
+            light=light, slant=slant, tilt=tilt, concave=concave, reference=reference, solver=solver,
+            filter=filter, refine=refine,
+        )  # fmt: skip
+        if material:
+            raise InputError(
+                "--material is for one photo of a surface filling the frame; leave it out for a photo set"
+            )
+    wanted = _wanted(only, [*LEGEND, "albedo"] if material or photo_set else list(LEGEND))
     if material:
         return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
                          channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
@@ -118,7 +129,7 @@ def maps(
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
-        photo, rec = reconstruct_photo(
+        reading, shape, rec = reconstruct_source(
             err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
         )
         start = time.perf_counter()
@@ -126,22 +137,23 @@ def maps(
             made = shadeform.maps(rec, reach=reach)
         timings["maps"] = time.perf_counter() - start
         start = time.perf_counter()
+        relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
+        white = albedo_map(rec.albedo, rec.mask)[1] if photo_set else None
+        lines = legend(relief, albedo="stereo" if photo_set else None, white=white)
         for name in wanted:
-            save_gray(made[name], temps[name], bitdepth=LEGEND[name][0])
+            save_gray(made[name], temps[name], bitdepth=lines[name][0])
         outputs.commit()
         timings["write"] = time.perf_counter() - start
     timings["total"] = time.perf_counter() - total
 
-    relief = float(np.nanmax(rec.depth[rec.mask]) - np.nanmin(rec.depth[rec.mask]))
-    print_notes(err, photo.info, rec.info)
-    lines = legend(relief)
+    print_notes(err, reading, rec.info)
     rows = [(files[name], lines[name][1]) for name in wanted]
     if as_json:
         print_json(
             {
                 "command": "maps",
-                "input": {"path": image, "width": photo.image.shape[1], "height": photo.image.shape[0]},
-                "maps": {name: {"path": files[name], "bits": LEGEND[name][0]} for name in wanted},
+                "input": {"path": image, "width": shape[1], "height": shape[0]},
+                "maps": {name: {"path": files[name], "bits": lines[name][0]} for name in wanted},
                 "height_range_px": relief,
                 "info": rec.info,
                 "timings": timings,
@@ -150,7 +162,7 @@ def maps(
         return
     console = stdout_console()
     console.print(
-        f"[bold]maps of[/] {escape(str(image))} ({photo.image.shape[1]}x{photo.image.shape[0]}), "
+        f"[bold]maps of[/] {escape(str(image))} ({shape[1]}x{shape[0]}), "
         f"{rec.info['solver']}, in {format_seconds(timings['total'])}"
     )
     print_files(console, rows)
@@ -183,7 +195,7 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
         given = resolve_light(light, slant, tilt)
     err = stderr_console()
     total = time.perf_counter()
-    lines = legend(material=True)
+    lines = legend(albedo="material")
     with OutputSet() as outputs:
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}

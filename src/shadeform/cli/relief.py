@@ -34,13 +34,14 @@ from shadeform.cli._shell import (
     print_files,
     print_json,
     print_notes,
+    refuse_options,
     stage,
     stderr_console,
     stdout_console,
     write_maps,
 )
-from shadeform.cli.photos import reconstruct_options, reconstruct_photo
-from shadeform.errors import InputError
+from shadeform.cli.photos import reconstruct_options
+from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source, refuse_one_photo_options
 from shadeform.io.atomic import OutputSet
 from shadeform.solid import MIN_WALL_MM, grid_step
 
@@ -59,9 +60,7 @@ _FLAGS = {
 
 @app.command("relief")
 def relief_command(
-    image: Annotated[
-        Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
-    ],
+    image: PhotoOrSetArgument,
     output: Annotated[
         Path,
         typer.Option(
@@ -161,7 +160,8 @@ def relief_command(
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
     if closed:
-        _refuse_relief_options(
+        # --closed has no flat base, no relief depth and no top to compress
+        refuse_options(
             {
                 "--height": height != 4.0,
                 "--base": base != 2.0,
@@ -172,7 +172,9 @@ def relief_command(
                 "--min-wall": min_wall != MIN_WALL_MM,
                 "--max-triangles": max_triangles is not None,
                 "--full-resolution": full_resolution,
-            }
+            },
+            "for a relief on a flat base; --closed makes a closed object sized by --width alone (its "
+            "depth in proportion)",
         )
     options = check_options(
         width_mm=width,
@@ -186,6 +188,11 @@ def relief_command(
         max_triangles=max_triangles,
         names=_FLAGS,
     )
+    if is_photo_set(image):
+        refuse_one_photo_options(
+            light=light, slant=slant, tilt=tilt, concave=concave, reference=reference, solver=solver,
+            filter=filter, refine=refine,
+        )  # fmt: skip
     solve_options = reconstruct_options(
         light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
         solver=solver, filter=filter, integrator=integrator, refine=refine,
@@ -209,7 +216,7 @@ def relief_command(
         return
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        photo, rec = reconstruct_photo(
+        reading, shape, rec = reconstruct_source(
             err,
             timings,
             image,
@@ -220,7 +227,6 @@ def relief_command(
             grid=grid,
             **solve_options,
         )
-        pixels = photo.image
         with stage(err, "building the solid", timings, "relief"):
             solid = shadeform.relief(rec, **options)
         with stage(err, "writing files", timings, "write"):
@@ -232,12 +238,12 @@ def relief_command(
 
     size = [float(v) for v in solid.size_mm]
     volume = solid.volume_mm3
-    print_notes(err, photo.info, rec.info)
+    print_notes(err, reading, rec.info)
     if as_json:
         print_json(
             {
                 "command": "relief",
-                "input": {"path": image, "width": pixels.shape[1], "height": pixels.shape[0]},
+                "input": {"path": image, "width": shape[1], "height": shape[0]},
                 "files": {"mesh": output, "depth": depth, "normals": normals},
                 "solid": {
                     "size_mm": size,
@@ -257,8 +263,8 @@ def relief_command(
         return
 
     out = stdout_console()
-    rows, cols = pixels.shape
-    out.print(f"[bold]relief[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(photo.info)})")
+    rows, cols = shape
+    out.print(f"[bold]relief[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(reading)})")
     out.print(
         f"  size {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} mm (x y z: base {options['base_mm']:g} + "
         f"relief {options['height_mm']:g}), volume {volume:,.0f} mm^3, {solid.n_faces:,} triangles"
@@ -291,17 +297,6 @@ def relief_command(
     print_files(out, written)
 
 
-def _refuse_relief_options(given: dict[str, bool]) -> None:
-    """One line naming the relief's own options given with ``--closed``, which has no flat base,
-    no relief depth and no top to compress."""
-    names = [flag for flag, used in given.items() if used]
-    if names:
-        raise InputError(
-            f"{', '.join(names)} {'is' if len(names) == 1 else 'are'} for a relief on a flat base; "
-            "--closed makes a closed object sized by --width alone (its depth in proportion)"
-        )
-
-
 def _closed_solid(err, timings, image, output, depth, normals, width_mm, as_json, solve) -> None:
     """``relief --closed``: the photo's closed model (:func:`shadeform.fusion.close`) in
     millimetres (:func:`shadeform.fusion.closed.in_millimetres`), written and reported."""
@@ -313,7 +308,7 @@ def _closed_solid(err, timings, image, output, depth, normals, width_mm, as_json
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        photo, rec = reconstruct_photo(err, timings, image, **solve)
+        reading, shape, rec = reconstruct_source(err, timings, image, **solve)
         with stage(err, "closing the model (the back mirrored from the front)", timings, "relief"):
             model = in_millimetres(close(rec), width_mm=width_mm)
         with stage(err, "writing files", timings, "write"):
@@ -324,13 +319,13 @@ def _closed_solid(err, timings, image, output, depth, normals, width_mm, as_json
             written += write_maps(rec, temps, depth=depth, normals=normals)
         outputs.commit()
     timings["total"] = time.perf_counter() - total
-    print_notes(err, photo.info, rec.info)
+    print_notes(err, reading, rec.info)
     size = [float(v) for v in np.ptp(model.vertices, axis=0)]
     if as_json:
         print_json(
             {
                 "command": "relief",
-                "input": {"path": image, "width": photo.image.shape[1], "height": photo.image.shape[0]},
+                "input": {"path": image, "width": shape[1], "height": shape[0]},
                 "files": {"mesh": output, "depth": depth, "normals": normals},
                 "solid": {"size_mm": size, "volume_mm3": model.volume, "triangles": model.n_faces,
                           "vertices": model.n_vertices, "width_mm": width_mm},
@@ -342,8 +337,8 @@ def _closed_solid(err, timings, image, output, depth, normals, width_mm, as_json
         )  # fmt: skip
         return
     out = stdout_console()
-    rows, cols = photo.image.shape
-    out.print(f"[bold]closed solid[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(photo.info)})")
+    rows, cols = shape
+    out.print(f"[bold]closed solid[/] of {escape(str(image))} ({cols}x{rows}, {describe_photo(reading)})")
     out.print(f"  volume {model.volume:,.0f} mm^3, {model.n_faces:,} triangles", highlight=False)
     print_closed(out, err, model, unit="mm")
     out.print(

@@ -230,15 +230,21 @@ def _stereo_maps(rec, temps, albedo, confidence, *, gray):
     mesh); the (file, description) rows to print. ``gray``: the photos were (or were made) one
     channel, so the albedo is written grey."""
     from shadeform.io.maps import save_gray
+    from shadeform.texture import ALBEDO_WHITE_PERCENTILE, albedo_map
 
     rows = []
     if albedo is not None:
-        values = rec.albedo[..., 0] if gray and np.ndim(rec.albedo) == 3 else rec.albedo
-        values = np.where(rec.mask if values.ndim == 2 else rec.mask[..., None], values, 0.0)
-        top = float(np.percentile(values[rec.mask], 99.5)) if rec.mask.any() else 0.0
-        save_gray(values / top if top > 0 else values, temps[albedo])
-        kind = "grey" if values.ndim == 2 else "colour"
-        rows.append((albedo, f"albedo, 16-bit {kind}, linear, white = {top:.4g} (99.5th percentile)"))
+        image, top = albedo_map(
+            rec.albedo[..., 0] if gray and np.ndim(rec.albedo) == 3 else rec.albedo, rec.mask
+        )
+        save_gray(image, temps[albedo])
+        kind = "grey" if image.ndim == 2 else "colour"
+        rows.append(
+            (
+                albedo,
+                f"albedo, 16-bit {kind}, linear, white = {top:.4g} ({ALBEDO_WHITE_PERCENTILE:g}th percentile)",
+            )
+        )
     if confidence is not None:
         save_gray(np.nan_to_num(rec.confidence), temps[confidence])
         rows.append((confidence, "confidence of each normal, 16-bit, 0 to 1"))

@@ -13,6 +13,7 @@ from shadeform.cli._shell import (
     print_files,
     print_json,
     progress_bar,
+    refuse_options,
     stderr_console,
     stdout_console,
 )
@@ -77,9 +78,7 @@ def tiled_reconstruct(
     """``reconstruct --tiles``: :func:`shadeform.tiled.reconstruct` with a progress bar on stderr."""
     from shadeform import tiled
 
-    given = [name for name, value in refused.items() if value]
-    if given:
-        raise InputError(f"{given[0]} is not available with tiles; use --tiles off")
+    refuse_options(refused, "not available with tiles; use --tiles off")
     if isinstance(options["light"], str):
         raise InputError("tiles need the light as --light X,Y,Z or --slant/--tilt, not estimated")
     depth = depth if depth is not None else output.with_name(f"{output.stem}_depth.tif")
