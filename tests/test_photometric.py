@@ -12,7 +12,7 @@ from PIL import Image
 from shadeform import synth
 from shadeform.errors import InputError
 from shadeform.light import light_from_slant_tilt
-from shadeform.photometric import photometric_stereo
+from shadeform.photometric import photometric_stereo, reconstruct_stereo
 
 BALL = Path(__file__).resolve().parents[2] / "shared" / "data" / "diligent-ball"
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "diligent"
@@ -715,6 +715,22 @@ def test_real_ball_with_unknown_lights():
     assert angles(result.normals, truth, photos.mask).mean() < 4.0
     lights = photos.lights / np.linalg.norm(photos.lights, axis=1, keepdims=True)
     assert np.median(np.degrees(np.arccos(np.clip(np.sum(result.lights * lights, axis=1), -1, 1)))) < 2.0
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason=f"real DiLiGenT photos not found at {REAL}")
+def test_a_slab_from_lights_read_wrong_is_said_with_what_to_do():
+    """DiLiGenT's cow with its lights read from the photos: the bas-relief resolved wrong, a slab
+    11 times as deep as the outline is long (issue 36). The result says so and what to do; the
+    calibrated ball, a true surface, stays under the bar without a warning."""
+    from shadeform.photometric.reconstruct import SLAB_SPAN
+
+    photos, _ = _real("cow")
+    read = reconstruct_stereo(photos.images, None, photos.mask, intensities=photos.intensities)
+    assert read.info["quality"]["depth_span"] > SLAB_SPAN
+    assert "give the light file" in read.info["quality"]["warning"]
+    ball, _ = _real("ball")
+    given = reconstruct_stereo(ball.images, ball.lights, ball.mask, intensities=ball.intensities)
+    assert given.info["quality"] == {"depth_span": pytest.approx(0.5, abs=0.1)}  # a hemisphere: r / 2r
 
 
 def test_cli_unknown_lights(tmp_path):

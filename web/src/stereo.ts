@@ -261,6 +261,9 @@ export class StereoSession {
 
   private showNote(result: StereoResult): void {
     const notes: string[] = [];
+    // a depth no photo shows (a slab: lights read from the photos, resolved wrong), and what to do
+    const quality = result.info.quality as { warning?: string } | undefined;
+    if (quality?.warning) notes.push(`Warning: ${quality.warning[0].toUpperCase()}${quality.warning.slice(1)}.`);
     const lights = { file: 'from the light file', sphere: 'read from the sphere', unknown: 'read from the photos' }[this.params.lights];
     notes.push(`${result.lights.length} lights ${lights}.`);
     if (result.sphere) {

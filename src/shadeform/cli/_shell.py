@@ -342,11 +342,14 @@ def note_channel(console: Console, info: dict) -> None:
 
 
 def print_notes(console: Console, photo_info: dict, info: dict) -> None:
-    """The notes on stderr of a photo solved: the channel chosen, an unsure light estimate, a
-    depth pulled back within its outline's reach, the areas the shading cannot settle."""
+    """The notes on stderr of a photo (or a photo set) solved: the channel chosen, a doubtful mask,
+    a set's depth that no photo shows, an unsure light estimate, a depth pulled back within its
+    outline's reach, the areas the shading cannot settle."""
     note_channel(console, photo_info)
     if info.get("mask_warning"):  # a doubtful automatic mask (shadeform.masks.FoundObject.warning)
         console.print(f"warning: {info['mask_warning']}", soft_wrap=True, highlight=False)
+    if info.get("quality", {}).get("warning"):  # a photo set's depth no photo shows (a slab)
+        console.print(f"warning: {info['quality']['warning']}", soft_wrap=True, highlight=False)
     note_light(console, info)
     note_bounded(console, info)
     note_unsure(console, info)

@@ -28,6 +28,7 @@ from shadeform.cli._shell import (
     output_temps,
     print_files,
     print_json,
+    print_notes,
     stage,
     stderr_console,
     stdout_console,
@@ -184,6 +185,7 @@ def stereo(
     timings["total"] = time.perf_counter() - total
 
     height, width = rec.shape
+    print_notes(err, photos.info, rec.info)
     if as_json:
         print_json(
             {
@@ -201,7 +203,8 @@ def stereo(
         f"by {rec.info['solver']}, {integrator} integration"
     )
     out.print(
-        f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel"
+        f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel, "
+        f"depth {rec.info['quality']['depth_span']:.2f} x the outline's longest side"
     )
     names = [Path(path).name for path in photos.paths]  # the user's names for the photos, not indices
     if rec.info["photos_rescaled"]:

@@ -11,6 +11,12 @@ from shadeform._deprecated import renamed_keywords
 from shadeform.errors import InputError
 from shadeform.photometric.stereo import photometric_stereo
 
+#: A depth that spans more than this many times the outline's longest side is not a surface the
+#: photos show: a bas-relief the uncalibrated stereo resolved wrong (a slab; DiLiGenT's cow and
+#: reading read from their photos span 12-13 times their outline, the other five 0.4-1.0). The
+#: bar issue 36 set, not a value swept.
+SLAB_SPAN = 2.0
+
 
 @renamed_keywords(method="model")
 def reconstruct_stereo(
@@ -54,8 +60,9 @@ def reconstruct_stereo(
         ran), ``model`` (the photometric model's name), ``integrator``, ``photos``, ``lights_used`` (median per pixel),
         ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
         (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
-        directions used, a list of ``[x, y, z]``) and
-        ``timings`` in seconds.
+        directions used, a list of ``[x, y, z]``), ``timings`` in seconds and ``quality``: the
+        quality line of every stereo result, ``depth_span`` (:func:`depth_span`) and, when it is
+        above :data:`SLAB_SPAN`, a ``warning`` that says what to do.
 
     Raises
     ------
@@ -93,6 +100,18 @@ def reconstruct_stereo(
     done = time.perf_counter()
     directions = np.asarray(lights if result.lights is None else result.lights, dtype=np.float64)
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
+    span = depth_span(depth, solved)
+    checks = {"depth_span": round(span, 3)}
+    if span > SLAB_SPAN:
+        checks["warning"] = (
+            f"the depth spans {span:.1f} times the outline's longest side: not a surface the photos show"
+            + (
+                " (the lights read from the photos resolved the shape wrong); give the light file, or "
+                "read the lights from a shiny sphere in the photos"
+                if lights is None
+                else "; check the light file's frame (x right, y up, z toward the camera) and the mask"
+            )
+        )
     return Reconstruction(
         normals=result.normals,
         depth=depth,
@@ -111,6 +130,18 @@ def reconstruct_stereo(
             "lights": "read from the photos" if lights is None else "given",
             "light_directions": (directions / np.linalg.norm(directions, axis=1, keepdims=True)).tolist(),
             "timings": {"normals": normals_time - start, "depth": done - normals_time},
+            "quality": checks,
         },
         confidence=np.where(solved, result.confidence, np.nan),
     )
+
+
+def depth_span(depth: np.ndarray, mask: np.ndarray) -> float:
+    """The depth's range over the mask in units of the outline's longest side (its bounding box's);
+    0 for an empty mask."""
+    if not mask.any():
+        return 0.0
+    rows, cols = np.nonzero(mask)
+    side = max(np.ptp(rows), np.ptp(cols)) + 1
+    values = depth[mask]
+    return float((np.nanmax(values) - np.nanmin(values)) / side)
