@@ -179,3 +179,46 @@ def test_a_refused_maps_request_is_said_and_the_next_one_supersedes_it(page):
     page.click("#maps-make")
     wait_for(page, "maps", "current")
     assert page.evaluate("window.shadeform.maps.maps().length") == 5
+
+
+def test_a_photo_sets_model_printed_and_mapped(page, tmp_path):
+    """In photo-set mode the Print and Maps panels take the set's photometric stereo: a solid of
+    the width asked, downloaded; the maps with the set's albedo, in the zip too; a change of the
+    set's settings makes both out of date."""
+    page.click("#examples-menu > button")
+    page.click('#examples-menu [data-photo-set="stereo:vase"]')
+    page.wait_for_function("window.shadeform.stereo.applied() > 0", timeout=RESULT_MS)
+    assert page.is_visible("#print-group") and page.is_visible("#maps-group")
+    result = build_print(page, "50")
+    assert result["status"] == "current"
+    solid = page.evaluate("window.shadeform.print.lastResult()")
+    assert max(solid["size_mm"][:2]) == pytest.approx(50.0, abs=1e-4)
+    assert page.evaluate("window.shadeform.print.shown()") is True
+    with page.expect_download() as info:
+        page.click("#print-stl")
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    mesh = trimesh.load(path, force="mesh")
+    assert mesh.is_watertight and max(mesh.extents[:2]) == pytest.approx(50.0, abs=1e-3)
+    page.click("#print-switch")  # the set's model again
+    assert page.evaluate("window.shadeform.print.shown()") is False
+
+    page.locator("#maps-group").scroll_into_view_if_needed()
+    page.click("#maps-make")
+    wait_for(page, "maps", "current")
+    page.wait_for_function("window.shadeform.maps.maps().length === 6")
+    shown = {m["name"]: m["bits"] for m in page.evaluate("window.shadeform.maps.maps()")}
+    assert shown == {**MAP_BITS, "albedo": 16}
+    page.screenshot(path=str(ARTIFACTS / "app-maps-photo-set.png"))
+    with page.expect_download() as info:
+        page.click("#maps-zip")
+    zipped = tmp_path / info.value.suggested_filename
+    info.value.save_as(zipped)
+    with zipfile.ZipFile(zipped) as archive:
+        (albedo,) = [n for n in archive.namelist() if n.endswith("_albedo.png")]
+        assert png.Reader(bytes=archive.read(albedo)).read()[3]["bitdepth"] == 16
+
+    # the set's settings changed: the solid and the maps are out of date
+    page.select_option("#stereo-model", "robust")
+    page.wait_for_function("window.shadeform.print.modelState().status === 'stale'")
+    page.wait_for_function("window.shadeform.maps.modelState().status === 'stale'")

@@ -423,6 +423,15 @@ export interface ReliefRequest {
   request_id: number;
 }
 
+/** A print-ready solid of a stored photo set's photometric stereo with these parameters. */
+export interface StereoReliefRequest {
+  photoset_id: string;
+  params: StereoParams;
+  relief: ReliefParams;
+  /** Chosen by the client, echoed in the result. */
+  request_id: number;
+}
+
 /** The solid, in millimetres, and its measures. */
 export interface ReliefResult {
   request_id: number;
@@ -444,7 +453,7 @@ export interface ReliefResult {
 
 /** One texture map, small, with what its file holds. */
 export interface MapPreview {
-  /** normal_opengl, normal_directx, height, ambient_occlusion or curvature. */
+  /** normal_opengl, normal_directx, height, ambient_occlusion, curvature, or a photo set's albedo. */
   name: string;
   /** A preview: base64 8-bit PNG, at most 256 pixels on a side. */
   png: string;

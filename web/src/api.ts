@@ -19,10 +19,12 @@ import type {
   ReconstructParams,
   ReconstructRequest,
   ReconstructResult,
+  ReliefParams,
   ReliefRequest,
   ReliefResult,
   SeedMaskRequest,
   SolveJob,
+  StereoReliefRequest,
   StereoRequest,
   StereoResult,
   ViewSetInfo,
@@ -264,20 +266,37 @@ export function exportFused(request: FuseRequest, suffix: string): Promise<{ blo
 
 // ------------------------------------------------------------------- prints and maps
 
-export function relief(request: ReliefRequest, signal?: AbortSignal): Promise<ReliefResult> {
-  return json<ReliefResult>(postJson('/api/relief', request, signal));
+/**
+ * What a print and the maps are made of: the open photo's model (its reconstruction request) or
+ * the open photo set's photometric stereo (its stereo request); each has its own routes.
+ */
+export type ModelSource = { kind: 'photo'; request: ReconstructRequest } | { kind: 'set'; request: StereoRequest };
+
+/** The request of a print of ``source`` with these options. */
+export function reliefRequest(source: ModelSource, relief: ReliefParams, request_id: number): ReliefRequest | StereoReliefRequest {
+  return source.kind === 'photo'
+    ? { image_id: source.request.image_id, params: source.request.params, relief, request_id }
+    : { photoset_id: source.request.photoset_id, params: source.request.params, relief, request_id };
 }
 
-export function exportRelief(request: ReliefRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
-  return downloaded(postJson(`/api/relief/export?format=${encodeURIComponent(suffix)}`, request), suffix);
+function printRoute(request: ReliefRequest | StereoReliefRequest | ReconstructRequest | StereoRequest, route: string): string {
+  return 'photoset_id' in request ? `/api/stereo/${route}` : `/api/${route}`;
 }
 
-export function maps(request: ReconstructRequest, signal?: AbortSignal): Promise<MapsResult> {
-  return json<MapsResult>(postJson('/api/maps', request, signal));
+export function relief(request: ReliefRequest | StereoReliefRequest, signal?: AbortSignal): Promise<ReliefResult> {
+  return json<ReliefResult>(postJson(printRoute(request, 'relief'), request, signal));
 }
 
-export function mapsZip(request: ReconstructRequest): Promise<{ blob: Blob; filename: string }> {
-  return downloaded(postJson('/api/maps/zip', request), '.zip');
+export function exportRelief(request: ReliefRequest | StereoReliefRequest, suffix: string): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson(`${printRoute(request, 'relief/export')}?format=${encodeURIComponent(suffix)}`, request), suffix);
+}
+
+export function maps(request: ReconstructRequest | StereoRequest, signal?: AbortSignal): Promise<MapsResult> {
+  return json<MapsResult>(postJson(printRoute(request, 'maps'), request, signal));
+}
+
+export function mapsZip(request: ReconstructRequest | StereoRequest): Promise<{ blob: Blob; filename: string }> {
+  return downloaded(postJson(printRoute(request, 'maps/zip'), request), '.zip');
 }
 
 async function downloaded(pending: Promise<Response>, suffix: string): Promise<{ blob: Blob; filename: string }> {

@@ -123,10 +123,17 @@ class App {
       },
       modelChanged: () => this.showModelState(),
     });
-    const modelRequest = () => (this.photo.image ? this.photo.request(0) : null);
+    // the open photo set's model in its mode, else the open photo's
+    const modelRequest = (): api.ModelSource | null => {
+      if (document.body.classList.contains('stereo-mode')) {
+        const request = this.stereo.current();
+        return request ? { kind: 'set', request } : null;
+      }
+      return this.photo.image ? { kind: 'photo', request: this.photo.request(0) } : null;
+    };
     this.print = new PrintPanel(options.relief_defaults, viewerPanel.viewer, {
       request: modelRequest,
-      showModel: () => this.solver.showModel(),
+      showModel: () => (document.body.classList.contains('stereo-mode') ? this.stereo.showModel() : this.solver.showModel()),
       shown: () => viewerPanel.modelShown(),
       busy,
       toast: (message, kind) => toast(message, kind),

@@ -1,5 +1,6 @@
-// The Maps panel: the one photo's model as texture maps (shadeform.maps on the server): normal
-// maps in the OpenGL and DirectX conventions, height, ambient occlusion and curvature, each
+// The Maps panel: the open photo's or photo set's model as texture maps (shadeform.maps on the
+// server): normal maps in the OpenGL and DirectX conventions, height, ambient occlusion and
+// curvature (and a photo set's albedo), each
 // previewed small with its legend, all downloaded at once as a zip of full-resolution PNGs (the
 // files `shadeform maps` writes, with a README.txt).
 //
@@ -7,7 +8,7 @@
 // their own (modelState.ts): an edit makes the previews out of date (dimmed), "Make maps" makes
 // them current, and the zip is offered only then, so that what is downloaded is what is shown.
 import * as api from './api';
-import type { MapsResult, ReconstructRequest } from './api.gen';
+import type { MapsResult, ReconstructRequest, StereoRequest } from './api.gen';
 import { $, showMessage } from './dom';
 import { LatestRequest, ModelState, statusText } from './modelState';
 import { inputsKey } from './printPanel';
@@ -15,8 +16,8 @@ import { download } from './state';
 import './print.css';
 
 export interface MapsHost {
-  /** The reconstruction request for the photo's current settings, or null when none is open. */
-  request(): ReconstructRequest | null;
+  /** The open photo's or photo set's model at its current settings, or null when none is open. */
+  request(): api.ModelSource | null;
   busy(text: string, work: () => Promise<void>): Promise<void>;
   toast(message: string, kind?: 'error' | 'info'): void;
 }
@@ -28,6 +29,7 @@ const TITLES: Record<string, string> = {
   height: 'Height',
   ambient_occlusion: 'Ambient occlusion',
   curvature: 'Curvature',
+  albedo: 'Albedo',
 };
 
 export class MapsPanel {
@@ -36,13 +38,13 @@ export class MapsPanel {
   private key: string | null = null;
   private readonly requests = new LatestRequest(this.model, (message) => this.showError(message), () => this.render());
   private result: MapsResult | null = null;
-  private made: ReconstructRequest | null = null; // what the previews on record were made from
+  private made: ReconstructRequest | StereoRequest | null = null; // what the previews on record were made from
   private ready = false;
 
   constructor(private readonly host: MapsHost) {
     $('maps-group').innerHTML = `
       <h2>Maps</h2>
-      <div class="hint-text">Texture maps of the model for a game engine or a renderer: normals, height, ambient occlusion, curvature.</div>
+      <div class="hint-text">Texture maps of the model for a game engine or a renderer: normals, height, ambient occlusion, curvature (and a photo set's albedo).</div>
       <div class="buttons">
         <button class="btn small primary" id="maps-make" title="Make every map of the model's current settings and preview them here">Make maps</button>
         <button class="btn small" id="maps-zip" title="Every map at full resolution as a PNG (16-bit normals and height), with a README.txt legend">Download all (zip)</button>
@@ -77,7 +79,10 @@ export class MapsPanel {
     const base = this.host.request();
     if (!base) return this.host.toast('Open a photo first, then make its maps');
     this.sync();
-    const request: ReconstructRequest = { ...base, request_id: this.requests.nextId(), preview: false };
+    const request: ReconstructRequest | StereoRequest =
+      base.kind === 'photo'
+        ? { ...base.request, request_id: this.requests.nextId(), preview: false }
+        : { ...base.request, request_id: this.requests.nextId() };
     await this.requests.run(
       (signal) => api.maps(request, signal),
       (result) => {

@@ -1,5 +1,6 @@
-// The Print panel: the one photo's model as a closed solid in millimetres (shadeform.relief on the
-// server), shown in the 3D view with its measures beside it, downloaded as STL or 3MF.
+// The Print panel: the open photo's model, or the open photo set's, as a closed solid in
+// millimetres (shadeform.relief on the server), shown in the 3D view with its measures beside it,
+// downloaded as STL or 3MF.
 //
 // The solid depends on the model's settings (all but the mesh's step: it is made from the
 // full-resolution depth) and on the print options here. Its state is a ModelState of its own
@@ -12,7 +13,7 @@
 // switch between the two without asking the server again.
 import * as THREE from 'three';
 import * as api from './api';
-import type { Options, ReconstructRequest, ReliefParams, ReliefRequest, ReliefResult } from './api.gen';
+import type { Options, ReliefParams, ReliefRequest, ReliefResult, StereoReliefRequest } from './api.gen';
 import { $, showMessage } from './dom';
 import { LatestRequest, ModelState, statusText } from './modelState';
 import { download } from './state';
@@ -20,9 +21,9 @@ import type { Viewer } from './viewer';
 import './print.css';
 
 export interface PrintHost {
-  /** The reconstruction request for the photo's current settings, or null when none is open. */
-  request(): ReconstructRequest | null;
-  /** Show the photo's model in the 3D view again, in place of the solid. */
+  /** The open photo's or photo set's model at its current settings, or null when none is open. */
+  request(): api.ModelSource | null;
+  /** Show the model in the 3D view again, in place of the solid. */
   showModel(): void;
   /** A solid is on screen (the 3D view's controls are on). */
   shown(): void;
@@ -58,7 +59,7 @@ export class PrintPanel {
   private modelKey: string | null = null;
   private readonly requests = new LatestRequest(this.model, (message) => this.showError(message), () => this.render());
   private result: ReliefResult | null = null;
-  private built: ReliefRequest | null = null; // what the solid on record was built from
+  private built: ReliefRequest | StereoReliefRequest | null = null; // what the solid on record was built from
   private mesh: api.DecodedMesh | null = null;
   private problem: string | null = null; // what is wrong with a typed option, before any request
   private readonly dims: HTMLElement;
@@ -112,9 +113,7 @@ export class PrintPanel {
     if (!base) return this.host.toast('Open a photo first, then build its print');
     if (this.problem) return this.showError(this.problem);
     this.sync();
-    const request: ReliefRequest = {
-      image_id: base.image_id, params: base.params, relief: structuredClone(this.options), request_id: this.requests.nextId(),
-    };
+    const request = api.reliefRequest(base, structuredClone(this.options), this.requests.nextId());
     await this.requests.run(
       (signal) => api.relief(request, signal),
       (result) => {
@@ -353,10 +352,12 @@ export class PrintPanel {
   }
 }
 
-/** What a solid depends on of the model's request: all but the mesh's step. */
-export function inputsKey(request: ReconstructRequest): string {
-  const { step: _step, ...params } = request.params;
-  return JSON.stringify([request.image_id, params]);
+/** What a solid (or the maps) depends on of the model: its photo or photo set and its settings
+ * but the mesh's step. */
+export function inputsKey(source: api.ModelSource): string {
+  const { step: _step, ...params } = source.request.params;
+  const id = source.kind === 'photo' ? source.request.image_id : source.request.photoset_id;
+  return JSON.stringify([source.kind, id, params]);
 }
 
 function mm(value: number): string {

@@ -160,6 +160,16 @@ export class StereoSession {
 
   // ----------------------------------------------------------------------- solving
 
+  /** The open set's request at its current settings (for the Print and Maps panels), or null. */
+  current(): api.StereoRequestBody | null {
+    return this.info ? { photoset_id: this.info.photoset_id, params: structuredClone(this.params), request_id: 0 } : null;
+  }
+
+  /** Show the set's model in the 3D view again (in place of a print's solid). */
+  showModel(): void {
+    if (this.result) this.host.showMesh(this.result, api.decodeMesh(this.result.mesh), false);
+  }
+
   request(): api.StereoRequestBody {
     return { photoset_id: this.info!.photoset_id, params: structuredClone(this.params), request_id: ++this.requestCounter };
   }

@@ -10,11 +10,16 @@ and as texture maps.
                                                 previews of every map, with their legends)
 ``POST /api/maps/zip``                          ``ReconstructRequest`` -> a zip of every map at
                                                 full resolution as PNG, with a README.txt legend
+``POST /api/stereo/relief``, ``.../export``     ``StereoReliefRequest``: the same of a photo
+                                                set's photometric stereo
+``POST /api/stereo/maps``, ``.../maps/zip``     ``StereoRequest``: the same, with the set's albedo
 ==============================================  =================================================
 
 As elsewhere, input checking, a library call (:func:`shadeform.relief`, :func:`shadeform.maps`)
 and encoding. The reconstruction is the one :func:`shadeform.app.solving.solve` keeps for
-``/api/reconstruct`` and ``/api/export``: a model that is current is not solved again. Solids and
+``/api/reconstruct`` and ``/api/export`` (a photo set's, the one
+:func:`shadeform.app.stereo.solve_set` keeps for ``/api/stereo``): a model that is current is
+not solved again. Solids and
 maps are kept in the same results cache, so that a download after a preview is not made again.
 The maps' files are those of ``shadeform maps`` (:data:`shadeform.cli.maps.LEGEND`, written by
 :func:`shadeform.io.maps.save_gray`).
@@ -27,6 +32,8 @@ import math
 import tempfile
 import time
 import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,13 +54,15 @@ from shadeform.app.encoding import (
 from shadeform.app.schema import (
     MapPreview,
     MapsResult,
-    ReconstructParams,
     ReconstructRequest,
     ReliefParams,
     ReliefRequest,
     ReliefResult,
+    StereoReliefRequest,
+    StereoRequest,
 )
 from shadeform.app.solving import solve
+from shadeform.app.stereo import photoset, solve_set
 from shadeform.texture import legend
 
 __all__ = ["PREVIEW_SIDE", "add_print_routes", "relief_options"]
@@ -91,44 +100,66 @@ def add_print_routes(app: FastAPI, state: Any) -> None:
         maps made of them.
     """
 
+    FORMAT = Query(..., description="A suffix from Options.formats: .stl or .3mf for a printer.")
+
     @app.post("/api/relief", response_model=ReliefResult)
     async def post_relief(body: ReliefRequest, request: Request) -> Response:
         options = relief_options(body.relief)  # refused before any solve
-        return await state.solve_json(
-            request, _relief_result, state, state.image(body.image_id), body, options
-        )
+        source = _photo(state, body)
+        return await state.solve_json(request, _relief_result, state, source, body.request_id, options)
 
     @app.post("/api/relief/export", response_class=Response, responses=FILE_RESPONSES)
-    async def post_relief_export(
-        body: ReliefRequest,
-        format: str = Query(..., description="A suffix from Options.formats: .stl or .3mf for a printer."),
-    ) -> Response:
-        from shadeform.io.exporters import available_formats
-
-        suffix = format_suffix(format, available_formats())
-        options = relief_options(body.relief)
-        entry = state.image(body.image_id)
-        async with state.solve_lock:
-            solid, _ = await run_in_threadpool(_relief, state, entry, body.params, options)
-            data = await run_in_threadpool(mesh_bytes, solid, suffix)
-        return download(data, f"{safe_stem(entry.name)}-relief", suffix)
+    async def post_relief_export(body: ReliefRequest, format: str = FORMAT) -> Response:
+        return await _relief_file(state, _photo(state, body), body.relief, format)
 
     @app.post("/api/maps", response_model=MapsResult)
     async def post_maps(body: ReconstructRequest, request: Request) -> Response:
-        return await state.solve_json(request, _maps_result, state, state.image(body.image_id), body)
+        return await state.solve_json(request, _maps_result, state, _photo(state, body), body.request_id)
 
     @app.post("/api/maps/zip", response_class=Response, responses=_ZIP_RESPONSES)
     async def post_maps_zip(body: ReconstructRequest) -> Response:
-        entry = state.image(body.image_id)
-        async with state.solve_lock:
-            made, how = await run_in_threadpool(_maps, state, entry, body.params)
-            data = await run_in_threadpool(_zip, made, safe_stem(entry.name), how["range"])
-        name = f"{safe_stem(entry.name)}-maps.zip"
-        return Response(
-            data,
-            media_type="application/zip",
-            headers={"Content-Disposition": f'attachment; filename="{name}"'},
-        )
+        return await _maps_zip(state, _photo(state, body))
+
+    @app.post("/api/stereo/relief", response_model=ReliefResult)
+    async def post_stereo_relief(body: StereoReliefRequest, request: Request) -> Response:
+        options = relief_options(body.relief)
+        source = _photo_set(state, body)
+        return await state.solve_json(request, _relief_result, state, source, body.request_id, options)
+
+    @app.post("/api/stereo/relief/export", response_class=Response, responses=FILE_RESPONSES)
+    async def post_stereo_relief_export(body: StereoReliefRequest, format: str = FORMAT) -> Response:
+        return await _relief_file(state, _photo_set(state, body), body.relief, format)
+
+    @app.post("/api/stereo/maps", response_model=MapsResult)
+    async def post_stereo_maps(body: StereoRequest, request: Request) -> Response:
+        return await state.solve_json(request, _maps_result, state, _photo_set(state, body), body.request_id)
+
+    @app.post("/api/stereo/maps/zip", response_class=Response, responses=_ZIP_RESPONSES)
+    async def post_stereo_maps_zip(body: StereoRequest) -> Response:
+        return await _maps_zip(state, _photo_set(state, body))
+
+
+async def _relief_file(state, source: _Source, relief: ReliefParams, format: str) -> Response:
+    """The solid's file for a download."""
+    from shadeform.io.exporters import available_formats
+
+    suffix = format_suffix(format, available_formats())
+    options = relief_options(relief)
+    async with state.solve_lock:
+        solid, _ = await run_in_threadpool(_relief, state, source, options)
+        data = await run_in_threadpool(mesh_bytes, solid, suffix)
+    return download(data, f"{safe_stem(source.name)}-relief", suffix)
+
+
+async def _maps_zip(state, source: _Source) -> Response:
+    """Every map at full resolution, zipped, for a download."""
+    async with state.solve_lock:
+        made, how = await run_in_threadpool(_maps, state, source)
+        data = await run_in_threadpool(_zip, made, safe_stem(source.name), how)
+    name = f"{safe_stem(source.name)}-maps.zip"
+    return Response(
+        data, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'}
+    )
 
 
 def relief_options(params: ReliefParams) -> dict:
@@ -148,39 +179,67 @@ def relief_options(params: ReliefParams) -> dict:
 # --- the work ----------------------------------------------------------------------------------
 
 
-def _key(kind: str, entry, params: ReconstructParams, *extra) -> tuple:
-    # the mesh's step plays no part: a solid and the maps are made from the full-resolution depth
-    return (kind, entry.image_id, params.model_dump_json(exclude={"step"}), *extra)
+@dataclass(frozen=True, eq=False)
+class _Source:
+    """What a print or the maps are made of: a stored photo's reconstruction or a photo set's
+    photometric stereo, with what identifies it (the mesh's step plays no part: a solid and the
+    maps are made from the full-resolution depth), its name for files, and how to get it."""
+
+    key: tuple
+    name: str
+    solved: Callable[[], tuple[Any, bool]]  # () -> (reconstruction, whether it was cached)
 
 
-def _relief(state, entry, params: ReconstructParams, options: dict) -> tuple[Any, dict[str, Any]]:
-    """The solid for these parameters and print options, from the cache when known; with the
-    seconds spent and whether the reconstruction and the solid were reused."""
+def _photo(state, body) -> _Source:
+    entry, params = state.image(body.image_id), body.params
+
+    def solved():
+        found, cached = solve(state, entry, params)
+        return found.reconstruction, cached
+
+    return _Source((entry.image_id, params.model_dump_json(exclude={"step"})), entry.name, solved)
+
+
+def _photo_set(state, body) -> _Source:
+    entry, params = photoset(state, body.photoset_id), body.params
+
+    def solved():
+        found, cached = solve_set(state, entry, params)
+        return found.reconstruction, cached
+
+    return _Source(
+        (entry.photoset_id, params.model_dump_json(exclude={"step"})), entry.stem or entry.name, solved
+    )
+
+
+def _relief(state, source: _Source, options: dict) -> tuple[Any, dict[str, Any]]:
+    """The solid for these print options, from the cache when known; with the seconds spent and
+    whether the reconstruction and the solid were reused."""
     from shadeform import relief
 
-    key = _key("relief", entry, params, tuple(sorted(options.items())))
+    key = ("relief", *source.key, tuple(sorted(options.items())))
     known = state.results.get(key)
     if known is not None:
         return known, {"timings": {}, "cached": True, "reused": True}
-    solved, cached = solve(state, entry, params)
-    timings = {} if cached else {"reconstruct": _solve_seconds(solved.reconstruction)}
+    reconstruction, cached = source.solved()
+    timings = {} if cached else {"reconstruct": _solve_seconds(reconstruction)}
     start = time.perf_counter()
-    solid = relief(solved.reconstruction, **options)
+    solid = relief(reconstruction, **options)
     timings["relief"] = time.perf_counter() - start
     state.results.put(key, solid, solid.vertices.nbytes + solid.faces.nbytes + solid.normals.nbytes)
     return solid, {"timings": timings, "cached": cached, "reused": False}
 
 
-def _relief_result(state, entry, body: ReliefRequest, options: dict) -> ReliefResult:
+def _relief_result(state, source: _Source, request_id: int, options: dict) -> ReliefResult:
     start = time.perf_counter()
-    solid, how = _relief(state, entry, body.params, options)
+    solid, how = _relief(state, source, options)
     timings = how["timings"]
     lap = time.perf_counter()
     encoded = mesh_data(solid)
     timings["encode"] = time.perf_counter() - lap
     timings["total"] = time.perf_counter() - start
     return ReliefResult(
-        request_id=body.request_id,
+        request_id=request_id,
         mesh=encoded,
         size_mm=tuple(float(v) for v in solid.size_mm),
         volume_mm3=solid.volume_mm3,
@@ -192,24 +251,29 @@ def _relief_result(state, entry, body: ReliefRequest, options: dict) -> ReliefRe
     )
 
 
-def _maps(state, entry, params: ReconstructParams) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def _maps(state, source: _Source) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Every map of the reconstruction (float32, full resolution), from the cache when known;
-    with the seconds spent, whether anything was reused, and the height map's range in pixels."""
+    with the seconds spent, whether anything was reused, the height map's range in pixels and
+    (a photo set's) the albedo's white."""
     from shadeform import maps
+    from shadeform.texture import albedo_map
 
-    key = _key("maps", entry, params)
+    key = ("maps", *source.key)
     known = state.results.get(key)
     if known is not None:
-        return known[0], {"timings": {}, "cached": True, "reused": True, "range": known[1]}
-    solved, cached = solve(state, entry, params)
-    timings = {} if cached else {"reconstruct": _solve_seconds(solved.reconstruction)}
+        return known[0], {"timings": {}, "cached": True, "reused": True, **known[1]}
+    reconstruction, cached = source.solved()
+    timings = {} if cached else {"reconstruct": _solve_seconds(reconstruction)}
     start = time.perf_counter()
     # float32 keeps 24 bits, more than the 16-bit files need, at half the cache's memory
-    made = {name: values.astype(np.float32) for name, values in maps(solved.reconstruction).items()}
+    made = {name: values.astype(np.float32) for name, values in maps(reconstruction).items()}
     timings["maps"] = time.perf_counter() - start
-    low, high = solved.depth_range
-    state.results.put(key, (made, high - low), sum(values.nbytes for values in made.values()))
-    return made, {"timings": timings, "cached": cached, "reused": False, "range": high - low}
+    depth = reconstruction.depth[reconstruction.mask]
+    measures = {"range": float(np.nanmax(depth) - np.nanmin(depth))}
+    if "albedo" in made:
+        measures["white"] = albedo_map(reconstruction.albedo, reconstruction.mask)[1]
+    state.results.put(key, (made, measures), sum(values.nbytes for values in made.values()))
+    return made, {"timings": timings, "cached": cached, "reused": False, **measures}
 
 
 def _solve_seconds(reconstruction) -> float:
@@ -217,20 +281,25 @@ def _solve_seconds(reconstruction) -> float:
     return float(sum(reconstruction.info["timings"].values()))
 
 
-def _maps_result(state, entry, body: ReconstructRequest) -> MapsResult:
+def _legend(made: dict, how: dict) -> dict[str, tuple[int, str]]:
+    """The legend of the maps made: a photo set's albedo too."""
+    return legend(how["range"], albedo="stereo" if "albedo" in made else None, white=how.get("white"))
+
+
+def _maps_result(state, source: _Source, request_id: int) -> MapsResult:
     start = time.perf_counter()
-    made, how = _maps(state, entry, body.params)
+    made, how = _maps(state, source)
     timings = how["timings"]
     lap = time.perf_counter()
     previews = [
         MapPreview(name=name, png=png_base64(_shrink(made[name])), bits=bits, legend=text)
-        for name, (bits, text) in legend(how["range"]).items()
+        for name, (bits, text) in _legend(made, how).items()
     ]
     timings["encode"] = time.perf_counter() - lap
     timings["total"] = time.perf_counter() - start
     height, width = made["height"].shape
     return MapsResult(
-        request_id=body.request_id,
+        request_id=request_id,
         width=width,
         height=height,
         maps=previews,
@@ -247,17 +316,18 @@ def _shrink(values: np.ndarray) -> np.ndarray:
     return downsample(values, max(1, math.ceil(max(values.shape[:2]) / PREVIEW_SIDE)))
 
 
-def _zip(made: dict[str, np.ndarray], stem: str, relief_px: float) -> bytes:
+def _zip(made: dict[str, np.ndarray], stem: str, how: dict) -> bytes:
     """Every map as the CLI writes it (``STEM_NAME.png``, its bit depth), and README.txt."""
     from shadeform.io.maps import save_gray
 
     buffer = io.BytesIO()
-    lines = ["Texture maps made by shadeform from one photo (the same files as `shadeform maps`).", ""]
+    source = "a photo set" if "albedo" in made else "one photo"
+    lines = [f"Texture maps made by shadeform from {source} (the same files as `shadeform maps`).", ""]
     with (
         tempfile.TemporaryDirectory(prefix="shadeform-maps-") as folder,
         zipfile.ZipFile(buffer, "w") as archive,
     ):
-        for name, (bits, text) in legend(relief_px).items():
+        for name, (bits, text) in _legend(made, how).items():
             filename = f"{stem}_{name}.png"
             # the file name is ours: a sanitised stem and a map's name
             path = save_gray(made[name], Path(folder) / filename, bitdepth=bits)

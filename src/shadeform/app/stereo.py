@@ -52,7 +52,7 @@ from shadeform.app.schema import PhotoSetInfo, StereoParams, StereoRequest, Ster
 from shadeform.app.store import new_image_id
 from shadeform.errors import InputError
 
-__all__ = ["StoredPhotoSet", "add_stereo_routes"]
+__all__ = ["StoredPhotoSet", "add_stereo_routes", "photoset", "solve_set"]
 
 #: Most photos in one set (DiLiGenT has 96; RTI domes 50 to 100).
 MAX_PHOTOS = 256
@@ -154,7 +154,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         "/api/photosets/{photoset_id}/photos/{index}.png", response_class=Response, responses=PNG_RESPONSES
     )
     def get_photoset_photo(photoset_id: str, index: int) -> Response:
-        entry = _photoset(state, photoset_id)
+        entry = photoset(state, photoset_id)
         if not 0 <= index < len(entry.images):
             raise HTTPException(
                 404, f"photo {index} is not in this set: it has photos 0 to {len(entry.images) - 1}"
@@ -164,7 +164,7 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
 
     @router.post("/api/stereo", response_model=StereoResult)
     async def post_stereo(body: StereoRequest, request: Request) -> Response:
-        return await state.solve_json(request, _result, state, _photoset(state, body.photoset_id), body)
+        return await state.solve_json(request, _result, state, photoset(state, body.photoset_id), body)
 
     @router.post("/api/stereo/export", response_class=Response, responses=FILE_RESPONSES)
     async def post_stereo_export(
@@ -174,9 +174,9 @@ def add_stereo_routes(app: FastAPI, state: Any) -> None:
         from shadeform.io.exporters import available_formats
 
         suffix = format_suffix(format, available_formats())
-        entry = _photoset(state, body.photoset_id)
+        entry = photoset(state, body.photoset_id)
         async with state.solve_lock:
-            solved, _ = await run_in_threadpool(_solve, state, entry, body.params)
+            solved, _ = await run_in_threadpool(solve_set, state, entry, body.params)
             data = await run_in_threadpool(mesh_file, solved.reconstruction, body.params.step, suffix)
         return download(data, entry.stem or entry.name, suffix)
 
@@ -306,7 +306,7 @@ def _replace(entry: StoredPhotoSet, key: str) -> StoredPhotoSet:
     return replace(entry, photoset_id=key)
 
 
-def _photoset(state, photoset_id: str) -> StoredPhotoSet:
+def photoset(state, photoset_id: str) -> StoredPhotoSet:
     return state.recall_kind(photoset_id, StoredPhotoSet, "photo set", "sets", "open the photos again")
 
 
@@ -332,7 +332,7 @@ def _info(entry: StoredPhotoSet) -> PhotoSetInfo:
 # --- solving -----------------------------------------------------------------------------------
 
 
-def _solve(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedSet, bool]:
+def solve_set(state, entry: StoredPhotoSet, params: StereoParams) -> tuple[_SolvedSet, bool]:
     """The photometric stereo result for these parameters, from the cache when only ``step``
     changed."""
     from shadeform.integration import available_integrators
@@ -413,7 +413,7 @@ def _result(state, entry: StoredPhotoSet, body: StereoRequest) -> StereoResult:
     from shadeform import to_mesh
 
     start = time.perf_counter()
-    solved, cached = _solve(state, entry, body.params)
+    solved, cached = solve_set(state, entry, body.params)
     rec = solved.reconstruction
     timings = {} if cached else dict(rec.info["timings"])
     lap = time.perf_counter()

@@ -38,6 +38,7 @@ from shadeform.app.schema.printing import (
     ReliefParams,
     ReliefRequest,
     ReliefResult,
+    StereoReliefRequest,
 )
 from shadeform.app.schema.projects import (
     PROJECT_ID_PATTERN,
@@ -107,6 +108,7 @@ __all__ = [
     "Outline",
     "ReliefParams",
     "ReliefRequest",
+    "StereoReliefRequest",
     "ReliefResult",
     "MapPreview",
     "MapsResult",

@@ -16,7 +16,14 @@ from shadeform.app.schema.masks import (
     SeedMaskRequest,
 )
 from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, OptionInfo, Options
-from shadeform.app.schema.printing import MapPreview, MapsResult, ReliefParams, ReliefRequest, ReliefResult
+from shadeform.app.schema.printing import (
+    MapPreview,
+    MapsResult,
+    ReliefParams,
+    ReliefRequest,
+    ReliefResult,
+    StereoReliefRequest,
+)
 from shadeform.app.schema.projects import (
     DisplaySettings,
     Project,
@@ -76,6 +83,7 @@ _EXPORTED = (
     MaskResult,
     ReliefParams,
     ReliefRequest,
+    StereoReliefRequest,
     ReliefResult,
     MapPreview,
     MapsResult,

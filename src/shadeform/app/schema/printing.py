@@ -10,6 +10,7 @@ from typing_extensions import TypeAliasType
 
 from shadeform.app.schema.common import MeshData, _Model
 from shadeform.app.schema.reconstruct import ReconstructParams
+from shadeform.app.schema.stereo import StereoParams
 
 Outline = TypeAliasType("Outline", Literal["mask", "frame"])
 
@@ -40,6 +41,15 @@ class ReliefRequest(_Model):
     request_id: int = Field(default=0, description="Chosen by the client, echoed in the result.")
 
 
+class StereoReliefRequest(_Model):
+    """A print-ready solid of a stored photo set's photometric stereo with these parameters."""
+
+    photoset_id: str
+    params: StereoParams = Field(default_factory=StereoParams)
+    relief: ReliefParams = Field(default_factory=ReliefParams)
+    request_id: int = Field(default=0, description="Chosen by the client, echoed in the result.")
+
+
 class ReliefResult(_Model):
     """The solid, in millimetres, and its measures."""
 
@@ -60,7 +70,9 @@ class ReliefResult(_Model):
 class MapPreview(_Model):
     """One texture map, small, with what its file holds."""
 
-    name: str = Field(description="normal_opengl, normal_directx, height, ambient_occlusion or curvature.")
+    name: str = Field(
+        description="normal_opengl, normal_directx, height, ambient_occlusion, curvature, or a photo set's albedo."
+    )
     png: str = Field(description="A preview: base64 8-bit PNG, at most 256 pixels on a side.")
     bits: int = Field(description="Bits per sample of the map's file in the zip.")
     legend: str = Field(description="What the map's values mean.")
