@@ -187,3 +187,16 @@ def test_batch_checks_max_pixels_before_reading(tmp_path, bad):
 
     with pytest.raises(InputError, match="max_pixels must be a whole number >= 1"):
         reconstruct_files([tmp_path / "never-read.png"], tmp_path, max_pixels=bad)
+
+
+def test_every_command_reading_photos_files_says_how_they_are_encoded():
+    """``--linear/--srgb`` wherever a photo file is read (the app decides per upload: it reads no
+    file of the user's path)."""
+    commands = typer.main.get_command(app).commands
+    for name in PHOTO_COMMANDS:
+        option = next((p for p in commands[name].params if p.name == "linear"), None)
+        if name == "app":
+            assert option is None
+            continue
+        assert option is not None and option.opts == ["--linear"] and option.secondary_opts == ["--srgb"], name
+        assert option.default is None, name  # decided by the file (and a calibrated set's folder)

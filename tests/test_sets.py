@@ -125,3 +125,18 @@ def test_fused_views_each_a_photo_set_keep_the_waist_and_the_outlines(name, cli,
     views["views"][0]["concave"] = {"regions": [{"polygon": [[1, 1], [9, 1], [9, 9]], "axis": "x"}]}
     (tmp_path / "views.json").write_text(json.dumps(views))
     _fails(cli("fuse", "--views", tmp_path / "views.json", "-o", tmp_path / "b.ply"), "photo set", "concave")
+
+
+def test_fuse_reads_photos_as_told_linear_or_srgb(cli, tmp_path):
+    """``fuse --linear/--srgb`` as every command reading photos: 8-bit files are sRGB unless told."""
+    angles = (0, 180)
+    photos = []
+    for view in synth.render_views("ellipsoid", angles, size=48):
+        photos.append(tmp_path / f"v{int(view.angle)}.png")
+        Image.fromarray(np.rint(255 * np.asarray(view.image)).astype(np.uint8)).save(photos[-1])
+    readings = {}
+    for flag in ((), ("--linear",), ("--srgb",)):
+        result = cli("fuse", *photos, "--angles", "0,180", "-o", tmp_path / "m.ply", "--json", *flag)
+        assert result.exit_code == 0, result.output
+        readings[flag] = [view["reading"]["encoding"] for view in json.loads(result.stdout)["views"]]
+    assert readings == {(): ["srgb"] * 2, ("--linear",): ["linear"] * 2, ("--srgb",): ["srgb"] * 2}

@@ -15,6 +15,7 @@ from shadeform.cli._shell import (
     FilterOption,
     IntegratorOption,
     JsonOption,
+    LinearOption,
     MaxPixelsOption,
     SlantOption,
     SolverOption,
@@ -86,6 +87,7 @@ def fuse(
     slant: SlantOption = None,
     tilt: TiltOption = None,
     channel: ChannelOption = "auto",
+    linear: LinearOption = None,
     filter: FilterOption = None,
     solver: SolverOption = "auto",
     integrator: IntegratorOption = None,
@@ -153,7 +155,7 @@ def fuse(
     start = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output)
-        images, object_masks, drawn, recs = [], [], [], []
+        images, object_masks, drawn, recs, readings = [], [], [], [], []
 
         def solve(i: int, extra=()):
             """View ``i`` solved, with ``extra`` concave regions besides the ones drawn for it (a
@@ -181,17 +183,19 @@ def fuse(
                             "tells convex from concave itself; drop its concave regions"
                         )
                     photos = load_set(
-                        entry.photo, mask=entry.mask, linear=None, channel=channel, max_pixels=max_pixels
+                        entry.photo, mask=entry.mask, linear=linear, channel=channel, max_pixels=max_pixels
                     )
                     rec = solve_set(photos, integrator=integrator)
                     images.append(None)
+                    readings.append(photos.info)
                     object_masks.append(rec.mask)
                     drawn.append([])
                     recs.append(rec)
                     bar.advance(task)
                     continue
-                photo = read_photo(entry.photo, channel=channel, max_pixels=max_pixels)
+                photo = read_photo(entry.photo, channel=channel, linear=linear, max_pixels=max_pixels)
                 images.append(photo.image)
+                readings.append(photo.info)
                 object_masks.append(
                     shadeform.load_mask(entry.mask, shape=photo.image.shape, max_pixels=max_pixels)
                     if entry.mask
@@ -228,8 +232,13 @@ def fuse(
             {
                 "command": "fuse",
                 "views": [
-                    {"photo": entry.photo, "pose": _plain_pose(entry.pose), "settled_concave": areas}
-                    for entry, areas in zip(entries, settled)
+                    {
+                        "photo": entry.photo,
+                        "pose": _plain_pose(entry.pose),
+                        "settled_concave": areas,
+                        "reading": reading,  # how the file was read: bits, encoding, channel
+                    }
+                    for entry, areas, reading in zip(entries, settled, readings)
                 ],
                 "surface": surface,
                 "rivals": [{"turns": list(rival.turns), "ratio": rival.ratio} for rival in placement.rivals],
