@@ -6,98 +6,55 @@ import json
 
 from pydantic.json_schema import models_json_schema
 
-from shadeform.app.schema.common import ErrorBody, MeshData
-from shadeform.app.schema.fusion import FusedView, FuseRequest, FuseResult, FuseView, ViewSetInfo
-from shadeform.app.schema.masks import (
-    AutoMaskRequest,
-    BoxMaskRequest,
-    MaskFileRequest,
-    MaskResult,
-    SeedMaskRequest,
-)
-from shadeform.app.schema.options import ExampleInfo, FormatInfo, Limits, MethodInfo, OptionInfo, Options
-from shadeform.app.schema.printing import (
-    MapPreview,
-    MapsResult,
-    ReliefParams,
-    ReliefRequest,
-    ReliefResult,
-    StereoReliefRequest,
-)
-from shadeform.app.schema.projects import (
-    DisplaySettings,
-    Project,
-    ProjectDocument,
-    ProjectImage,
-    ProjectInfo,
-    ProjectList,
-    ProjectPhotoSet,
-    ProjectSource,
-    ProjectViewEntry,
-    ProjectViews,
-)
-from shadeform.app.schema.reconstruct import (
-    ConcaveRegion,
-    ConcaveRegions,
-    FilterParams,
-    ImageInfo,
-    LightParams,
-    ReconstructParams,
-    ReconstructRequest,
-    ReconstructResult,
-    SolveJob,
-)
-from shadeform.app.schema.stereo import PhotoSetInfo, StereoParams, StereoRequest, StereoResult
-
-#: Models written to the TypeScript file, in this order.
+#: The models written to the TypeScript file, by name (the package exports them), in this order.
 _EXPORTED = (
-    FilterParams,
-    LightParams,
-    ConcaveRegion,
-    ConcaveRegions,
-    ReconstructParams,
-    ReconstructRequest,
-    OptionInfo,
-    MethodInfo,
-    FormatInfo,
-    ExampleInfo,
-    Limits,
-    ImageInfo,
-    Options,
-    MeshData,
-    ReconstructResult,
-    SolveJob,
-    StereoParams,
-    StereoRequest,
-    PhotoSetInfo,
-    StereoResult,
-    FuseView,
-    FuseRequest,
-    FusedView,
-    FuseResult,
-    ViewSetInfo,
-    AutoMaskRequest,
-    SeedMaskRequest,
-    BoxMaskRequest,
-    MaskFileRequest,
-    MaskResult,
-    ReliefParams,
-    ReliefRequest,
-    StereoReliefRequest,
-    ReliefResult,
-    MapPreview,
-    MapsResult,
-    ProjectSource,
-    ProjectImage,
-    DisplaySettings,
-    ProjectPhotoSet,
-    ProjectViewEntry,
-    ProjectViews,
-    ProjectDocument,
-    ProjectInfo,
-    ProjectList,
-    Project,
-    ErrorBody,
+    "FilterParams",
+    "LightParams",
+    "ConcaveRegion",
+    "ConcaveRegions",
+    "ReconstructParams",
+    "ReconstructRequest",
+    "OptionInfo",
+    "MethodInfo",
+    "FormatInfo",
+    "ExampleInfo",
+    "Limits",
+    "ImageInfo",
+    "Options",
+    "MeshData",
+    "ReconstructResult",
+    "SolveJob",
+    "StereoParams",
+    "StereoRequest",
+    "PhotoSetInfo",
+    "StereoResult",
+    "FuseView",
+    "FuseRequest",
+    "FusedView",
+    "FuseResult",
+    "ViewSetInfo",
+    "AutoMaskRequest",
+    "SeedMaskRequest",
+    "BoxMaskRequest",
+    "MaskFileRequest",
+    "MaskResult",
+    "ReliefParams",
+    "ReliefRequest",
+    "StereoReliefRequest",
+    "ReliefResult",
+    "MapPreview",
+    "MapsResult",
+    "ProjectSource",
+    "ProjectImage",
+    "DisplaySettings",
+    "ProjectPhotoSet",
+    "ProjectViewEntry",
+    "ProjectViews",
+    "ProjectDocument",
+    "ProjectInfo",
+    "ProjectList",
+    "Project",
+    "ErrorBody",
 )
 
 
@@ -113,11 +70,14 @@ def typescript() -> str:
     str
         The whole file, ending with a newline.
     """
-    _, schema = models_json_schema([(model, "serialization") for model in _EXPORTED])
+    from shadeform.app import schema as package  # imported when asked: the package imports this module
+
+    models = [getattr(package, name) for name in _EXPORTED]
+    _, schema = models_json_schema([(model, "serialization") for model in models])
     definitions = schema["$defs"]
     # aliases (Channel, ...) first, then the models in _EXPORTED order
     order = [name for name in definitions if "properties" not in definitions[name]]
-    order += [model.__name__ for model in _EXPORTED]
+    order += list(_EXPORTED)
     lines = [
         "// Generated from shadeform.app.schema by `python -m shadeform.app.schema`; do not edit.",
         "// A test (tests/test_app_api.py) fails when this file and the schema disagree.",
