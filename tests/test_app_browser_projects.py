@@ -41,11 +41,17 @@ def server(app_server):
     return app_server.url
 
 
-def wait_for_autosave(page) -> dict:
-    """Wait until the server took a save made after now and none is due; the autosave's state."""
-    saves = page.evaluate("window.shadeform.projects().saves")
+def saves(page) -> int:
+    """How many saves the server has taken from this page."""
+    return page.evaluate("window.shadeform.projects().saves")
+
+
+def wait_for_autosave(page, since: int | None = None) -> dict:
+    """Wait until the server took a save after ``since`` saves (default: now) and none is due; the
+    autosave's state. Count before a change whose save may be taken while its result is awaited."""
+    taken = saves(page) if since is None else since
     page.wait_for_function(
-        f"(() => {{ const p = window.shadeform.projects(); return p.saves > {saves} && !p.pending; }})()",
+        f"(() => {{ const p = window.shadeform.projects(); return p.saves > {taken} && !p.pending; }})()",
         timeout=SAVED_MS,
     )
     return page.evaluate("window.shadeform.projects()")
@@ -93,7 +99,7 @@ def test_a_project_outlives_a_restart_and_an_empty_browser_and_reopens_from_open
     wait_for_result(page, before)
     saved = page.evaluate("window.shadeform.state()")
     assert len(saved["params"]["concave"]["regions"]) == 1
-    autosave = wait_for_autosave(page)
+    autosave = wait_for_autosave(page, 0)  # the first save: whenever it came
     assert autosave["error"] is None and not autosave["off"]
     project_id = autosave["ids"]["photo"]
     assert project_id
@@ -142,11 +148,11 @@ def test_a_project_outlives_a_restart_and_an_empty_browser_and_reopens_from_open
         ]
         assert not sent, f"the image was sent or opened again: {sent}"
 
-        # going on there saves to the same project
-        before = other.evaluate("window.shadeform.applied()")
+        # going on there saves to the same project (the save may come before the new result)
+        before, taken = other.evaluate("window.shadeform.applied()"), saves(other)
         other.select_option("#filter-kind", "median")
         wait_for_result(other, before)
-        assert wait_for_autosave(other)["ids"]["photo"] == project_id
+        assert wait_for_autosave(other, taken)["ids"]["photo"] == project_id
         listed = other.evaluate("fetch('/api/projects').then((r) => r.json())")["projects"]
         assert [p["id"] for p in listed][0] == project_id and len(listed) == 2
         document = other.evaluate(f"fetch('/api/projects/{project_id}').then((r) => r.json())")["document"]
@@ -196,14 +202,16 @@ def test_photo_set_and_views_projects_reopen_in_another_browser(page, browser, a
     page.click("#examples-menu > button")
     page.click('#examples-menu [data-photo-set="stereo:vase"]')
     page.wait_for_function("window.shadeform.stereo.applied() > 0", timeout=FIRST_RESULT_MS)
+    taken = saves(page)
     page.select_option("#stereo-model", "robust")
-    set_id = wait_for_autosave(page)["ids"]["photo_set"]
+    set_id = wait_for_autosave(page, taken)["ids"]["photo_set"]
     info = page.evaluate("window.shadeform.stereo.info()")
     page.click("#examples-menu > button")
     page.click('#examples-menu [data-view-set="views:lumpy"]')
     page.wait_for_function("window.shadeform.views.applied() > 0", timeout=FIRST_RESULT_MS)
+    taken = saves(page)
     page.click("#parts-toggle")  # the partial models hidden: a setting of the views' project
-    views_id = wait_for_autosave(page)["ids"]["views"]
+    views_id = wait_for_autosave(page, taken)["ids"]["views"]
     views = page.evaluate("window.shadeform.views.views()")
 
     context, other, errors = new_profile(browser, app_server.url)
