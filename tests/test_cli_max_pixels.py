@@ -198,5 +198,7 @@ def test_every_command_reading_photos_files_says_how_they_are_encoded():
         if name == "app":
             assert option is None
             continue
-        assert option is not None and option.opts == ["--linear"] and option.secondary_opts == ["--srgb"], name
+        assert option is not None and option.opts == ["--linear"] and option.secondary_opts == ["--srgb"], (
+            name
+        )
         assert option.default is None, name  # decided by the file (and a calibrated set's folder)
