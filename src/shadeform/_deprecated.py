@@ -1,13 +1,14 @@
-"""Old names kept for one release: keyword arguments renamed by :func:`renamed_keywords`."""
+"""Old names kept for one release: keyword arguments (:func:`renamed_keywords`) and module
+attributes (:func:`renamed_attributes`) that were renamed."""
 
 from __future__ import annotations
 
 import functools
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
-__all__ = ["renamed_keywords"]
+__all__ = ["renamed_attributes", "renamed_keywords"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -49,3 +50,36 @@ def renamed_keywords(**renames: str) -> Callable[[F], F]:
         return wrapper  # type: ignore[return-value]
 
     return decorate
+
+
+def renamed_attributes(
+    module: str, renames: Mapping[str, tuple[str, Callable[[], Any]]]
+) -> Callable[[str], Any]:
+    """A module ``__getattr__`` for old attribute names: ``renames`` maps each old name to its new
+    name and a function giving its value (read when asked, so a registry's listing stays current),
+    and each access warns (``DeprecationWarning``, pointing at the code that asked). Other names
+    raise ``AttributeError``. A module with attributes of its own to serve calls the result last
+    from its own ``__getattr__``, with ``stacklevel=3`` (one frame more to the asker).
+
+    Examples
+    --------
+    >>> __getattr__ = renamed_attributes("shadeform.x", {"OLD": ("NEW", lambda: 3)})
+    >>> import warnings
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     __getattr__("OLD")
+    3
+    """
+
+    def __getattr__(name: str, stacklevel: int = 2):
+        if name not in renames:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        new, value = renames[name]
+        warnings.warn(
+            f"{module}.{name} is now {new}; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=stacklevel,
+        )
+        return value()
+
+    return __getattr__

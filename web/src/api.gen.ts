@@ -68,15 +68,6 @@ export interface ReconstructRequest {
   preview: boolean;
 }
 
-/** One option of a solver's (or another registry entry's) own (:class:`shadeform.registry.Option`). */
-export interface OptionInfo {
-  name: string;
-  type: "bool" | "int" | "float" | "str";
-  default: boolean | number | string;
-  /** One line in the user's words. */
-  help: string;
-}
-
 /** A solver or integrator the library offers (its registry: :func:`shadeform.solvers.available_solvers`, :func:`shadeform.integration.available_integrators`). */
 export interface MethodInfo {
   name: string;
@@ -84,6 +75,15 @@ export interface MethodInfo {
   description: string;
   /** Its own options (``--option NAME=VALUE`` on the command line); absent when it has none. */
   options?: OptionInfo[];
+}
+
+/** One option of a solver's (or another registry entry's) own (:class:`shadeform.registry.Option`). */
+export interface OptionInfo {
+  name: string;
+  type: "bool" | "int" | "float" | "str";
+  default: boolean | number | string;
+  /** One line in the user's words. */
+  help: string;
 }
 
 /** A mesh format the export endpoint writes (:func:`shadeform.available_formats`). */

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import importlib
 
+from shadeform._deprecated import renamed_attributes
 from shadeform.light.vectors import as_light, light_from_slant_tilt, parse_light, slant_tilt
 
 # public name -> submodule that defines it, imported on first use
@@ -49,19 +50,18 @@ __all__ = [
 ]
 
 
+# the old name of ESTIMATION_CUES, for one release: warns each time, never cached
+_renamed = renamed_attributes(
+    __name__, {"ESTIMATION_METHODS": ("ESTIMATION_CUES", lambda: __getattr__("ESTIMATION_CUES"))}
+)
+
+
 def __getattr__(name: str):
-    if name == "ESTIMATION_METHODS":  # the old name of ESTIMATION_CUES: warns each time, never cached
-        import warnings
-
-        from shadeform.light import estimate
-
-        warnings.warn(estimate._OLD_CUES, DeprecationWarning, stacklevel=2)
-        return estimate.ESTIMATION_CUES
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
-    raise AttributeError(f"module 'shadeform.light' has no attribute {name!r}")
+    return _renamed(name, stacklevel=3)
 
 
 def __dir__():

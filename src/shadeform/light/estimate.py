@@ -12,13 +12,12 @@ turns the one it takes into a :class:`LightEstimate` with its confidence.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from shadeform._checks import check_choice, check_mask, shading_image
-from shadeform._deprecated import renamed_keywords
+from shadeform._deprecated import renamed_attributes, renamed_keywords
 from shadeform.errors import InputError
 from shadeform.light._evidence import (
     CONFIDENCE_ANGLE,
@@ -378,12 +377,6 @@ def _estimate(reading: Reading, convex: bool, info: dict) -> LightEstimate:
     )
 
 
-def __getattr__(name: str):
-    # the old name of ESTIMATION_CUES, for one release
-    if name == "ESTIMATION_METHODS":
-        warnings.warn(_OLD_CUES, DeprecationWarning, stacklevel=2)
-        return ESTIMATION_CUES
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-_OLD_CUES = "ESTIMATION_METHODS is deprecated; use ESTIMATION_CUES (the old name goes in the next release)"
+#: The old name of ESTIMATION_CUES, for one release.
+OLD_NAMES = {"ESTIMATION_METHODS": ("ESTIMATION_CUES", lambda: ESTIMATION_CUES)}
+__getattr__ = renamed_attributes(__name__, OLD_NAMES)

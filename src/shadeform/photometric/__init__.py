@@ -59,7 +59,7 @@ neighbours), :mod:`.reconstruct` (:func:`reconstruct_stereo`: normals, then dept
 
 from __future__ import annotations
 
-from shadeform.photometric import registry as _registry
+from shadeform._deprecated import renamed_attributes
 from shadeform.photometric.audit import AGREE as AGREE
 from shadeform.photometric.audit import FAULTY as FAULTY
 from shadeform.photometric.audit import TOLERANCE as TOLERANCE
@@ -68,6 +68,7 @@ from shadeform.photometric.lambertian import ITERATIONS as ITERATIONS
 from shadeform.photometric.lambertian import MIN_SHADING as MIN_SHADING
 from shadeform.photometric.reconstruct import reconstruct_stereo
 from shadeform.photometric.registry import (
+    OLD_NAMES,
     STEREO_MODELS,
     StereoModel,
     available_methods,
@@ -94,11 +95,12 @@ __all__ = [
 ]
 
 
+# the old names (METHODS, STEREO_METHODS, StereoMethod) warn, as in the registry module
+_renamed = renamed_attributes(__name__, OLD_NAMES)
+
+
 def __getattr__(name: str):
-    # MODELS follows the registry (a model registered after import is in it); the old names
-    # (METHODS, STEREO_METHODS, StereoMethod) warn there
+    # MODELS follows the registry (a model registered after import is in it)
     if name == "MODELS":
         return STEREO_MODELS.names()
-    if name in _registry._DEPRECATED:
-        return _registry._old_name(name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _renamed(name, stacklevel=3)

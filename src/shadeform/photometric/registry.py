@@ -13,6 +13,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
+from shadeform._deprecated import renamed_attributes
 from shadeform.registry import Option, Registry
 
 __all__ = [
@@ -95,34 +96,20 @@ def available_stereo_methods() -> dict[str, str]:
     return available_stereo_models()
 
 
-#: Old names read through the module's ``__getattr__``: old name -> (new name, its value when asked).
-_DEPRECATED = {
+#: The module's old names, for one release: old name -> (new name, its value when asked).
+OLD_NAMES = {
     "STEREO_METHODS": ("STEREO_MODELS", lambda: STEREO_MODELS),
     "StereoMethod": ("StereoModel", lambda: StereoModel),
     "METHODS": ("MODELS", lambda: STEREO_MODELS.names()),
 }
-
-
-def _old_name(name: str):
-    """The value of the deprecated name ``name`` (a key of :data:`_DEPRECATED`), with a
-    :class:`DeprecationWarning` pointing at the code that asked for it (through a module's
-    ``__getattr__``)."""
-    new, value = _DEPRECATED[name]
-    warnings.warn(
-        f"shadeform.photometric.{name} is deprecated; use {new} (removed in the next release)",
-        DeprecationWarning,
-        stacklevel=3,
-    )
-    return value()
+_renamed = renamed_attributes(__name__, OLD_NAMES)
 
 
 def __getattr__(name: str):
     # MODELS follows the registry: read when asked, not copied at import
     if name == "MODELS":
         return STEREO_MODELS.names()
-    if name in _DEPRECATED:
-        return _old_name(name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _renamed(name, stacklevel=3)
 
 
 register(

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shadeform._deprecated import renamed_attributes
 from shadeform.registry import Option, Registry, load
 from shadeform.solvers.problem import Problem, Reference, Solution
 
@@ -301,15 +302,7 @@ register(
 )
 
 
-def __getattr__(name: str):
-    # the old name of available_solvers, for one release
-    if name == "available_methods":
-        import warnings
-
-        warnings.warn(
-            "shadeform.solvers.available_methods is now available_solvers; the old name goes in the next release",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return available_solvers
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# the old name of available_solvers, for one release
+__getattr__ = renamed_attributes(
+    __name__, {"available_methods": ("available_solvers", lambda: available_solvers)}
+)

@@ -6,57 +6,6 @@ import json
 
 from pydantic.json_schema import models_json_schema
 
-#: The models written to the TypeScript file, by name (the package exports them), in this order.
-_EXPORTED = (
-    "FilterParams",
-    "LightParams",
-    "ConcaveRegion",
-    "ConcaveRegions",
-    "ReconstructParams",
-    "ReconstructRequest",
-    "OptionInfo",
-    "MethodInfo",
-    "FormatInfo",
-    "ExampleInfo",
-    "Limits",
-    "ImageInfo",
-    "Options",
-    "MeshData",
-    "ReconstructResult",
-    "SolveJob",
-    "StereoParams",
-    "StereoRequest",
-    "PhotoSetInfo",
-    "StereoResult",
-    "FuseView",
-    "FuseRequest",
-    "FusedView",
-    "FuseResult",
-    "ViewSetInfo",
-    "AutoMaskRequest",
-    "SeedMaskRequest",
-    "BoxMaskRequest",
-    "MaskFileRequest",
-    "MaskResult",
-    "ReliefParams",
-    "ReliefRequest",
-    "StereoReliefRequest",
-    "ReliefResult",
-    "MapPreview",
-    "MapsResult",
-    "ProjectSource",
-    "ProjectImage",
-    "DisplaySettings",
-    "ProjectPhotoSet",
-    "ProjectViewEntry",
-    "ProjectViews",
-    "ProjectDocument",
-    "ProjectInfo",
-    "ProjectList",
-    "Project",
-    "ErrorBody",
-)
-
 
 def typescript() -> str:
     """The TypeScript declarations of the schema: the text of ``web/src/api.gen.ts``.
@@ -70,14 +19,18 @@ def typescript() -> str:
     str
         The whole file, ending with a newline.
     """
+    from pydantic import BaseModel
+
     from shadeform.app import schema as package  # imported when asked: the package imports this module
 
-    models = [getattr(package, name) for name in _EXPORTED]
+    # every model the package exports, in the order of its __all__
+    exported = [getattr(package, name) for name in package.__all__]
+    models = [item for item in exported if isinstance(item, type) and issubclass(item, BaseModel)]
     _, schema = models_json_schema([(model, "serialization") for model in models])
     definitions = schema["$defs"]
-    # aliases (Channel, ...) first, then the models in _EXPORTED order
+    # aliases (Channel, ...) first, then the models in the package's order
     order = [name for name in definitions if "properties" not in definitions[name]]
-    order += list(_EXPORTED)
+    order += [model.__name__ for model in models]
     lines = [
         "// Generated from shadeform.app.schema by `python -m shadeform.app.schema`; do not edit.",
         "// A test (tests/test_app_api.py) fails when this file and the schema disagree.",
