@@ -171,7 +171,7 @@ export class StereoSession {
   }
 
   request(): api.StereoRequestBody {
-    return { photoset_id: this.info!.photoset_id, params: structuredClone(this.params), request_id: ++this.requestCounter };
+    return { ...this.current()!, request_id: ++this.requestCounter };
   }
 
   async solve(): Promise<void> {
