@@ -258,3 +258,14 @@ def test_user_mistakes_are_one_line_and_exit_2(dome_set, cli, tmp_path):
 def _sphere():
     scene = synth.scene("sphere", size=16)
     return scene.normals, scene.mask
+
+
+def test_display_values_even_out_the_lights_and_encode_srgb():
+    photos = np.full((3, 2, 2, 3), 0.2, np.float32)
+    photos[1] *= 2  # the second light was twice as strong, and said so
+    for strengths in (np.array([1.0, 2.0, 1.0]), np.array([[1.0, 2.0, 1.0]] * 3).T):
+        shown = display_values(photos, strengths)
+        assert np.allclose(shown, shown[0, 0, 0, 0]) and shown[0, 0, 0, 0] == pytest.approx(0.4845, abs=1e-3)
+    assert display_values(photos * 9, None).max() == pytest.approx(1.0, abs=1e-6)  # clipped before encoding
+    with pytest.raises(InputError, match="finite positive"):
+        display_values(photos, np.array([1.0, 0.0, 1.0]))

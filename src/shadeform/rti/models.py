@@ -138,7 +138,7 @@ def fit(images, lights, *, kind: str = "ptm-lrgb") -> RelightModel:
             f"a {kind} model has {terms} terms per pixel and needs at least {terms} photos under "
             f"different lights; the set has {count}"
         )
-    design = ptm_basis(lights) if kind.startswith("ptm") else hsh_basis(lights, terms)
+    design = _design(kind, lights)
     if np.linalg.matrix_rank(design, tol=1e-6 * np.abs(design).max()) < terms:
         raise InputError(
             f"the {count} lights are too alike to fit a {kind} model ({terms} terms); photograph the "
@@ -149,21 +149,24 @@ def fit(images, lights, *, kind: str = "ptm-lrgb") -> RelightModel:
         stack = np.repeat(stack, 3, axis=3)
     if kind != "ptm-lrgb":
         return RelightModel(kind, _solve(inverse, stack))
-    chroma, luminance = split_chroma(stack)
-    return RelightModel(kind, _solve(inverse, luminance), chroma)
-
-
-def split_chroma(stack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each pixel's colour over the photos, its largest channel 1, and each photo's luminance
-    along it (the least-squares multiple of the colour): (H, W, 3) and (N, H, W). A pixel black
-    in every photo has colour 0 and luminance 0."""
-    mean = stack.mean(axis=0)
-    top = mean.max(axis=2, keepdims=True)
-    chroma = np.divide(mean, top, out=np.zeros_like(mean), where=top > 0)
+    # LRGB: each photo's luminance is its colour along the pixel's chroma, a linear map; so the
+    # luminance's fit is the channels' fits along the chroma (6 terms a pixel, not N photos),
+    # and the chroma comes from the mean photo, one more row of the same product
+    rows = np.vstack([inverse, np.full((1, count), 1.0 / count, dtype=np.float32)])
+    solved = _solve(rows, stack)
+    chroma = chroma_of(solved[-1])
     norm = (chroma * chroma).sum(axis=2)
-    luminance = np.einsum("nhwc,hwc->nhw", stack, chroma)
+    luminance = (solved[:-1] * chroma).sum(axis=3)
     np.divide(luminance, norm, out=luminance, where=norm > 0)
-    return chroma.astype(np.float32), luminance.astype(np.float32)
+    return RelightModel(kind, luminance, chroma)
+
+
+def chroma_of(mean: np.ndarray) -> np.ndarray:
+    """Each pixel's colour, (H, W, 3), from its mean over the photos: its largest channel 1, 0
+    where the pixel is black in every photo. A pixel of the LRGB model is its chroma times its
+    luminance, the least-squares multiple of the chroma in each photo."""
+    top = mean.max(axis=2, keepdims=True)
+    return np.divide(mean, top, out=np.zeros_like(mean), where=top > 0).astype(np.float32)
 
 
 def relight(model: RelightModel, light) -> np.ndarray:
@@ -175,9 +178,7 @@ def relight(model: RelightModel, light) -> np.ndarray:
     light : (3,) array_like
         Direction toward the light, x right, y up, z toward the camera.
     """
-    direction = np.asarray(light, dtype=np.float64).reshape(1, 3)
-    terms = FORMATS[model.kind]
-    weights = ptm_basis(direction) if model.kind.startswith("ptm") else hsh_basis(direction, terms)
+    weights = _design(model.kind, np.asarray(light, dtype=np.float64).reshape(1, 3))
     value = np.tensordot(weights[0].astype(np.float32), model.coefficients, axes=1)
     return value[..., None] * model.chroma if model.chroma is not None else value
 
@@ -185,18 +186,34 @@ def relight(model: RelightModel, light) -> np.ndarray:
 def rms_error(model: RelightModel, images, lights, *, mask=None) -> float:
     """Root mean square of the relit model against the photos, over every photo and channel
     (and the ``mask``'s pixels, if given): in the photos' units. Grey photos are compared on
-    each of the model's three equal channels."""
+    each of the model's three equal channels. Computed a band of rows at a time (the photos
+    relit as one product with the model's terms)."""
     stack = np.asarray(images, dtype=np.float32)
     if stack.ndim == 3:
         stack = stack[..., None]
+    design = _design(model.kind, lights).astype(np.float32)  # (N, terms)
+    rows = stack.shape[1]
+    band = max(1, 2**22 // max(1, stack[0, 0].size * len(stack)))  # about 16 MB of photos a band
+    keep = None if mask is None else np.asarray(mask, dtype=bool)
     total, count = 0.0, 0
-    for photo, light in zip(stack, np.asarray(lights, dtype=np.float64)):
-        difference = relight(model, light) - photo
-        if mask is not None:
-            difference = difference[np.asarray(mask, dtype=bool)]
-        total += float(np.square(difference, dtype=np.float64).sum())
+    for top in range(0, rows, band):
+        part = slice(top, top + band)
+        terms = model.coefficients[:, part]
+        lit = np.tensordot(design, terms, axes=1)  # (N, band, W[, 3])
+        if model.chroma is not None:
+            lit = lit[..., None] * model.chroma[part]
+        difference = lit - stack[:, part]
+        if keep is not None:
+            difference = difference[:, keep[part]]
+        flat = difference.ravel()
+        total += float(np.dot(flat, flat))
         count += difference.size
     return float(np.sqrt(total / max(count, 1)))
+
+
+def _design(kind: str, lights) -> np.ndarray:
+    """The model's functions of each light, (N, terms)."""
+    return ptm_basis(lights) if kind.startswith("ptm") else hsh_basis(lights, FORMATS[kind])
 
 
 def _solve(inverse: np.ndarray, values: np.ndarray) -> np.ndarray:
