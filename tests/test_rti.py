@@ -87,6 +87,8 @@ def test_lrgb_keeps_each_pixels_colour_and_grey_sets_fit_too():
     grey = fit(photos[..., 1], DOME, kind="hsh3")
     assert grey.coefficients.shape == (9, *photos.shape[1:3], 3)
     assert np.array_equal(grey.coefficients[..., 0], grey.coefficients[..., 2])
+    grey_lrgb = fit(photos[..., 1], DOME, kind="ptm-lrgb")
+    assert np.array_equal(grey_lrgb.chroma[mask], np.ones((mask.sum(), 3), np.float32))
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -166,6 +168,9 @@ def test_too_few_photos_or_lights_too_alike_are_refused():
         fit(photos, DOME, kind="ptm")
     with pytest.raises(InputError, match="one light direction"):
         fit(photos, DOME[:4], kind="hsh2")
+    photos[3, 2, 2] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        fit(photos, DOME, kind="hsh2")
 
 
 # --- the command line -------------------------------------------------------------------------

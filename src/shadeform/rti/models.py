@@ -144,16 +144,16 @@ def fit(images, lights, *, kind: str = "ptm-lrgb") -> RelightModel:
             f"the {count} lights are too alike to fit a {kind} model ({terms} terms); photograph the "
             "object under lights spread over the hemisphere"
         )
+    if not np.isfinite(stack).all():
+        raise InputError("the photos hold NaN or infinite values; give finite intensities")
     inverse = np.linalg.pinv(design).astype(np.float32)  # (terms, N)
-    if stack.shape[3] == 1:
-        stack = np.repeat(stack, 3, axis=3)
     if kind != "ptm-lrgb":
-        return RelightModel(kind, _solve(inverse, stack))
+        return RelightModel(kind, _colour(_solve(inverse, stack)))
     # LRGB: each photo's luminance is its colour along the pixel's chroma, a linear map; so the
     # luminance's fit is the channels' fits along the chroma (6 terms a pixel, not N photos),
     # and the chroma comes from the mean photo, one more row of the same product
     rows = np.vstack([inverse, np.full((1, count), 1.0 / count, dtype=np.float32)])
-    solved = _solve(rows, stack)
+    solved = _colour(_solve(rows, stack))
     chroma = chroma_of(solved[-1])
     norm = (chroma * chroma).sum(axis=2)
     luminance = (solved[:-1] * chroma).sum(axis=3)
@@ -209,6 +209,11 @@ def rms_error(model: RelightModel, images, lights, *, mask=None) -> float:
         total += float(np.dot(flat, flat))
         count += difference.size
     return float(np.sqrt(total / max(count, 1)))
+
+
+def _colour(solved: np.ndarray) -> np.ndarray:
+    """A grey set's fit as three equal channels (solved once, copied after)."""
+    return np.repeat(solved, 3, axis=3) if solved.shape[3] == 1 else solved
 
 
 def _design(kind: str, lights) -> np.ndarray:
