@@ -8,6 +8,7 @@ module, and the conftest, imports them as ``helpers``: ``from helpers.surfaces i
 - :mod:`helpers.surfaces`: small hand-made surfaces of known depth and normals.
 - :mod:`helpers.pngs`: pixel arrays and PNG files written by an encoder other than Pillow.
 - :mod:`helpers.readers`: the independent readers of exported meshes (``ivinfo``, three.js).
+- :mod:`helpers.rti`: an independent reader of PTM and HSH (``.rti``) files, and RTIViewer's lighting.
 - :mod:`helpers.browser`: the app's real server and Chromium for the browser tests.
 - :mod:`helpers.fusion`: true views of the closed synthetic objects, and their scores.
 - :mod:`helpers.lights`: a rig of photos with a chrome sphere, angles between lights.

@@ -6,6 +6,7 @@ Commands::
     shadeform fuse A.png B.png --angles 0,180 -o OUT.glb   views from several sides -> one closed model
     shadeform relief IMAGE -o OUT.stl --width 100   photo -> print-ready solid in millimetres
     shadeform maps IMAGE --out DIR           photo -> normal, height, occlusion and curvature maps
+    shadeform rti SET -o OUT.ptm             photo set -> relightable PTM or HSH (.rti) for RTIViewer
     shadeform synth SCENE -o image.png       a synthetic image and its ground truth
     shadeform evaluate                       error table of the solvers on the synthetic scenes
     shadeform formats                        the mesh formats -o understands
@@ -25,7 +26,7 @@ leaves no file behind.
 
 from __future__ import annotations
 
-from shadeform.cli import batch, fuse, maps, photos, relief, stereo, tools  # noqa: F401  (their commands register on the app)
+from shadeform.cli import batch, fuse, maps, photos, relief, rti, stereo, tools  # noqa: F401  (their commands register on the app)
 from shadeform.cli._shell import USAGE_EXIT, app, main
 
 __all__ = ["USAGE_EXIT", "app", "main"]

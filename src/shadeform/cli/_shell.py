@@ -43,7 +43,7 @@ _NO_ARGS = getattr(sys.modules[_CLICK_ERROR.__module__], "NoArgsIsHelpError", ()
 
 #: The order of ``shadeform --help``'s command list: the main job first, the tools last.
 COMMAND_ORDER = (
-    "reconstruct", "stereo", "fuse", "relief", "maps", "lights", "batch", "app", "demo",
+    "reconstruct", "stereo", "fuse", "relief", "maps", "lights", "rti", "batch", "app", "demo",
     "synth", "evaluate", "solvers", "formats", "warm",
 )  # fmt: skip
 

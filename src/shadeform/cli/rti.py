@@ -1,0 +1,171 @@
+"""``shadeform rti``: a photo set (one still camera, one light per photo) -> the relightable file
+RTIViewer opens: a polynomial texture map (``.ptm``) or hemispherical harmonics (``.rti``)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.markup import escape
+
+from shadeform.cli._shell import (
+    MAX_PIXELS,
+    JsonOption,
+    LinearOption,
+    MaxPixelsOption,
+    app,
+    check_suffix,
+    describe_photo,
+    format_seconds,
+    print_json,
+    stage,
+    stderr_console,
+    stdout_console,
+)
+from shadeform.errors import InputError
+from shadeform.io.atomic import OutputSet
+
+#: What each file suffix holds by default: RTIBuilder's usual choices.
+DEFAULT_FORMAT = {".ptm": "ptm-lrgb", ".rti": "hsh3"}
+
+#: The formats in the user's words.
+DESCRIBE = {
+    "ptm-lrgb": "PTM 1.2, LRGB (luminance polynomial and colour)",
+    "ptm-rgb": "PTM 1.2, RGB (a polynomial per channel)",
+    "hsh2": "HSH .rti, order 2 (4 terms per channel)",
+    "hsh3": "HSH .rti, order 3 (9 terms per channel)",
+}
+
+
+@app.command()
+def rti(
+    folder: Annotated[
+        Path,
+        typer.Argument(
+            help="Folder of the photo set: photos of one still camera under one light each, with "
+            "light_directions.txt or an RTI .lp file (light_intensities.txt, if there, evens out the lights).",
+            show_default=False,
+        ),
+    ],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="File to write: .ptm (polynomial texture map) or .rti (hemispherical harmonics), "
+            "as RTIViewer opens them.",
+        ),
+    ],
+    format: Annotated[
+        str | None,
+        typer.Option(
+            "--format",
+            metavar="FORMAT",
+            help="ptm-lrgb (default for .ptm), ptm-rgb, hsh3 (default for .rti) or hsh2.",
+            show_default=False,
+        ),
+    ] = None,
+    linear: LinearOption = None,
+    as_json: JsonOption = False,
+    max_pixels: MaxPixelsOption = MAX_PIXELS,
+) -> None:
+    """Fit a relightable image (RTI) to a photo set and write it for RTIViewer: PTM or HSH.
+
+    The file holds display (sRGB) values, as RTIBuilder's do from JPEG photos, whatever the photos'
+    encoding; the fit's RMS error against the photos is printed in percent of full scale."""
+    from shadeform.cli.sets import load_set
+    from shadeform.photoset import photo_files
+    from shadeform.rti import FORMATS, fit, rms_error, write_rti
+
+    kind = _check_format(output, format)
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(
+            f"'{folder}' is not a folder; give the folder of the photo set (its photos with "
+            "light_directions.txt or an .lp file)"
+        )
+    count = len(photo_files([folder]))
+    if count < FORMATS[kind]:
+        raise InputError(
+            f"a {kind} file fits {FORMATS[kind]} terms per pixel and needs at least {FORMATS[kind]} "
+            f"photos under different lights; folder '{folder}' has {count}"
+        )
+    err = stderr_console()
+    timings: dict[str, float] = {}
+    total = time.perf_counter()
+    with OutputSet() as outputs:
+        temp = outputs.temp(output)
+        with stage(err, f"loading the photo set {escape(str(folder))}", timings, "load"):
+            photos = load_set(folder, mask=None, linear=linear, channel=None, max_pixels=max_pixels)
+            shown = display_values(photos.images, photos.intensities)
+        with stage(err, f"fitting {kind} to {count} photos", timings, "fit"):
+            model = fit(shown, photos.lights, kind=kind)
+            rms = rms_error(model, shown, photos.lights)
+        with stage(err, f"writing {escape(output.name)}", timings, "write"):
+            size = write_rti(temp, model)
+        outputs.commit()
+    timings["total"] = time.perf_counter() - total
+    height, width = model.shape
+    if as_json:
+        print_json(
+            {
+                "command": "rti",
+                "input": {"folder": folder, "photos": count, "width": width, "height": height},
+                "format": kind,
+                "files": {"output": output},
+                "bytes": size,
+                "rms": rms,
+                "photo": photos.info,
+                "timings": timings,
+            }
+        )
+        return
+    stdout_console().print(
+        f"[bold]wrote[/] {escape(str(output))}: {DESCRIBE[kind]}, {width}x{height}, {_size(size)}, "
+        f"from {count} photos ({describe_photo(photos.info)}); fit RMS {100 * rms:.2f}% of full scale, "
+        f"in {format_seconds(timings['total'])}"
+    )
+
+
+def _check_format(output: Path, format: str | None) -> str:
+    """The format the user asked for, or the one the file suffix implies; refused if the suffix
+    cannot hold it."""
+    check_suffix(output, tuple(DEFAULT_FORMAT), "an RTI file to")
+    suffix = output.suffix.lower()
+    if format is None:
+        return DEFAULT_FORMAT[suffix]
+    if format not in DESCRIBE:
+        raise InputError(f"unknown --format {format!r}; choose one of {', '.join(DESCRIBE)}")
+    wanted = ".ptm" if format.startswith("ptm") else ".rti"
+    if wanted != suffix:
+        raise InputError(
+            f"--format {format} is written to a {wanted} file, not '{output.name}'; name it {wanted}"
+        )
+    return format
+
+
+def display_values(images: np.ndarray, intensities) -> np.ndarray:
+    """A set's linear photos as RTIViewer shows a file's values: each photo divided by its
+    light's strength relative to the median light (if the set gives strengths), clipped to
+    [0, 1] and sRGB-encoded, as RTIBuilder fits its JPEG photos."""
+    from shadeform.io.colour import srgb_encode
+
+    values = np.asarray(images, dtype=np.float32)
+    if intensities is not None:
+        strength = np.asarray(intensities, dtype=np.float64)
+        if not (np.isfinite(strength).all() and (strength > 0).all()):
+            raise InputError("the light intensities must be finite positive numbers (each light's strength)")
+        relative = (strength / np.median(strength, axis=0)).astype(np.float32)
+        values = values / relative.reshape(len(values), 1, 1, -1)  # the photos are (N, H, W, 3)
+    return srgb_encode(np.clip(values, 0.0, 1.0))
+
+
+def _size(count: int) -> str:
+    """A file size in the units a user reads."""
+    for unit, step in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= step:
+            return f"{count / step:.1f} {unit}"
+    return f"{count} bytes"

@@ -1,0 +1,22 @@
+"""Relightable images (RTI) for cultural-heritage users: a photo set (one still camera, one light
+per photo) fitted per pixel as a polynomial texture map or hemispherical harmonics
+(:mod:`.models`), written as the ``.ptm`` and ``.rti`` files RTIViewer opens (:mod:`.files`)."""
+
+from __future__ import annotations
+
+from shadeform.rti.files import SUFFIXES, encode, file_size, write_rti
+from shadeform.rti.models import FORMATS, RelightModel, fit, hsh_basis, ptm_basis, relight, rms_error
+
+__all__ = [
+    "FORMATS",
+    "SUFFIXES",
+    "RelightModel",
+    "encode",
+    "file_size",
+    "fit",
+    "hsh_basis",
+    "ptm_basis",
+    "relight",
+    "rms_error",
+    "write_rti",
+]
