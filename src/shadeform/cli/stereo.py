@@ -205,6 +205,7 @@ def stereo(
     out.print(
         f"  object {int(rec.mask.sum()):,} pixels, median {rec.info['lights_used']:g} lights used per pixel, "
         f"depth {rec.info['quality']['depth_span']:.2f} x the outline's longest side"
+        + _settled(rec.info["quality"])
     )
     names = [Path(path).name for path in photos.paths]  # the user's names for the photos, not indices
     if rec.info["photos_rescaled"]:
@@ -369,3 +370,13 @@ def lights(
         [(output, "light directions" + (" (RTI .lp)" if output.suffix.lower() == ".lp" else ""))]
         + ([(intensities, "relative light strengths")] if intensities is not None else []),
     )
+
+
+def _settled(quality: dict) -> str:
+    """With lights read from the photos: whether the photos settled the relief, in words."""
+    if "relief_settled" not in quality:
+        return ""
+    rise = quality["entropy_rise"]
+    if quality["relief_settled"]:
+        return f", relief settled by the photos (albedo entropy's minimum {rise:g} spreads deep)"
+    return f", relief NOT settled by the photos (albedo entropy's minimum {rise:g} spreads deep)"

@@ -61,8 +61,11 @@ def reconstruct_stereo(
         ``photos_rescaled`` (``[index, factor]`` pairs), ``photos_dropped``, ``light_scale``
         (:class:`PhotometricStereo`), ``lights`` (given or read), ``light_directions`` (the unit
         directions used, a list of ``[x, y, z]``), ``timings`` in seconds and ``quality``: the
-        quality line of every stereo result, ``depth_span`` (:func:`depth_span`) and, when it is
-        above :data:`SLAB_SPAN`, a ``warning`` that says what to do.
+        quality line of every stereo result, ``depth_span`` (:func:`depth_span`); with lights read
+        from the photos ``relief_settled`` and ``entropy_rise`` (the albedo entropy's rise at half
+        and twice the depth, in bootstrap spreads:
+        :class:`~shadeform.photometric.uncalibrated.ReliefCheck`); and, when the span is above
+        :data:`SLAB_SPAN` or the relief is not settled, a ``warning`` that says what to do.
 
     Raises
     ------
@@ -102,15 +105,24 @@ def reconstruct_stereo(
     mean = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).mean(axis=0)
     span = depth_span(depth, solved)
     checks = {"depth_span": round(span, 3)}
+    doubts = []
     if span > SLAB_SPAN:
-        checks["warning"] = (
+        doubts.append(
             f"the depth spans {span:.1f} times the outline's longest side: not a surface the photos show"
-            + (
-                " (the lights read from the photos resolved the shape wrong); give the light file, or "
-                "read the lights from a shiny sphere in the photos"
-                if lights is None
-                else "; check the light file's frame (x right, y up, z toward the camera) and the mask"
+        )
+    if result.relief is not None:
+        checks["relief_settled"] = result.relief.resolved
+        checks["entropy_rise"] = round(result.relief.rise / max(result.relief.spread, 1e-12), 1)
+        if not result.relief.resolved:
+            doubts.append(
+                "the photos did not settle the relief (the albedo's entropy has no minimum): the depth is a guess"
             )
+    if doubts:
+        checks["warning"] = "; ".join(doubts) + (
+            " (the lights read from the photos resolved the shape wrong); give the light file, or "
+            "read the lights from a shiny sphere in the photos"
+            if lights is None
+            else "; check the light file's frame (x right, y up, z toward the camera) and the mask"
         )
     return Reconstruction(
         normals=result.normals,

@@ -18,6 +18,7 @@ from shadeform.photometric.audit import _audit
 from shadeform.photometric.holes import _fill
 from shadeform.photometric.lambertian import HIGHLIGHT_ANGLE, ITERATIONS, MIN_SHADING
 from shadeform.photometric.registry import STEREO_MODELS
+from shadeform.photometric.uncalibrated import ReliefCheck
 from shadeform.registry import load
 
 #: Pixels solved at once: bounds the memory of the (images x pixels) arrays.
@@ -63,6 +64,9 @@ class PhotometricStereo:
     light_scale : float
         The factor on the given lights' ``tan(slant)`` that the photos showed (1: taken as given;
         ``refine_lights``).
+    relief : ReliefCheck or None
+        With lights read from the photos (``lights=None``), whether the albedo's entropy settled
+        the bas-relief (:class:`~shadeform.photometric.uncalibrated.ReliefCheck`); else None.
     """
 
     normals: np.ndarray
@@ -74,6 +78,7 @@ class PhotometricStereo:
     photos_rescaled: tuple[tuple[int, float], ...] = ()
     lights: np.ndarray | None = None
     light_scale: float = 1.0
+    relief: ReliefCheck | None = None
 
     @property
     def method(self) -> str:
@@ -188,7 +193,7 @@ def photometric_stereo(
         return values
 
     highlight_cos = np.cos(np.radians(highlight_angle))
-    estimated = lights is None
+    estimated, relief = lights is None, None
     if estimated:
         from shadeform.photometric.uncalibrated import estimate_lights
 
@@ -197,7 +202,7 @@ def photometric_stereo(
         coarse = np.zeros_like(mask)
         coarse[::stride, ::stride] = mask[::stride, ::stride]
         small = coarse[::stride, ::stride]
-        lights, found = estimate_lights(readings_of(np.flatnonzero(coarse)).mean(axis=2), small)
+        lights, found, relief = estimate_lights(readings_of(np.flatnonzero(coarse)).mean(axis=2), small)
         scale = scale * found[:, None]
 
     fit = load(entry.fit)
@@ -285,6 +290,7 @@ def photometric_stereo(
         ),
         lights=lights if estimated or light_scale != 1.0 else None,
         light_scale=light_scale,
+        relief=relief,
     )
 
 
