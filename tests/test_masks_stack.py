@@ -100,9 +100,9 @@ def test_grey_photos_and_few_of_them():
 def test_reconstruct_stereo_uses_it():
     from shadeform.photometric import reconstruct_stereo
 
-    photos, truth, _, _ = domed_set(96)
-    rec = reconstruct_stereo(photos, ring_of_lights(), integrator="fourier")
-    assert iou(rec.mask, truth) >= 0.9  # the pixels solved: the found mask's
+    photos, truth, _, _ = domed_set(64)
+    rec = reconstruct_stereo(photos, ring_of_lights(), model="least_squares", integrator="fourier")
+    assert iou(rec.mask, truth) >= 0.95  # the pixels solved: the found mask's
 
 
 @pytest.mark.parametrize(
