@@ -38,8 +38,9 @@ def reconstruct_stereo(
     images, lights, intensities, model
         As for :func:`photometric_stereo` (``lights=None``: read from the photos).
     mask : (H, W) array_like of bool, optional
-        Object pixels. Default: found in the brightest reading of each pixel over the photos, as
-        :func:`shadeform.preprocess.object_mask` finds an object on a dark background.
+        Object pixels. Default: found from all the photos by
+        :func:`shadeform.masks.find_object_in_set` (the background, and the insides that few
+        lights reach, left out).
     integrator : {"poisson", "bilateral", "fourier", "paths"}
         Depth from the normals (:func:`shadeform.integrate`); ``z = 0`` at the most frontal
         normal.
@@ -80,14 +81,9 @@ def reconstruct_stereo(
     check_choice(integrator, tuple(available_integrators()), "integrator")
     start = time.perf_counter()
     if mask is None:
-        from shadeform.preprocess import object_mask
+        from shadeform.masks import find_object_in_set
 
-        stack = np.asarray(images)
-        brightest = stack.max(axis=0) if stack.ndim == 3 else stack.max(axis=(0, 3))
-        peak = float(brightest.max()) if brightest.size else 0.0
-        if not (np.isfinite(peak) and peak > 0):
-            raise InputError("every photo is black (or not finite); give photos of the lit object")
-        mask = object_mask(brightest / peak)
+        mask = find_object_in_set(images).mask
         if sphere is not None:
             column, row, radius = np.asarray(sphere, dtype=np.float64)
             rows, cols = np.ogrid[0 : mask.shape[0], 0 : mask.shape[1]]
