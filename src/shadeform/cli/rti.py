@@ -53,7 +53,8 @@ def rti(
         Path,
         typer.Argument(
             help="Folder of the photo set: photos of one still camera under one light each, with "
-            "light_directions.txt or an RTI .lp file (light_intensities.txt, if there, evens out the lights).",
+            "light_directions.txt or an RTI .lp file (light_intensities.txt, if there, evens out the lights); "
+            "or an RTIBuilder project folder (jpeg-exports/ and the .lp in assembly-files/).",
             show_default=False,
         ),
     ],

@@ -22,8 +22,8 @@ PhotoOrSetArgument = Annotated[
     Path,
     typer.Argument(
         help="Photo of the object (PNG, JPEG, TIFF, BMP), or a folder holding a photo set (photos under "
-        "several lights with their light_directions.txt or .lp file): its photometric stereo, as "
-        "`shadeform stereo` makes it, far better normals than one photo's.",
+        "several lights with their light_directions.txt or .lp file, or an RTIBuilder project folder): "
+        "its photometric stereo, as `shadeform stereo` makes it, far better normals than one photo's.",
         show_default=False,
     ),
 ]
