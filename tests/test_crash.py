@@ -87,6 +87,19 @@ class TestSweep:
         assert sorted(sweep(tmp_path)) == sorted(left)
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in kept)
 
+    def test_a_dead_process_s_temporary_folders_go_with_what_they_hold(self, tmp_path):
+        dead, alive = dead_pid(), os.getppid()
+        left = [
+            tmp_path / f".web.shadeform-{dead}-1a2b3c4d.partial",  # a web set half written
+            tmp_path / f".web.shadeform-{dead}-5e6f7a8b.partial-old",  # an old one moved aside
+        ]
+        kept = [tmp_path / f".web.shadeform-{alive}-1a2b3c4d.partial", tmp_path / "web"]
+        for folder in left + kept:
+            folder.mkdir()
+            (folder / "plane_0.jpg").write_bytes(b"x")
+        assert sorted(sweep(tmp_path)) == sorted(left)
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in kept)
+
     def test_writers_sweep_their_folder_first(self, tmp_path):
         for write in ("atomic", "set"):
             folder = tmp_path / write

@@ -4,7 +4,8 @@ One folder in the DiLiGenT layout (``filenames.txt``, ``light_directions.txt``,
 ``light_intensities.txt``, ``mask.png``; all optional but the lights), or the photos themselves
 with a light file: the project's (``x y z`` per photo) or an RTI ``.lp`` file (a count, then
 ``name x y z`` per photo; its names are matched to the photos'). Light and intensity files:
-``docs/conventions.md`` ("Light").
+``docs/conventions.md`` ("Light"). An RTIBuilder project folder is a set too: its photos in
+``jpeg-exports/``, named by the one ``.lp`` file in ``assembly-files/`` (:func:`rtibuilder_project`).
 
 Encoding: a folder that holds ``light_intensities.txt`` is radiometrically calibrated data, linear
 whatever its bit depth (light strengths divide only linear values), so its photos are kept as
@@ -34,6 +35,11 @@ from shadeform.io.images import (
 
 #: Files a folder's photos may be, when it has no filenames.txt.
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+#: RTIBuilder's project layout: the folder of the photos it fits, and the folder of its light
+#: file (the ``.lp``, whose photo paths are often absolute Windows paths into the first).
+RTIBUILDER_PHOTOS = "jpeg-exports"
+RTIBUILDER_LIGHTS = "assembly-files"
 
 
 @dataclass(frozen=True)
@@ -251,12 +257,15 @@ def read_photos(photos, *, linear: bool | None = None, names=None, max_pixels: i
 def photo_files(sources) -> list[Path]:
     """The photos named by ``sources``: the files themselves, or one folder's photos (in
     ``filenames.txt``'s order when it has one, else sorted by name; masks and normal maps left
-    out)."""
+    out; an RTIBuilder project's in its ``.lp`` file's order, :func:`project_photos`)."""
     sources = list(map(Path, sources))
     if len(sources) > 1 and any(source.is_dir() for source in sources):
         raise InputError("give the photos, or one folder holding them, not both")
     if len(sources) == 1 and sources[0].is_dir():
         folder = sources[0]
+        project = rtibuilder_project(folder)
+        if project is not None:
+            return project_photos(*project)
         listing = folder / "filenames.txt"
         if listing.is_file():
             return [folder / name for name in listing.read_text(encoding="utf-8").split()]
@@ -305,7 +314,8 @@ def read_lp(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
 
     The format: the number of photos on the first line, then one line per photo, its file name
     and ``x y z`` (x right, y up, z toward the camera, as in ``docs/conventions.md``); names may
-    hold a folder, which is ignored. Blank lines are skipped.
+    hold a folder (a Windows one too, as RTIBuilder writes them, spaces and all), which is
+    ignored. Blank lines are skipped.
 
     Raises
     ------
@@ -326,11 +336,14 @@ def read_lp(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
 
 def parse_lp(text: str, name: str) -> tuple[list[str], np.ndarray]:
     """:func:`read_lp` on a file's text; ``name`` is the file's name for messages."""
-    lines = [line.split() for line in text.splitlines() if line.strip()]
+    # the name is all but the last three fields: a Windows path may hold spaces
+    lines = [line.rsplit(None, 3) for line in text.splitlines() if line.strip()]
     usage = "an .lp file holds the number of photos, then one line 'name x y z' per photo"
     try:
         count = int(lines[0][0]) if lines and len(lines[0]) == 1 else -1
         rows = [(line[0], [float(v) for v in line[1:4]]) for line in lines[1:] if len(line) == 4]
+        if any(_is_number(row[0].split()[-1]) for row in rows if " " in row[0].strip()):
+            raise ValueError("a fourth number, not a name with spaces")
     except ValueError:
         raise InputError(f"light file '{name}' has a line that is not 'name x y z'; {usage}") from None
     if count < 1 or len(rows) != count or len(lines) != count + 1:
@@ -340,6 +353,14 @@ def parse_lp(text: str, name: str) -> tuple[list[str], np.ndarray]:
     if not (np.isfinite(directions).all() and (lengths > 0).all()):
         raise InputError(f"light file '{name}' has a direction that is zero or not a number")
     return [Path(row[0].replace("\\", "/")).name for row in rows], directions / lengths[:, None]
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def write_lights(path: str | os.PathLike, directions, *, names=None) -> None:
@@ -377,6 +398,60 @@ def match_lp(photos, names, directions, path) -> np.ndarray:
     )
 
 
+def rtibuilder_project(folder: str | os.PathLike) -> tuple[Path, Path] | None:
+    """An RTIBuilder project's light file and photo folder, if ``folder`` is one (or its
+    ``jpeg-exports/``): ``(assembly-files/<name>.lp, jpeg-exports/)``; None for any other folder.
+
+    Raises
+    ------
+    InputError
+        A project whose ``assembly-files/`` holds no ``.lp`` file, or several.
+    """
+    folder = Path(folder)
+    if folder.name.lower() == RTIBUILDER_PHOTOS and (folder.parent / RTIBUILDER_LIGHTS).is_dir():
+        folder = folder.parent
+    photos, assembly = folder / RTIBUILDER_PHOTOS, folder / RTIBUILDER_LIGHTS
+    if not (photos.is_dir() and assembly.is_dir()):
+        return None
+    found = sorted(path for path in assembly.iterdir() if path.suffix.lower() == ".lp" and path.is_file())
+    if len(found) == 1:
+        return found[0], photos
+    if not found:
+        raise InputError(
+            f"RTIBuilder project '{folder}' has no .lp file in {RTIBUILDER_LIGHTS}/; put the light file "
+            "there (a count, then 'name x y z' per photo)"
+        )
+    raise InputError(
+        f"RTIBuilder project '{folder}' has {len(found)} .lp files in {RTIBUILDER_LIGHTS}/ "
+        f"({', '.join(p.name for p in found)}); keep the one that belongs to the photos in {RTIBUILDER_PHOTOS}/"
+    )
+
+
+def project_photos(lp: str | os.PathLike, folder: str | os.PathLike) -> list[Path]:
+    """The photos an ``.lp`` file names, found in ``folder`` by file name (its own folders, a
+    Windows machine's ones included, ignored; the case too where only that differs), in the
+    file's order.
+
+    Raises
+    ------
+    InputError
+        A photo the file names that ``folder`` does not hold (the first few named).
+    """
+    folder = Path(folder)
+    names, _ = read_lp(lp)
+    present = {path.name: path for path in folder.iterdir() if path.is_file()}
+    folded = {name.lower(): path for name, path in present.items()}
+    photos = [present.get(name) or folded.get(name.lower()) for name in names]
+    missing = [name for name, photo in zip(names, photos) if photo is None]
+    if missing:
+        shown = ", ".join(missing[:3]) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
+        raise InputError(
+            f"light file '{lp}' names {len(missing)} photo{'s' if len(missing) > 1 else ''} that "
+            f"'{folder}' does not hold ({shown}); copy them there or remove their lines from the .lp"
+        )
+    return photos
+
+
 #: The ways to give a photo set's lights, in the words of the command line.
 _LIGHTS_FROM = (
     "give --lights FILE (one direction toward the light per photo, x y z, or an RTI .lp file), "
@@ -397,7 +472,8 @@ def _find(sources: list[Path], lights, intensities, mask, *, need_lights=True):
             if (folder / name).is_file()
         }
         if need_lights:
-            lights = lights or found.get("light_directions.txt")
+            project = rtibuilder_project(folder)
+            lights = lights or found.get("light_directions.txt") or (project and project[0])
             intensities = intensities or found.get("light_intensities.txt")
         mask = mask or found.get("mask.png")
         if lights is None and need_lights:

@@ -133,3 +133,55 @@ def light_up(read: ReadRti, light) -> np.ndarray:
 def read_file(path) -> ReadRti:
     data = Path(path).read_bytes()
     return read_ptm(data) if data.startswith(b"PTM_") else read_hsh(data)
+
+
+# --- Relight's web format ----------------------------------------------------------------------
+# Written from OpenLIME's ShaderRTI and Relight's convert_rti (how they read info.json and the
+# planes), not from shadeform's writer.
+
+
+class ReadWeb:
+    """A web set read back: ``info`` (info.json), ``planes`` (nplanes, H, W) coefficients
+    (``(byte / 255 - bias) * scale``), ``bytes`` (nplanes, H, W) the decoded bytes."""
+
+
+def read_web(folder) -> ReadWeb:
+    import json
+
+    from PIL import Image
+
+    folder = Path(folder)
+    out = ReadWeb()
+    out.info = json.loads((folder / "info.json").read_text(encoding="utf-8"))
+    nplanes = out.info["nplanes"]
+    material = out.info["materials"][0]
+    scale, bias = np.array(material["scale"]), np.array(material["bias"])
+    assert len(scale) == len(bias) == nplanes
+    layers = []
+    for j in range(math.ceil(nplanes / 3)):
+        with Image.open(folder / f"plane_{j}.jpg") as image:
+            assert image.format == "JPEG" and image.mode == "RGB"
+            layers.append(np.asarray(image, dtype=np.float64))
+    out.bytes = np.concatenate([np.moveaxis(layer, -1, 0) for layer in layers])[:nplanes]
+    out.planes = (out.bytes / 255.0 - bias[:, None, None]) * scale[:, None, None]
+    return out
+
+
+def web_weights(read: ReadWeb, light) -> np.ndarray:
+    """The viewer's weights of the terms for a light: PTM in Relight's order (1, x, y, x^2, xy,
+    y^2), HSH as RTIViewer's."""
+    x, y, z = np.asarray(light, dtype=float) / np.linalg.norm(light)
+    if read.info["type"] == "ptm":
+        return np.array([1.0, x, y, x * x, x * y, y * y])
+    return hsh_weights(light, read.info["nplanes"] // 3)
+
+
+def light_up_web(read: ReadWeb, light) -> np.ndarray:
+    """The image the viewer shows for a light, (H, W, 3) in 0-1 (not clipped)."""
+    weights = web_weights(read, light)
+    if read.info["colorspace"] == "lrgb":  # JPEG 0: the colour; the rest: the luminance's terms
+        luminance = np.tensordot(weights, read.planes[3:9], axes=1)
+        return np.moveaxis(read.planes[:3], 0, -1) * luminance[..., None]
+    # rgb: JPEG j holds term j of the red, green and blue channels
+    terms = read.planes.reshape(len(weights), 3, *read.planes.shape[1:])
+    return np.moveaxis(np.tensordot(weights, terms, axes=1), 0, -1)

@@ -1,5 +1,6 @@
 """``shadeform rti``: a photo set (one still camera, one light per photo) -> the relightable file
-RTIViewer opens: a polynomial texture map (``.ptm``) or hemispherical harmonics (``.rti``)."""
+RTIViewer opens: a polynomial texture map (``.ptm``) or hemispherical harmonics (``.rti``); or
+the folder of JPEG planes Relight's web viewer and OpenLIME show in a browser (``--format web-*``)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,6 @@ from shadeform.cli._shell import (
     LinearOption,
     MaxPixelsOption,
     app,
-    check_suffix,
     describe_photo,
     format_seconds,
     print_json,
@@ -37,7 +37,14 @@ DESCRIBE = {
     "ptm-rgb": "PTM 1.2, RGB (a polynomial per channel)",
     "hsh2": "HSH .rti, order 2 (4 terms per channel)",
     "hsh3": "HSH .rti, order 3 (9 terms per channel)",
+    "web-hsh3": "Relight web set, HSH order 3",
+    "web-hsh2": "Relight web set, HSH order 2",
+    "web-ptm-lrgb": "Relight web set, PTM LRGB",
+    "web-ptm-rgb": "Relight web set, PTM RGB",
 }
+
+#: Short names of the web formats: the model each file suffix holds by default.
+WEB_ALIASES = {"web-hsh": "web-hsh3", "web-ptm": "web-ptm-lrgb"}
 
 
 @app.command()
@@ -46,7 +53,8 @@ def rti(
         Path,
         typer.Argument(
             help="Folder of the photo set: photos of one still camera under one light each, with "
-            "light_directions.txt or an RTI .lp file (light_intensities.txt, if there, evens out the lights).",
+            "light_directions.txt or an RTI .lp file (light_intensities.txt, if there, evens out the lights); "
+            "or an RTIBuilder project folder (jpeg-exports/ and the .lp in assembly-files/).",
             show_default=False,
         ),
     ],
@@ -56,7 +64,7 @@ def rti(
             "-o",
             "--output",
             help="File to write: .ptm (polynomial texture map) or .rti (hemispherical harmonics), "
-            "as RTIViewer opens them.",
+            "as RTIViewer opens them; with --format web-*, a folder (Relight's web format).",
         ),
     ],
     format: Annotated[
@@ -64,7 +72,10 @@ def rti(
         typer.Option(
             "--format",
             metavar="FORMAT",
-            help="ptm-lrgb (default for .ptm), ptm-rgb, hsh3 (default for .rti) or hsh2.",
+            help="ptm-lrgb (default for .ptm), ptm-rgb, hsh3 (default for .rti) or hsh2; or web-hsh3 "
+            "(web-hsh), web-hsh2, web-ptm-lrgb (web-ptm) or web-ptm-rgb: -o is then a folder of "
+            "info.json and JPEG planes that Relight's web viewer and OpenLIME show in a browser (an "
+            "earlier web set there is replaced, a folder holding other files refused).",
             show_default=False,
         ),
     ] = None,
@@ -72,15 +83,21 @@ def rti(
     as_json: JsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
-    """Fit a relightable image (RTI) to a photo set and write it for RTIViewer: PTM or HSH.
+    """Fit a relightable image (RTI) to a photo set and write it for RTIViewer (PTM or HSH) or
+    for the web (Relight's format).
 
     The file holds display (sRGB) values, as RTIBuilder's do from JPEG photos, whatever the photos'
-    encoding; the fit's RMS error against the photos is printed in percent of full scale."""
+    encoding; the fit's RMS error against the photos is printed in percent of full scale.
+    The output's kind is the format's: a .ptm or .rti file, or with --format web-* a folder."""
     from shadeform.cli.sets import load_set
     from shadeform.photoset import photo_files
-    from shadeform.rti import FORMATS, fit, rms_error, write_rti
+    from shadeform.rti import FORMATS, check_web_folder, fit, rms_error, web_files, write_rti, write_web
 
-    kind = _check_format(output, format)
+    format = _check_format(output, format)
+    web = format.startswith("web-")
+    kind = format.removeprefix("web-")
+    if web:
+        check_web_folder(output)
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(
@@ -97,7 +114,7 @@ def rti(
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with OutputSet() as outputs:
-        temp = outputs.temp(output)
+        temp = outputs.temp_folder(output) if web else outputs.temp(output)
         with stage(err, f"loading the photo set {escape(str(folder))}", timings, "load"):
             photos = load_set(folder, mask=None, linear=linear, channel=None, max_pixels=max_pixels)
             shown = display_values(photos.images, photos.intensities)
@@ -105,7 +122,7 @@ def rti(
             model = fit(shown, photos.lights, kind=kind)
             rms = rms_error(model, shown, photos.lights)
         with stage(err, f"writing {escape(output.name)}", timings, "write"):
-            size = write_rti(temp, model)
+            size = write_web(temp, model, lights=photos.lights) if web else write_rti(temp, model)
         outputs.commit()
     timings["total"] = time.perf_counter() - total
     height, width = model.shape
@@ -114,7 +131,7 @@ def rti(
             {
                 "command": "rti",
                 "input": {"folder": folder, "photos": count, "width": width, "height": height},
-                "format": kind,
+                "format": format,
                 "files": {"output": output},
                 "bytes": size,
                 "rms": rms,
@@ -123,22 +140,39 @@ def rti(
             }
         )
         return
+    shown = f"{output}/ ({len(web_files(kind))} files)" if web else str(output)
     stdout_console().print(
-        f"[bold]wrote[/] {escape(str(output))}: {DESCRIBE[kind]}, {width}x{height}, {_size(size)}, "
+        f"[bold]wrote[/] {escape(shown)}: {DESCRIBE[format]}, {width}x{height}, {_size(size)}, "
         f"from {count} photos ({describe_photo(photos.info)}); fit RMS {100 * rms:.2f}% of full scale, "
         f"in {format_seconds(timings['total'])}"
     )
 
 
 def _check_format(output: Path, format: str | None) -> str:
-    """The format the user asked for, or the one the file suffix implies; refused if the suffix
-    cannot hold it."""
-    check_suffix(output, tuple(DEFAULT_FORMAT), "an RTI file to")
+    """The format the user asked for (a web one's short name resolved), or the one the file
+    suffix implies; refused if the output cannot hold it: a web set is a folder, not a .ptm or
+    .rti file."""
+    format = WEB_ALIASES.get(format, format)
+    if format is not None and format not in DESCRIBE:
+        raise InputError(
+            f"unknown --format {format!r}; choose one of {', '.join(DESCRIBE)} (or {', '.join(WEB_ALIASES)})"
+        )
+    if format is not None and format.startswith("web-"):
+        if output.suffix.lower() in DEFAULT_FORMAT:
+            raise InputError(
+                f"--format {format} writes a folder (Relight's web format), not the file '{output.name}'; "
+                "give -o a folder name"
+            )
+        return format
     suffix = output.suffix.lower()
+    if suffix not in DEFAULT_FORMAT:
+        given = f"suffix '{output.suffix}'" if output.suffix else "no suffix"
+        raise InputError(
+            f"cannot write an RTI file to '{output.name}': {given}; use one of {', '.join(DEFAULT_FORMAT)}, "
+            "or --format web-hsh3 to write a folder for the web"
+        )
     if format is None:
         return DEFAULT_FORMAT[suffix]
-    if format not in DESCRIBE:
-        raise InputError(f"unknown --format {format!r}; choose one of {', '.join(DESCRIBE)}")
     wanted = ".ptm" if format.startswith("ptm") else ".rti"
     if wanted != suffix:
         raise InputError(

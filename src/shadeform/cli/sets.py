@@ -22,8 +22,8 @@ PhotoOrSetArgument = Annotated[
     Path,
     typer.Argument(
         help="Photo of the object (PNG, JPEG, TIFF, BMP), or a folder holding a photo set (photos under "
-        "several lights with their light_directions.txt or .lp file): its photometric stereo, as "
-        "`shadeform stereo` makes it, far better normals than one photo's.",
+        "several lights with their light_directions.txt or .lp file, or an RTIBuilder project folder): "
+        "its photometric stereo, as `shadeform stereo` makes it, far better normals than one photo's.",
         show_default=False,
     ),
 ]
@@ -59,9 +59,15 @@ def refuse_one_photo_options(*, light, slant, tilt, concave, reference, solver, 
 
 def set_lights(folder: Path) -> Path | None:
     """The folder's light file: ``light_directions.txt`` (read by the set's loader itself: None
-    here), else its one ``.lp`` file (RTI)."""
+    here), else an RTIBuilder project's ``.lp`` (:func:`shadeform.photoset.rtibuilder_project`),
+    else the folder's one ``.lp`` file (RTI)."""
+    from shadeform.photoset import rtibuilder_project
+
     if (folder / LIGHT_FILE).is_file():
         return None
+    project = rtibuilder_project(folder)
+    if project is not None:
+        return project[0]
     found = sorted(path for path in folder.iterdir() if path.suffix.lower() == ".lp" and path.is_file())
     if len(found) == 1:
         return found[0]

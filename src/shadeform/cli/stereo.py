@@ -46,7 +46,8 @@ def stereo(
         typer.Argument(
             help="Three or more photos under different lights, or one folder holding "
             "them with light_directions.txt (and optionally filenames.txt, "
-            "light_intensities.txt, mask.png).",
+            "light_intensities.txt, mask.png), or an RTIBuilder project folder (jpeg-exports/ and the "
+            ".lp in assembly-files/).",
             show_default=False,
         ),
     ],

@@ -5,10 +5,13 @@ existing good file (``docs/conventions.md``, "Errors").
 
 Every temporary is named ``.<target name>.shadeform-<pid>-<random>.partial<suffix>`` (an
 :class:`OutputSet`'s) or ``...tmp`` (:func:`atomic_write`'s): hidden, recognisable, and naming
-the process that writes it. It is removed on every exit that runs Python's clean-up (an
-exception, Ctrl-C, and SIGTERM or SIGHUP where the command line turns them into an exit); what a
-process killed outright (``kill -9``, a power cut) leaves is swept from a folder by the next
-process that writes there (:func:`sweep`), once the process named in it no longer runs.
+the process that writes it. A command that writes a whole folder (files read together, as a web
+viewer reads them) fills a temporary folder named the same way (:meth:`OutputSet.temp_folder`,
+:func:`atomic_folder`), renamed into place once complete. A temporary is removed on every exit
+that runs Python's clean-up (an exception, Ctrl-C, and SIGTERM or SIGHUP where the command line
+turns them into an exit); what a process killed outright (``kill -9``, a power cut) leaves is
+swept from a folder by the next process that writes there (:func:`sweep`), once the process
+named in it no longer runs.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import contextlib
 import os
 import re
 import secrets
+import shutil
 import signal
 import stat
 import tempfile
@@ -28,7 +32,15 @@ from typing import IO
 
 from shadeform.errors import InputError
 
-__all__ = ["OutputSet", "atomic_write", "exit_on_signals", "remove_temporaries", "sweep", "target_name"]
+__all__ = [
+    "OutputSet",
+    "atomic_folder",
+    "atomic_write",
+    "exit_on_signals",
+    "remove_temporaries",
+    "sweep",
+    "target_name",
+]
 
 #: A temporary's name: the target's name (a temporary's own, the last ".shadeform-", is its), the
 #: writing process, a random part, the kind.
@@ -137,6 +149,32 @@ def atomic_write(path: str | os.PathLike[str], *, mode: str = "wb") -> Iterator[
     _fsync_folder(parent)
 
 
+@contextmanager
+def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Fill a folder so that it appears at ``path`` only once complete: the folder counterpart
+    of :func:`atomic_write`.
+
+    Yields a hidden, empty temporary folder beside ``path`` (or ``path`` itself when it is
+    already a temporary folder of this process, an :class:`OutputSet`'s); on leaving the ``with``
+    block it takes ``path``'s place, replacing a folder there. If the block raises, the temporary
+    folder is deleted with what it holds and ``path`` is left as it was.
+
+    Raises
+    ------
+    InputError
+        If the parent folder does not exist or cannot be written to, or ``path`` is a file.
+    """
+    path = Path(path)
+    own = _TEMPORARY.match(path.name)
+    if own is not None and int(own["pid"]) == os.getpid() and path.is_dir():
+        yield path  # renamed by its owner
+        return
+    with OutputSet() as outputs:
+        folder = outputs.temp_folder(path)
+        yield folder
+        outputs.commit()
+
+
 def target_name(path: str | os.PathLike[str]) -> str:
     """The name of the file a temporary of this module's (or a temporary's temporary) stands for,
     for messages; any other path's own name."""
@@ -181,7 +219,7 @@ def sweep(folder: str | os.PathLike[str], *, again: bool = False) -> list[Path]:
         if found is None or _running(int(found["pid"])):
             continue
         with contextlib.suppress(OSError):
-            os.unlink(entry.path)
+            _delete(Path(entry.path))
             removed.append(Path(entry.path))
     return removed
 
@@ -191,7 +229,7 @@ def remove_temporaries() -> None:
     (``os._exit`` in a worker whose parent is gone)."""
     for path in list(_LIVE):
         with contextlib.suppress(OSError):
-            path.unlink()
+            _delete(path)
         _LIVE.discard(path)
 
 
@@ -244,6 +282,14 @@ def _running(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
+def _delete(path: Path) -> None:
+    """Delete a temporary: a file, or a folder with what it holds (a link is not followed)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
+
+
 def _fsync_folder(folder: Path) -> None:
     """Make the rename itself durable (POSIX only; Windows cannot open folders)."""
     if os.name != "posix":
@@ -262,7 +308,8 @@ class OutputSet:
     the target's suffix (writers pick formats by suffix); the library writes there (atomically
     too). :meth:`commit` renames every temporary onto its target; if the command fails before,
     leaving the ``with`` block deletes the temporaries. If a rename itself fails, the targets this
-    run had already created are removed again.
+    run had already created are removed again. :meth:`temp_folder` does the same for a target that
+    is a whole folder.
     """
 
     def __init__(self) -> None:
@@ -310,24 +357,77 @@ class OutputSet:
         _LIVE.add(tmp)
         return tmp
 
+    def temp_folder(self, target: Path | str) -> Path:
+        """A hidden, empty temporary folder beside ``target`` for a command that writes a whole
+        folder; :meth:`commit` puts it in ``target``'s place (a folder there is moved aside
+        first and deleted once the new one is in place). Whether an existing folder may be
+        replaced is the caller's to decide before."""
+        target = Path(target)
+        if not target.parent.is_dir():
+            raise InputError(f"output folder '{target.parent}' does not exist; create it first")
+        if target.exists() and not target.is_dir():
+            raise InputError(f"output '{target}' is a file; give a folder name")
+        if any(target.resolve() == final.resolve() for _, final in self._pending):
+            raise InputError(f"'{target}' is given for two outputs; give each output its own name")
+        sweep(target.parent)
+        tmp = target.with_name(f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial")
+        try:
+            tmp.mkdir()
+        except OSError as err:
+            reason = (err.strerror or type(err).__name__).lower()
+            raise InputError(
+                f"cannot write '{target.name}' in folder '{target.parent}' ({reason}); choose another output folder"
+            ) from None
+        self._pending.append((tmp, target))
+        _LIVE.add(tmp)
+        return tmp
+
     def commit(self) -> list[Path]:
         created: list[Path] = []
         try:
             for tmp, target in self._pending:
                 existed = target.exists()
-                if existed:  # keep the permissions of the file being replaced
-                    os.chmod(tmp, stat.S_IMODE(target.stat().st_mode))
-                os.replace(tmp, target)
+                if tmp.is_dir():
+                    _replace_folder(tmp, target)
+                else:
+                    if existed:  # keep the permissions of the file being replaced
+                        os.chmod(tmp, stat.S_IMODE(target.stat().st_mode))
+                    os.replace(tmp, target)
                 _LIVE.discard(tmp)
                 if not existed:
                     created.append(target)
         except BaseException:
             for path in created:
-                path.unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    _delete(path)
             raise
         return [target for _, target in self._pending]
 
     def _discard(self) -> None:
         for tmp, _ in self._pending:
-            tmp.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                _delete(tmp)
             _LIVE.discard(tmp)
+
+
+def _replace_folder(folder: Path, target: Path) -> None:
+    """Put a complete ``folder`` in ``target``'s place: a folder already there is renamed aside
+    (a hidden temporary), the new one renamed in, the old one deleted; if the second rename
+    fails, the old folder is put back."""
+    if not target.exists():
+        os.rename(folder, target)
+        _fsync_folder(target.parent)
+        return
+    aside = target.with_name(f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial-old")
+    os.rename(target, aside)
+    _LIVE.add(aside)
+    try:
+        os.rename(folder, target)
+    except BaseException:
+        os.rename(aside, target)
+        _LIVE.discard(aside)
+        raise
+    _fsync_folder(target.parent)
+    with contextlib.suppress(OSError):
+        _delete(aside)
+    _LIVE.discard(aside)

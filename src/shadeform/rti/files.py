@@ -81,8 +81,8 @@ def _encode_ptm(model: RelightModel) -> bytes:
     height, width = model.shape
     values = model.coefficients.astype(np.float64) * 255.0  # the 8-bit value a pixel's polynomial gives
     planes = values if values.ndim == 3 else values.transpose(0, 3, 1, 2).reshape(6, -1)  # every channel
-    scale, bias = _ptm_quantiser(planes.reshape(6, -1))
-    raw = _ptm_bytes(values, scale, bias)  # (6, H, W) or (6, H, W, 3)
+    scale, bias = zero_exact_quantiser(planes.reshape(6, -1))
+    raw = quantised_bytes(values, scale, bias)  # (6, H, W) or (6, H, W, 3)
     bottom_up = raw[:, ::-1]
     if model.kind == "ptm-lrgb":
         colour = np.clip(np.rint(model.chroma[::-1] * 255.0), 0, 255).astype(np.uint8)
@@ -104,10 +104,11 @@ def _encode_ptm(model: RelightModel) -> bytes:
     return (header + "\n").encode("ascii") + b"".join(body)
 
 
-def _ptm_quantiser(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each of the six coefficients' scale (float) and bias (integer 0-254) such that every value
+def zero_exact_quantiser(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each coefficient's (row's) scale (float) and bias (integer 0-254) such that every value
     of its plane is ``(c - bias) * scale`` for a byte ``c``: the range (and 0, so that the bias
-    stays a byte) over 254 steps, the bias rounded up so that the lowest value lands in [0, 1)."""
+    stays a byte) over 254 steps, the bias rounded up so that the lowest value lands in [0, 1).
+    A coefficient 0 (a pixel black in every photo) is the byte ``bias`` exactly."""
     low = np.minimum(planes.min(axis=1), 0.0)
     high = np.maximum(planes.max(axis=1), 0.0)
     scale = np.where(high > low, (high - low) / 254.0, 1.0)
@@ -115,8 +116,10 @@ def _ptm_quantiser(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return scale, bias
 
 
-def _ptm_bytes(values: np.ndarray, scale: np.ndarray, bias: np.ndarray) -> np.ndarray:
-    shape = (6,) + (1,) * (values.ndim - 1)
+def quantised_bytes(values: np.ndarray, scale: np.ndarray, bias: np.ndarray) -> np.ndarray:
+    """``values`` (coefficients first) as the bytes of :func:`zero_exact_quantiser`'s scales and
+    biases."""
+    shape = (len(values),) + (1,) * (values.ndim - 1)
     raw = np.rint(values / scale.reshape(shape) + bias.reshape(shape))
     return np.clip(raw, 0, 255).astype(np.uint8)
 
