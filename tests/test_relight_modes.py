@@ -40,14 +40,22 @@ def results(tmp_path_factory):
     require(ESBUILD.exists(), "esbuild not installed: run `npm ci --prefix web` (make web)")
     compiled = tmp_path_factory.mktemp("relight") / "relightModes.mjs"
     build = subprocess.run(
-        [str(ESBUILD), str(ROOT / "web" / "src" / "relightModes.ts"), "--format=esm", f"--outfile={compiled}"],
+        [
+            str(ESBUILD),
+            str(ROOT / "web" / "src" / "relightModes.ts"),
+            "--format=esm",
+            f"--outfile={compiled}",
+        ],
         capture_output=True,
         text=True,
         timeout=60,
     )
     assert build.returncode == 0, build.stderr
     done = subprocess.run(
-        [node, str(JS / "check_relight_modes.mjs"), str(compiled)], capture_output=True, text=True, timeout=120
+        [node, str(JS / "check_relight_modes.mjs"), str(compiled)],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)

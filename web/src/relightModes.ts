@@ -67,7 +67,7 @@ export const RELIGHT_DEFAULTS: RelightSettings = {
   mode: 'default',
   lights: [DEFAULT_LIGHT],
   brightness: 1,
-  gain: 3,
+  gain: 2,
   diffuse: 0.6,
   specular: 0.6,
   exponent: 40,
