@@ -106,6 +106,7 @@ class App {
       solving: (on) => this.setSolving(on),
       toast: (message, kind) => toast(message, kind),
       changed: () => this.persist(),
+      viewingChanged: () => this.saveSoon(),
       modelChanged: () => this.showModelState(),
     });
     this.views = new ViewsSession(options, {
@@ -357,6 +358,12 @@ class App {
     // a view being edited keeps what the user changes (its photo too: a forgotten one reopened)
     if (image && source && this.views.editing !== null) this.views.edited(image, source, params);
     this.projects.changed();
+    this.saveSoon();
+  }
+
+  /** Store what a reload reopens in a moment (the server's project is not told: only a reload
+   * keeps what changed, e.g. how a photo set is viewed). */
+  private saveSoon(): void {
     clearTimeout(this.saveTimer);
     this.saveTimer = window.setTimeout(() => this.saveNow(), 150);
   }
@@ -372,7 +379,7 @@ class App {
       params: photo.image ? photo.params : null,
       view: this.viewerPanel.view,
       initialId: photo.initialId,
-      photoSet: this.stereo.session(),
+      photoSet: this.stereo.info ? { ...this.stereo.session()!, viewing: this.stereo.viewingSession() } : null,
       views: this.views.session(),
       viewsOpen: document.body.classList.contains('views-mode'),
     });

@@ -69,7 +69,7 @@ export class OpenPanel {
     if (freshStorage) void this.host.offerNewest(); // not awaited: the page is ready without it
     if (session.viewsOpen) return this.host.setViewsMode(true);
     if (session.photoSet) {
-      this.stereo.reopen(session.photoSet.info, session.photoSet.params);
+      this.stereo.reopen(session.photoSet.info, session.photoSet.params, session.photoSet.viewing);
       this.host.setStereoMode(true);
       return;
     }

@@ -1,7 +1,8 @@
 // The photo set's relighting, per pixel (stereo.ts shows it): the normals, albedo and confidence
 // the server sends as PNGs decoded into maps, and the object drawn from them under a light the
-// user moves: shown = encode(albedo * max(0, n . l) * brightness), linear albedo, sRGB on screen.
+// user moves, in the viewing mode the user picks (relightModes.ts): linear light, sRGB on screen.
 import type { StereoResult } from './api.gen';
+import { shade, unsharpNormals, type RelightSettings } from './relightModes';
 
 /** sRGB decoding (8-bit code -> linear) and encoding (linear, 4096 steps -> 8-bit code). */
 const SRGB_TO_LINEAR = Float32Array.from({ length: 256 }, (_, i) => {
@@ -97,13 +98,26 @@ export function lightFromDisc(x: number, y: number): [number, number, number] {
   return [x, y, Math.sqrt(Math.max(0, 1 - x * x - y * y))];
 }
 
-/** The object under light ``l``: albedo * max(0, n . l) * brightness, sRGB-encoded. */
-export function relight(maps: Maps, light: [number, number, number], brightness: number): ImageData {
-  const { width, height, mask, normals, albedo } = maps;
+/** Unsharp masking's normals of each maps at the radius and amount last asked for: a drag of
+ * the light reuses them. */
+const enhanced = new WeakMap<Maps, { radius: number; amount: number; normals: Float32Array }>();
+
+/** The object in ``settings``' mode under its lights (relightModes.ts), sRGB-encoded. */
+export function relight(maps: Maps, settings: RelightSettings): ImageData {
+  let normals = maps.normals;
+  if (settings.mode === 'unsharp-masking') {
+    const { radius, amount } = settings;
+    let kept = enhanced.get(maps);
+    if (!kept || kept.radius !== radius || kept.amount !== amount) {
+      kept = { radius, amount, normals: unsharpNormals(maps, radius, amount) };
+      enhanced.set(maps, kept);
+    }
+    normals = kept.normals;
+  }
+  const linear = shade(maps, settings, normals);
+  const { width, height, mask } = maps;
   const out = new ImageData(width, height);
   const data = out.data;
-  const [lx, ly, lz] = light;
-  const scale = brightness * ENCODE_STEPS;
   for (let i = 0, count = width * height; i < count; i++) {
     const p = 4 * i;
     data[p + 3] = 255;
@@ -113,8 +127,10 @@ export function relight(maps: Maps, light: [number, number, number], brightness:
       data[p + 2] = 31;
       continue;
     }
-    const shade = Math.max(0, normals[3 * i] * lx + normals[3 * i + 1] * ly + normals[3 * i + 2] * lz) * scale;
-    for (let c = 0; c < 3; c++) data[p + c] = LINEAR_TO_SRGB[Math.min(ENCODE_STEPS, Math.round(albedo[3 * i + c] * shade))];
+    for (let c = 0; c < 3; c++) {
+      const v = linear[3 * i + c]; // NaN (never made) would show black, not garbage
+      data[p + c] = v > 0 ? LINEAR_TO_SRGB[Math.min(ENCODE_STEPS, Math.round(v * ENCODE_STEPS))] : 0;
+    }
   }
   return out;
 }

@@ -39,8 +39,9 @@ export interface Session {
   view: ViewSettings;
   /** The server's start-up image last shown: a server started anew with an image shows it. */
   initialId: string | null;
-  /** The photo set open (photometric stereo) and its settings, when one is. */
-  photoSet?: { info: PhotoSetInfo; params: StereoParams } | null;
+  /** The photo set open (photometric stereo) and its settings, when one is; how it was viewed
+   * (relightModes.ts RelightSettings, checked as it is read back: restoreSettings). */
+  photoSet?: { info: PhotoSetInfo; params: StereoParams; viewing?: unknown } | null;
   /** The views (photos of one object from several sides) and the fusion's settings. */
   views?: ViewsSaved | null;
   /** Whether the Views panel was open. */

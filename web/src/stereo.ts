@@ -5,13 +5,16 @@
 // 3D view and the busy/toast helpers.
 //
 // Relighting is done on the page, per pixel, from the normals and albedo the server sends as PNGs
-// (relight.ts). A drag redraws at most once per animation frame.
+// (relight.ts), in the viewing mode and under the lights of the Relight group (relightPanel.ts).
+// A drag redraws at most once per animation frame. Save picture downloads what the pane shows.
 import * as api from './api';
 import type { Options, PhotoSetInfo, StereoParams, StereoResult } from './api.gen';
 import { NetworkError, send, UNREACHABLE } from './connection';
 import { $, showMessage } from './dom';
 import { ModelRequest, ModelState } from './modelState';
 import { decodeMaps, lightFromDisc, relight, type Maps } from './relight';
+import { RelightPanel } from './relightPanel';
+import { download } from './state';
 import { fillStereoChoices } from './words';
 
 export type StereoShow = 'relight' | 'normals' | 'albedo' | 'confidence' | 'photo';
@@ -24,6 +27,8 @@ export interface StereoHost {
   toast(message: string, kind?: 'error' | 'info'): void;
   /** The settings changed: keep them for a reload. */
   changed(): void;
+  /** Only how the pane shows the set changed (its viewing mode, lights): keep it for a reload. */
+  viewingChanged(): void;
   /** The model's state changed (the badge, the export menu and the dimming follow it). */
   modelChanged(): void;
 }
@@ -33,8 +38,8 @@ export class StereoSession {
   params: StereoParams;
   result: StereoResult | null = null;
   show: StereoShow = 'relight';
-  light: [number, number, number] = [0.4, 0.4, Math.sqrt(1 - 0.32)];
-  brightness = 1;
+  /** The Relight group: the viewing mode, its settings and the lights. */
+  readonly viewing: RelightPanel;
   photoIndex = 0;
   appliedCount = 0;
   /** What the photo set's model on screen is: current, computing, stale or failed. */
@@ -58,6 +63,11 @@ export class StereoSession {
     this.requests = new ModelRequest(this.model, (on) => host.solving(on));
     this.canvas = $<HTMLCanvasElement>('stereo-canvas');
     this.dome = $<HTMLCanvasElement>('light-dome');
+    this.viewing = new RelightPanel(() => {
+      if (this.show !== 'relight') this.setShow('relight');
+      else this.draw();
+      host.viewingChanged();
+    });
     this.buildPanel();
     this.bindPane();
   }
@@ -115,8 +125,10 @@ export class StereoSession {
     return opened;
   }
 
-  /** The photo set a reloaded page had open, with its settings (the server may have forgotten it). */
-  reopen(info: PhotoSetInfo, params: StereoParams): void {
+  /** The photo set a reloaded page had open, with its settings (the server may have forgotten it)
+   * and, where the reload kept them, how it was viewed (relightModes.ts restoreSettings). */
+  reopen(info: PhotoSetInfo, params: StereoParams, viewing?: unknown): void {
+    if (viewing !== undefined) this.viewing.restore(viewing);
     this.open(info, params);
   }
 
@@ -129,9 +141,14 @@ export class StereoSession {
     this.model.reset();
   }
 
-  /** What a reload needs to show the set again. */
+  /** What a reload needs to show the set again (a project keeps this; viewingSession() a reload only). */
   session(): { info: PhotoSetInfo; params: StereoParams } | null {
     return this.info ? { info: structuredClone(this.info), params: structuredClone(this.params) } : null;
+  }
+
+  /** How the set is viewed: its viewing mode, the mode's settings and the lights. */
+  viewingSession() {
+    return structuredClone(this.viewing.settings);
   }
 
   private open(info: PhotoSetInfo, params?: StereoParams): void {
@@ -305,14 +322,9 @@ export class StereoSession {
     }
     const photo = $<HTMLInputElement>('stereo-photo');
     photo.addEventListener('input', () => this.showPhoto(Number(photo.value) - 1));
-    const brightness = $<HTMLInputElement>('stereo-brightness');
-    brightness.addEventListener('input', () => {
-      this.brightness = Number(brightness.value);
-      $('stereo-brightness-out').textContent = this.brightness.toFixed(2);
-      if (this.show !== 'relight') this.setShow('relight');
-      else this.draw();
-    });
-    const dragOn = (element: HTMLCanvasElement, toDisc: (event: PointerEvent) => [number, number]) => {
+    $('stereo-picture').addEventListener('click', () => this.savePicture());
+    // a drag on the disc moves the light whose handle is nearest; one on the image, the last picked
+    const dragOn = (element: HTMLCanvasElement, toDisc: (event: PointerEvent) => [number, number], picks: boolean) => {
       const move = (event: PointerEvent) => {
         if (!this.maps) return;
         this.setLight(lightFromDisc(...toDisc(event)));
@@ -321,6 +333,7 @@ export class StereoSession {
         if (event.button !== 0) return;
         element.setPointerCapture(event.pointerId);
         if (this.show !== 'relight') this.setShow('relight');
+        if (picks) this.viewing.pick(...toDisc(event));
         move(event);
       });
       element.addEventListener('pointermove', (event) => {
@@ -331,12 +344,12 @@ export class StereoSession {
       const [row, col] = this.pixelAt(event.clientX, event.clientY);
       const maps = this.maps!;
       return [(col - maps.centre[0]) / maps.radius, -(row - maps.centre[1]) / maps.radius];
-    });
+    }, false);
     dragOn(this.dome, (event) => {
       const rect = this.dome.getBoundingClientRect();
       const half = rect.width / 2;
       return [(event.clientX - rect.left - half) / (half - 6), -(event.clientY - rect.top - half) / (half - 6)];
-    });
+    }, true);
   }
 
   setShow(show: StereoShow): void {
@@ -349,9 +362,25 @@ export class StereoSession {
     else this.draw();
   }
 
+  /** Move the light a drag moves (the Relight group redraws and keeps it). */
   setLight(light: [number, number, number]): void {
-    this.light = light;
-    this.draw();
+    this.viewing.moveActive(light);
+  }
+
+  /** What the pane shows, drawn now, downloaded as a PNG named after the set and the view. */
+  private savePicture(): void {
+    if (!this.info || !this.maps) return void this.host.toast('Nothing to save yet: the photo set is still being solved');
+    if (this.frame) {
+      cancelAnimationFrame(this.frame);
+      this.frame = 0;
+    }
+    this.render();
+    const stem = this.info.name.replace(/\.[^.]+$/, '').replace(/[^\w.-]+/g, '_') || 'photo_set';
+    const view = { relight: `relight-${this.viewing.settings.mode}`, photo: `photo-${this.photoIndex + 1}` }[this.show as string] ?? this.show;
+    this.canvas.toBlob((blob) => {
+      if (blob) download(blob, `${stem}-${view}.png`);
+      else this.host.toast('The browser could not make a PNG of the picture');
+    }, 'image/png');
   }
 
   /** Where the image lies on the page: the canvas shows it fitted and centred. */
@@ -416,11 +445,14 @@ export class StereoSession {
       if (this.photo) context.putImageData(this.photo, 0, 0);
       return;
     }
-    context.putImageData(relight(maps, this.light, this.brightness), 0, 0);
-    const [x, y, z] = this.light;
+    const settings = this.viewing.settings;
+    context.putImageData(relight(maps, settings), 0, 0);
+    const [x, y, z] = settings.lights[this.viewing.active];
     const slant = (Math.acos(z) * 180) / Math.PI;
     const tilt = (Math.atan2(y, x) * 180) / Math.PI;
-    $('stereo-light-out').textContent = `light slant ${slant.toFixed(0)}°, tilt ${tilt.toFixed(0)}°`;
+    const count = settings.lights.length;
+    const which = count > 1 ? `light ${this.viewing.active + 1} of ${count}:` : 'light';
+    $('stereo-light-out').textContent = `${which} slant ${slant.toFixed(0)}°, tilt ${tilt.toFixed(0)}°`;
   }
 
   private drawDome(): void {
@@ -444,11 +476,7 @@ export class StereoSession {
       context.arc(half + x * r, half - y * r, 2, 0, 2 * Math.PI);
       context.fill();
     }
-    const [x, y] = this.light;
-    context.fillStyle = '#facc15';
-    context.beginPath();
-    context.arc(half + x * r, half - y * r, 5, 0, 2 * Math.PI);
-    context.fill();
+    this.viewing.drawHandles(context, half, r);
   }
 
   // ------------------------------------------------------------------------ hook
@@ -458,7 +486,10 @@ export class StereoSession {
       info: () => (this.info ? structuredClone(this.info) : null),
       params: () => structuredClone(this.params),
       show: () => this.show,
-      light: () => [...this.light],
+      /** The light a drag moves, all the lights, and the Relight group's settings. */
+      light: () => [...this.viewing.settings.lights[this.viewing.active]],
+      lights: () => structuredClone(this.viewing.settings.lights),
+      viewing: () => this.viewingSession(),
       applied: () => this.appliedCount,
       /** The photo set's model: current, computing, stale or failed (modelState.ts). */
       modelState: () => this.model.view(),
