@@ -12,7 +12,11 @@ backgrounds are generated here, seeded, in linear light, one function per family
   chips of several sizes and tones;
 - ``tiles`` and ``newsprint`` (held out, written in session 24 after every choice of the mask was
   made, and run once): glazed ceramic tiles with grout lines and a sheen, and a newspaper page,
-  columns of printed lines and a photo block.
+  columns of printed lines and a photo block;
+- ``marble`` and ``carpet`` (held out, written in session 27 before the texture features of the
+  cut were tried on any background and not looked at until the features were chosen): a pale
+  polished stone with soft clouds and thin dark veins, and a low-pile carpet of two or three yarn
+  colours mixed at the pixel scale in a large pattern.
 
 :func:`composite` pastes the object's own pixels (its light, albedo, highlights) with an
 anti-aliased edge and an optional soft shadow, and :func:`as_file` saves the picture as an 8-bit
@@ -38,7 +42,7 @@ MIT = (
     "panther", "paper1", "pear", "phone", "raccoon", "sun",
 )  # fmt: skip
 TRAINING = ("table", "paper", "wood", "cloth")
-HELD_OUT = ("granite", "tiles", "newsprint")
+HELD_OUT = ("granite", "tiles", "newsprint", "marble", "carpet")
 FAMILIES = TRAINING + HELD_OUT
 
 
@@ -221,6 +225,38 @@ def newsprint(rng, shape) -> np.ndarray:
     return paper * (ink * light)[..., None] + rng.normal(0, 0.008, shape + (3,))
 
 
+def marble(rng, shape) -> np.ndarray:
+    """A polished stone: a pale ground, soft clouds and thin dark veins that wander across it."""
+    y, x = _grid(shape)
+    ground = rng.uniform(0.45, 0.85) * (1 + rng.uniform(-0.08, 0.08, 3))
+    clouds = 1 + 0.06 * _noise(rng, shape, 25)
+    veins = np.zeros(shape)
+    for _ in range(int(rng.integers(2, 5))):
+        angle = rng.uniform(0, np.pi)
+        along = x * np.cos(angle) + y * np.sin(angle) + 0.08 * _noise(rng, shape, 30)
+        offset = rng.uniform(along.min(), along.max())
+        width = rng.uniform(0.002, 0.008)
+        veins = np.maximum(veins, np.exp(-((along - offset) ** 2) / (2 * width**2)))
+    vein_colour = ground * rng.uniform(0.3, 0.7) * (1 + rng.uniform(-0.1, 0.1, 3))
+    stone = ground * clouds[..., None] * (1 - veins[..., None]) + vein_colour * veins[..., None]
+    light = _light(rng, shape, rng.uniform(0.1, 0.3), rng.uniform(0.1, 0.3))
+    return stone * light[..., None] + rng.normal(0, 0.006, shape + (3,))
+
+
+def carpet(rng, shape) -> np.ndarray:
+    """A low-pile carpet: fibres of two or three yarn colours mixed at the pixel scale, in
+    patches of a pattern a few hundred pixels across."""
+    yarns = rng.uniform(0.05, 0.6, (3, 3))
+    pattern = _noise(rng, shape, rng.uniform(20, 50))
+    which = np.digitize(pattern, [-0.4, 0.4])  # three regions of the pattern
+    fibres = rng.integers(0, 3, shape)
+    mix = np.where(rng.uniform(size=shape) < 0.6, which, fibres)  # most fibres follow the pattern
+    colour = yarns[mix] * (0.8 + 0.4 * rng.uniform(size=shape))[..., None]
+    pile = ndi.gaussian_filter(colour, (0.7, 0.7, 0))
+    light = _light(rng, shape, rng.uniform(0.1, 0.4), rng.uniform(0.1, 0.4))
+    return pile * light[..., None] + rng.normal(0, 0.006, shape + (3,))
+
+
 BACKGROUNDS = {
     "table": table,
     "paper": paper,
@@ -229,6 +265,8 @@ BACKGROUNDS = {
     "granite": granite,
     "tiles": tiles,
     "newsprint": newsprint,
+    "marble": marble,
+    "carpet": carpet,
 }
 
 
