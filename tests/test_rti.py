@@ -10,8 +10,9 @@ import re
 import numpy as np
 import pytest
 
+from helpers.cli import refused
 from helpers.photosets import SIX_LIGHTS, write_photo_set
-from helpers.rti import hsh_weights, light_up, read_file, read_hsh, read_ptm
+from helpers.rti import DOME, HELD_OUT, hsh_weights, light_up, read_file, read_hsh, read_ptm, write_dome_set
 from shadeform import photoset, synth
 from shadeform.cli.rti import display_values
 from shadeform.errors import InputError
@@ -29,13 +30,6 @@ from shadeform.rti import (
 )
 
 KINDS = tuple(FORMATS)
-
-#: A dome: one light at the camera, eight at 25 degrees of slant and eight at 50.
-DOME = np.array(
-    [[0.0, 0.0, 1.0]] + [light_from_slant_tilt(s, t) for s in (25, 50) for t in range(0, 360, 45)]
-)
-#: A light of the dome's range that no photo was taken under.
-HELD_OUT = np.asarray(light_from_slant_tilt(38, 70))
 
 
 def _lambertian(name, lights, *, size=40):
@@ -178,17 +172,7 @@ def test_too_few_photos_or_lights_too_alike_are_refused():
 
 @pytest.fixture(scope="module")
 def dome_set(tmp_path_factory):
-    """A grey sphere under the dome's 17 lights, as a folder (16-bit photos, light_directions.txt)."""
-    folder = tmp_path_factory.mktemp("rti") / "dome"
-    scene = synth.scene("sphere", size=32)
-    write_photo_set(folder, scene.normals, scene.mask, lights=DOME)
-    return folder
-
-
-def _fails(result, *words):
-    assert result.exit_code == 2, result.output
-    line = result.output.strip()
-    assert "\n" not in line and line.startswith("error:") and all(w in line for w in words), line
+    return write_dome_set(tmp_path_factory.mktemp("rti") / "dome")
 
 
 @pytest.mark.parametrize(
@@ -244,19 +228,19 @@ def test_a_folder_with_an_lp_file(dome_set, cli, tmp_path):
 
 
 def test_user_mistakes_are_one_line_and_exit_2(dome_set, cli, tmp_path):
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out.png"), "out.png", ".ptm, .rti")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out.ptm", "--format", "hsh3"), "hsh3", ".rti")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out.rti", "--format", "ptm"), "unknown --format")
-    _fails(cli("rti", dome_set / "000.png", "-o", tmp_path / "out.ptm"), "not a folder")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out.png"), "out.png", ".ptm, .rti")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out.ptm", "--format", "hsh3"), "hsh3", ".rti")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out.rti", "--format", "ptm"), "unknown --format")
+    refused(cli("rti", dome_set / "000.png", "-o", tmp_path / "out.ptm"), "not a folder")
     one = tmp_path / "one"
     write_photo_set(one, *_sphere(), lights=SIX_LIGHTS[:1])
-    _fails(cli("rti", one, "-o", tmp_path / "out.ptm"), "at least 6 photos", "has 1")
+    refused(cli("rti", one, "-o", tmp_path / "out.ptm"), "at least 6 photos", "has 1")
     bad = tmp_path / "bad"
     write_photo_set(bad, *_sphere(), lights=DOME)
     (bad / "light_directions.txt").write_text("up and to the left\n" * len(DOME))
-    _fails(cli("rti", bad, "-o", tmp_path / "out.ptm"), "light_directions.txt", "numbers")
+    refused(cli("rti", bad, "-o", tmp_path / "out.ptm"), "light_directions.txt", "numbers")
     (bad / "light_directions.txt").unlink()
-    _fails(cli("rti", bad, "-o", tmp_path / "out.ptm"), "no light_directions.txt")
+    refused(cli("rti", bad, "-o", tmp_path / "out.ptm"), "no light_directions.txt")
     assert not list(tmp_path.glob("out.*")) and not list(tmp_path.glob(".out*"))
 
 

@@ -12,20 +12,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from helpers.photosets import write_photo_set
-from helpers.rti import light_up, light_up_web, read_file, read_web
+from helpers.cli import refused
+from helpers.rti import DOME, HELD_OUT, light_up, light_up_web, read_file, read_web, write_dome_set
 from shadeform import photoset, synth
 from shadeform.cli.sets import load_set
 from shadeform.errors import InputError
-from shadeform.light import light_from_slant_tilt
 from shadeform.rti import fit, relight, write_web
-
-#: A dome: one light at the camera, eight at 25 degrees of slant and eight at 50.
-DOME = np.array(
-    [[0.0, 0.0, 1.0]] + [light_from_slant_tilt(s, t) for s in (25, 50) for t in range(0, 360, 45)]
-)
-#: A light of the dome's range that no photo was taken under.
-HELD_OUT = np.asarray(light_from_slant_tilt(38, 70))
 
 #: Coefficient planes and JPEGs of each model, as Relight's format counts them (three planes a
 #: JPEG): HSH 3 x terms; PTM RGB 3 x 6; PTM LRGB the colour and the six luminance terms.
@@ -168,17 +160,7 @@ def test_a_write_stopped_midway_leaves_nothing_and_the_earlier_set_intact(
 
 @pytest.fixture(scope="module")
 def dome_set(tmp_path_factory):
-    """A grey sphere under the dome's 17 lights, as a folder (16-bit photos, light_directions.txt)."""
-    folder = tmp_path_factory.mktemp("rtiweb") / "dome"
-    scene = synth.scene("sphere", size=32)
-    write_photo_set(folder, scene.normals, scene.mask, lights=DOME)
-    return folder
-
-
-def _fails(result, *words):
-    assert result.exit_code == 2, result.output
-    line = result.output.strip()
-    assert "\n" not in line and line.startswith("error:") and all(w in line for w in words), line
+    return write_dome_set(tmp_path_factory.mktemp("rtiweb") / "dome")
 
 
 @pytest.mark.parametrize(
@@ -212,17 +194,19 @@ def test_the_command_reports_a_web_set_in_json(dome_set, cli, tmp_path):
 
 
 def test_web_mistakes_are_one_line_and_exit_2(dome_set, cli, tmp_path):
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out.rti", "--format", "web-hsh3"), "folder", "out.rti")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out", "--format", "web"), "unknown --format", "web-hsh3")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "out"), "no suffix", "--format web-hsh3")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out.rti", "--format", "web-hsh3"), "folder", "out.rti")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out", "--format", "web"), "unknown --format", "web-hsh3")
+    refused(cli("rti", dome_set, "-o", tmp_path / "out"), "no suffix", "--format web-hsh3")
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "photo.png").write_bytes(b"")
-    _fails(
+    refused(
         cli("rti", dome_set, "-o", tmp_path / "taken", "--format", "web-hsh3"), "photo.png", "new folder name"
     )
     (tmp_path / "file").write_text("")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "file", "--format", "web-hsh3"), "is a file")
-    _fails(cli("rti", dome_set, "-o", tmp_path / "nowhere" / "web", "--format", "web-hsh3"), "does not exist")
+    refused(cli("rti", dome_set, "-o", tmp_path / "file", "--format", "web-hsh3"), "is a file")
+    refused(
+        cli("rti", dome_set, "-o", tmp_path / "nowhere" / "web", "--format", "web-hsh3"), "does not exist"
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "taken"]
 
 
@@ -300,10 +284,10 @@ def test_an_lp_naming_a_missing_photo_is_refused_in_one_line(dome_set, cli, tmp_
     _rtibuilder_project(project, dome_set, drop="IMG_0005.jpg")
     with pytest.raises(InputError, match=r"names 1 photo that .*jpeg-exports.* \(IMG_0005\.jpg\)"):
         photoset.load_photo_set([project])
-    _fails(cli("rti", project, "-o", tmp_path / "out.rti"), "IMG_0005.jpg", "jpeg-exports", "proj.lp")
-    _fails(cli("stereo", project, "-o", tmp_path / "out.ply"), "IMG_0005.jpg", "jpeg-exports")
+    refused(cli("rti", project, "-o", tmp_path / "out.rti"), "IMG_0005.jpg", "jpeg-exports", "proj.lp")
+    refused(cli("stereo", project, "-o", tmp_path / "out.ply"), "IMG_0005.jpg", "jpeg-exports")
     (project / "assembly-files" / "other.lp").write_text("0\n")
-    _fails(cli("rti", project, "-o", tmp_path / "out.rti"), "2 .lp files", "other.lp", "proj.lp")
+    refused(cli("rti", project, "-o", tmp_path / "out.rti"), "2 .lp files", "other.lp", "proj.lp")
     assert not list(tmp_path.glob("out*")) and not list(tmp_path.glob(".out*"))
 
 

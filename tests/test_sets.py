@@ -12,6 +12,7 @@ import pytest
 import trimesh
 from PIL import Image
 
+from helpers.cli import refused
 from helpers.fusion import scores
 from helpers.photosets import SIX_LIGHTS, write_photo_set
 from shadeform import photoset, synth
@@ -28,12 +29,6 @@ def sphere_set(tmp_path_factory):
     scene = synth.scene("sphere", size=SIZE)
     write_photo_set(folder, scene.normals, scene.mask)
     return folder
-
-
-def _fails(result, *words):
-    assert result.exit_code == 2, result.output
-    line = result.output.strip()
-    assert "\n" not in line and line.startswith("error:") and all(w in line for w in words), line
 
 
 def test_relief_of_a_photo_set_is_its_stereo_model_closed_and_sized(sphere_set, cli, tmp_path):
@@ -88,18 +83,18 @@ def test_a_photo_sets_folder_with_an_lp_file(sphere_set, cli, tmp_path):
     result = cli("maps", folder, "--out", tmp_path / "maps", "--maps", "normal_opengl", "--json")
     assert result.exit_code == 0, result.output
     photoset.write_lights(folder / "other.lp", SIX_LIGHTS, names=names)
-    _fails(cli("maps", folder, "--out", tmp_path / "maps"), "2 .lp files")
+    refused(cli("maps", folder, "--out", tmp_path / "maps"), "2 .lp files")
 
 
 def test_one_photo_options_and_a_set_without_lights_are_refused(sphere_set, cli, tmp_path):
-    _fails(cli("relief", sphere_set, "-o", tmp_path / "x.stl", "--light", "0,0,1", "--solver", "eikonal"),
+    refused(cli("relief", sphere_set, "-o", tmp_path / "x.stl", "--light", "0,0,1", "--solver", "eikonal"),
            "--light, --solver are for one photo")  # fmt: skip
-    _fails(cli("maps", sphere_set, "--out", tmp_path, "--material"), "--material")
+    refused(cli("maps", sphere_set, "--out", tmp_path, "--material"), "--material")
     bare = tmp_path / "bare"
     bare.mkdir()
     for path in sphere_set.glob("*.png"):
         (bare / path.name).write_bytes(path.read_bytes())
-    _fails(cli("relief", bare, "-o", tmp_path / "x.stl"), "no light_directions.txt and no .lp file")
+    refused(cli("relief", bare, "-o", tmp_path / "x.stl"), "no light_directions.txt and no .lp file")
     assert not list(tmp_path.glob("x*"))  # nothing written
 
 
@@ -124,7 +119,7 @@ def test_fused_views_each_a_photo_set_keep_the_waist_and_the_outlines(name, cli,
     views = {"views": [{"photo": str(f), "angle": a} for f, a in zip(folders, angles)]}
     views["views"][0]["concave"] = {"regions": [{"polygon": [[1, 1], [9, 1], [9, 9]], "axis": "x"}]}
     (tmp_path / "views.json").write_text(json.dumps(views))
-    _fails(cli("fuse", "--views", tmp_path / "views.json", "-o", tmp_path / "b.ply"), "photo set", "concave")
+    refused(cli("fuse", "--views", tmp_path / "views.json", "-o", tmp_path / "b.ply"), "photo set", "concave")
 
 
 def test_fuse_reads_photos_as_told_linear_or_srgb(cli, tmp_path):

@@ -11,6 +11,26 @@ from pathlib import Path
 
 import numpy as np
 
+from shadeform import synth
+from shadeform.light import light_from_slant_tilt
+
+#: A dome: one light at the camera, eight at 25 degrees of slant and eight at 50.
+DOME = np.array(
+    [[0.0, 0.0, 1.0]] + [light_from_slant_tilt(s, t) for s in (25, 50) for t in range(0, 360, 45)]
+)
+#: A light of the dome's range that no photo was taken under.
+HELD_OUT = np.asarray(light_from_slant_tilt(38, 70))
+
+
+def write_dome_set(folder: Path) -> Path:
+    """A grey sphere under the :data:`DOME`'s 17 lights, written as a photo set's folder (16-bit
+    photos, light_directions.txt)."""
+    from helpers.photosets import write_photo_set
+
+    scene = synth.scene("sphere", size=32)
+    write_photo_set(folder, scene.normals, scene.mask, lights=DOME)
+    return folder
+
 
 class ReadRti:
     """What one file holds: ``kind``, ``width``, ``height``, ``header`` (the text lines),

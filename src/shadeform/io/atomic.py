@@ -334,45 +334,40 @@ class OutputSet:
             self._made_folder = folder
 
     def temp(self, target: Path | str) -> Path:
-        target = Path(target)
-        if not target.parent.is_dir():
-            raise InputError(f"output folder '{target.parent}' does not exist; create it first")
-        if target.is_dir():
-            raise InputError(f"output path '{target}' is a folder; give a file name")
-        if any(target.resolve() == final.resolve() for _, final in self._pending):
-            raise InputError(f"'{target}' is given for two outputs; give each output its own file")
-        sweep(target.parent)
-        tmp = target.with_name(
-            f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial{target.suffix}"
-        )
-        try:  # a folder that cannot be written to is said now, not after the command's work
+        def probe(tmp: Path) -> None:  # a folder that cannot be written to is said now
             tmp.open("x").close()
             tmp.unlink()
-        except OSError as err:
-            reason = (err.strerror or type(err).__name__).lower()
-            raise InputError(
-                f"cannot write '{target.name}' in folder '{target.parent}' ({reason}); choose another output folder"
-            ) from None
-        self._pending.append((tmp, target))
-        _LIVE.add(tmp)
-        return tmp
+
+        return self._claim(Path(target), probe, folder=False)
 
     def temp_folder(self, target: Path | str) -> Path:
         """A hidden, empty temporary folder beside ``target`` for a command that writes a whole
         folder; :meth:`commit` puts it in ``target``'s place (a folder there is moved aside
         first and deleted once the new one is in place). Whether an existing folder may be
         replaced is the caller's to decide before."""
-        target = Path(target)
+        return self._claim(Path(target), Path.mkdir, folder=True)
+
+    def _claim(self, target: Path, make, *, folder: bool) -> Path:
+        """Check that ``target`` can be written (its folder exists, it is of the right kind, no
+        other output of the set names it), sweep what killed runs left beside it, and make its
+        hidden temporary (``make(tmp)``, said as a refusal when the folder cannot be written
+        to), committed in its place by :meth:`commit`."""
         if not target.parent.is_dir():
             raise InputError(f"output folder '{target.parent}' does not exist; create it first")
-        if target.exists() and not target.is_dir():
+        if folder and target.exists() and not target.is_dir():
             raise InputError(f"output '{target}' is a file; give a folder name")
+        if not folder and target.is_dir():
+            raise InputError(f"output path '{target}' is a folder; give a file name")
         if any(target.resolve() == final.resolve() for _, final in self._pending):
-            raise InputError(f"'{target}' is given for two outputs; give each output its own name")
+            what = "name" if folder else "file"
+            raise InputError(f"'{target}' is given for two outputs; give each output its own {what}")
         sweep(target.parent)
-        tmp = target.with_name(f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial")
+        suffix = "" if folder else target.suffix
+        tmp = target.with_name(
+            f".{target.name}.shadeform-{os.getpid()}-{secrets.token_hex(4)}.partial{suffix}"
+        )
         try:
-            tmp.mkdir()
+            make(tmp)
         except OSError as err:
             reason = (err.strerror or type(err).__name__).lower()
             raise InputError(
