@@ -19,7 +19,8 @@ warning threshold is chosen on the training families only and reported on the he
 lab photos as they are (DiLiGenT's frontal photo on black, MIT-Berkeley's ``light01.png`` and
 ``original.png``) are scored too, in colour and grey: the automatic mask must not get worse there.
 
-Usage: ``python benchmarks/bench_masks.py [--seeds 2] [--objects apple,cat] [--out benchmarks/results/masks.md]``
+Usage: ``python benchmarks/bench_masks.py [--seeds 2] [--objects apple,cat] [--families marble,carpet]
+[--methods auto,grey,click,box] [--no-lab] [--out benchmarks/results/masks.md]``
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -46,33 +48,47 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.count_nonzero(a & b) / union) if union else 1.0
 
 
-def score(rgb: np.ndarray, truth: np.ndarray) -> dict:
-    row: dict = {}
+METHODS = ("auto", "grey", "click", "box")
+
+
+def score(rgb: np.ndarray, truth: np.ndarray, methods=METHODS) -> dict:
+    row: dict = dict.fromkeys(METHODS)
     start = time.perf_counter()
     found = masks.find_object(rgb)
     row["auto_s"] = time.perf_counter() - start
     row["auto"] = iou(found.mask, truth)
     row["confidence"] = found.confidence
-    row["grey"] = iou(masks.find_object(select_channel(rgb, "luma").astype(np.float64)).mask, truth)
-    try:
-        row["click"] = iou(masks.segment_from_seeds(rgb, [composites.interior_point(truth)]), truth)
-    except Exception as err:  # a refusal (the click looks like the background) scores 0
-        row["click"], row["click_error"] = 0.0, str(err)
-    row["box"] = iou(masks.segment_from_box(rgb, composites.padded_box(truth)), truth)
+    if "grey" in methods:
+        row["grey"] = iou(masks.find_object(select_channel(rgb, "luma").astype(np.float64)).mask, truth)
+    if "click" in methods:
+        try:
+            row["click"] = iou(masks.segment_from_seeds(rgb, [composites.interior_point(truth)]), truth)
+        except Exception as err:  # a refusal (the click looks like the background) scores 0
+            row["click"], row["click_error"] = 0.0, str(err)
+    if "box" in methods:
+        row["box"] = iou(masks.segment_from_box(rgb, composites.padded_box(truth)), truth)
     return row
 
 
-def composite_rows(objects, seeds: int) -> list[dict]:
+def composite_rows(objects, seeds: int, families=composites.FAMILIES, methods=METHODS) -> list[dict]:
     rows = []
     for name in objects:
         obj = composites.cutout(name)
         for index, family in enumerate(composites.FAMILIES):
+            if family not in families:
+                continue
             for seed in range(seeds):
                 case_seed = 1000 * index + 10 * seed + objects.index(name) * 100_000
                 picture, truth = composites.composite(obj, family, case_seed)
                 kind = "png" if seed % 2 == 0 else "jpeg"
                 rgb = composites.as_file(picture, kind)
-                row = {"object": name, "family": family, "seed": seed, "file": kind, **score(rgb, truth)}
+                row = {
+                    "object": name,
+                    "family": family,
+                    "seed": seed,
+                    "file": kind,
+                    **score(rgb, truth, methods),
+                }
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     return rows
@@ -102,6 +118,10 @@ def lab_rows(objects) -> list[dict]:
             rows.append(row)
             print(json.dumps(row), flush=True)
     return rows
+
+
+def _two(value) -> str:
+    return "—" if value is None else f"{value:.2f}"
 
 
 def summary(values) -> str:
@@ -146,10 +166,11 @@ def warning_lines(rows, threshold) -> list[str]:
 
 
 def report(rows, lab, seconds: float, seeds: int) -> str:
+    shown = [f for f in composites.FAMILIES if any(r["family"] == f for r in rows)]
     lines = [
         "# Object masks on real objects over generated backgrounds",
         "",
-        "`python benchmarks/bench_masks.py` "
+        f"`python benchmarks/bench_masks.py{' ' if sys.argv[1:] else ''}{' '.join(sys.argv[1:])}` "
         f"({platform.machine()}, Python {platform.python_version()}, {seconds:.0f} s). "
         f"{len({r['object'] for r in rows})} real objects, {seeds} draw(s) per background "
         "(even draws PNG, odd JPEG q90, 8-bit sRGB). IoU with the true mask; bar 0.9.",
@@ -168,6 +189,8 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
     groups.append(("all", composites.FAMILIES))
     for label, families in groups:
         subset = [r for r in rows if r["family"] in families]
+        if not subset:
+            continue
         lines.append(
             f"| {label} | {len(subset)} | "
             + " | ".join(summary(r[m] for r in subset) for m in ("auto", "grey", "click", "box"))
@@ -189,25 +212,26 @@ def report(rows, lab, seconds: float, seeds: int) -> str:
             *warning_lines(rows, threshold),
             "",
         ]
-    lines += [
-        "## Lab photos as they are (automatic mask)",
-        "",
-        "| object | photo | colour | grey |",
-        "|---|---|---:|---:|",
-    ]
-    lines += [f"| {r['object']} | {r['photo']} | {r['auto']:.3f} | {r['grey']:.3f} |" for r in lab]
+    if lab:
+        lines += [
+            "## Lab photos as they are (automatic mask)",
+            "",
+            "| object | photo | colour | grey |",
+            "|---|---|---:|---:|",
+        ]
+        lines += [f"| {r['object']} | {r['photo']} | {r['auto']:.3f} | {r['grey']:.3f} |" for r in lab]
     lines += ["", "## Per object and background (auto / grey / click / box; confidence)", ""]
     lines += [
-        "| object | " + " | ".join(composites.FAMILIES) + " |",
-        "|---|" + "---|" * len(composites.FAMILIES),
+        "| object | " + " | ".join(shown) + " |",
+        "|---|" + "---|" * len(shown),
     ]
     for name in dict.fromkeys(r["object"] for r in rows):
         cells = []
-        for family in composites.FAMILIES:
+        for family in shown:
             parts = []
             for r in (r for r in rows if r["object"] == name and r["family"] == family):
                 conf = "" if r["confidence"] is None else f"; {r['confidence']:.2f}"
-                parts.append(f"{r['auto']:.2f} / {r['grey']:.2f} / {r['click']:.2f} / {r['box']:.2f}{conf}")
+                parts.append(" / ".join(_two(r[m]) for m in METHODS) + conf)
             cells.append("<br>".join(parts))
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -217,14 +241,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--objects", default=",".join(composites.DILIGENT + composites.MIT))
+    parser.add_argument("--families", default=",".join(composites.FAMILIES), help="backgrounds to paste on")
+    parser.add_argument("--methods", default=",".join(METHODS), help="auto is always measured")
+    parser.add_argument(
+        "--lab", action=argparse.BooleanOptionalAction, default=True, help="the lab photos too"
+    )
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "masks.md")
     args = parser.parse_args()
     if not composites.available():
         raise SystemExit(f"no real photographs at {composites.DATA}")
     objects = args.objects.split(",")
     start = time.perf_counter()
-    rows = composite_rows(objects, args.seeds)
-    lab = lab_rows(objects)
+    rows = composite_rows(objects, args.seeds, args.families.split(","), args.methods.split(","))
+    lab = lab_rows(objects) if args.lab else []
     text = report(rows, lab, time.perf_counter() - start, args.seeds)
     with atomic_write(args.out, mode="w") as handle:
         handle.write(text)
