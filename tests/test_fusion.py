@@ -57,7 +57,8 @@ def test_photos_of_a_lumpy_sphere_from_four_sides():
 @WAISTED
 def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
     """The waisted object's front and back photos each read the waist as a third hill top and
-    one lobe 25 px too deep (Chamfer over 2 %, a quarter of the volume gone); with ``resolve``
+    one lobe 25 px too deep (Chamfer over 2 %; a quarter of the volume gone while the offsets
+    were the gaps' low percentile, 5 % since they are taken on the contour generators); with ``resolve``
     the side views' silhouettes settle the waist as concave and the model meets the bars of the
     shapes without a concavity, stricter than the waisted one's 2 %. The lobe the outline does
     not settle either stays convex."""
@@ -72,7 +73,7 @@ def test_the_other_views_settle_a_waist_one_photo_reads_as_a_hill_top():
         return solve_again(i, regions)
 
     guessed = scores(shadeform.fuse(list(zip(recs, angles))), "waisted", size=SIZE)
-    assert guessed[0] > 2 and guessed[2] > 20, guessed
+    assert guessed[0] > 2, guessed
     placement = place(list(zip(recs, angles)), resolve=resolve)
     chamfer, fscore, volume, closed = scores(solid(placement), "waisted", size=SIZE)
     assert closed and chamfer <= 0.5 and fscore >= 95 and volume <= 3, (chamfer, fscore, volume)
@@ -135,7 +136,7 @@ def test_poses_of_a_waisted_body_are_refined_to_the_exact_ones():
     # an occluding contour, is not trusted: from exact poses too they end 0.17 degrees off)
     exact = place(list(zip(recs, angles)))
     settled = np.degrees([np.arctan2(view.rotation[0, 2], view.rotation[0, 0]) for view in exact.views])
-    assert np.abs(turns - settled).max() < 0.05
+    assert np.abs((turns - settled + 180) % 360 - 180).max() < 0.05  # 180 and -180 are one turn
     assert np.abs((turns - angles + 180) % 360 - 180).max() < 0.35
 
 
@@ -263,11 +264,12 @@ def test_disagreement_leaves_out_what_another_view_cannot_see():
     counted = np.minimum(np.abs(r[~hidden]) / (TUKEY * scale), 1)
     expected = np.sum((TUKEY * scale) ** 2 / 6 * (1 - (1 - counted**2) ** 3)) / (~hidden).sum()
     assert loss == pytest.approx(expected)
-    # a view turned by 5 degrees disagrees several times more
+    # a view turned by 5 degrees disagrees several times more (4.4 times; 8.0 while the offsets
+    # were the gaps' low percentile, which on exact depths sits a little closer)
     turned = list(views)
     rotation = turntable(5.0)[:3, :3] @ turned[1].rotation
     turned[1] = turned[1].at(rotation, turned[1].translation, turned[1].offset)
-    assert disagreement(turned, turntable=True, scale=scale)[0] > 5 * loss
+    assert disagreement(turned, turntable=True, scale=scale)[0] > 4 * loss
 
 
 @pytest.mark.parametrize("on_turntable", [True, False])
@@ -558,7 +560,7 @@ def test_cli_settles_the_waist_and_takes_regions_per_view(tmp_path):
     assert abs(settled["mesh"]["volume"] / truth - 1) < 0.05
     alone = run(*photos, "-o", str(tmp_path / "b.ply"), *common, "--no-settle")
     assert all(not view["settled_concave"] for view in alone["views"])
-    assert alone["mesh"]["volume"] / truth < 0.85
+    assert abs(settled["mesh"]["volume"] / truth - 1) < abs(alone["mesh"]["volume"] / truth - 1)
     # the waist drawn by the user: as the settled areas, inline and from a file
     front = {"regions": [{"polygon": settled["views"][0]["settled_concave"][0]["polygon"], "axis": "x"}]}
     back = {"regions": [{"polygon": settled["views"][2]["settled_concave"][0]["polygon"], "axis": "x"}]}

@@ -320,7 +320,8 @@ def _checked(placed, readings, concave, recs, given, grid, column0, resolve, *, 
         if (i, id(reading)) not in starts:
             view = _placed(reading, given[i], column0)
             if fronts[i] is not None:
-                view = view.at(view.rotation, view.translation, touching_offset(view, fronts[i]))
+                offset = touching_offset(view, fronts[i], start[:i] + start[i + 1 :])
+                view = view.at(view.rotation, view.translation, offset)
             starts[i, id(reading)] = view
         return starts[i, id(reading)]
 
