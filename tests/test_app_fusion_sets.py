@@ -107,7 +107,10 @@ def one_line_error(response, status: int) -> str:
 
 def test_two_photo_set_views_fuse_as_the_cli_fuses_their_folders(client, set_ids, folders, cli, tmp_path):
     result = fused(client, [set_view(i, a) for i, a in zip(set_ids, ANGLES)])
-    assert result["watertight"] and trimesh.Trimesh(vertices(result["mesh"]), faces(result["mesh"])).is_watertight
+    assert (
+        result["watertight"]
+        and trimesh.Trimesh(vertices(result["mesh"]), faces(result["mesh"])).is_watertight
+    )
     outlines = [view["outline_iou"] for view in result["views"]]
     assert min(outlines) >= 0.95, outlines
     # nothing to settle in a set: its photometric stereo tells convex from concave
@@ -121,7 +124,9 @@ def test_two_photo_set_views_fuse_as_the_cli_fuses_their_folders(client, set_ids
     np.testing.assert_allclose(outlines, report["outline_iou"], atol=1e-9)
     mine = trimesh.load(model)
     assert result["mesh"]["vertex_count"] == len(mine.vertices)
-    np.testing.assert_allclose(np.sort(vertices(result["mesh"]), axis=0), np.sort(mine.vertices, axis=0), atol=1e-3)
+    np.testing.assert_allclose(
+        np.sort(vertices(result["mesh"]), axis=0), np.sort(mine.vertices, axis=0), atol=1e-3
+    )
     assert result["volume"] == pytest.approx(report["mesh"]["volume"], rel=1e-6)
     # the photo-set mode's solve and cache: the stereo result of view 1 is the one fused
     stereo = client.post("/api/stereo", json={"photoset_id": set_ids[0]}).json()
@@ -150,7 +155,11 @@ def test_a_set_and_a_single_photo_fuse_together(client, set_ids, rendered):
     upload = client.post("/api/images", files={"file": ("side.png", png(side.image, 16), "image/png")})
     assert upload.status_code == 201, upload.text
     mask = base64.b64encode(png(side.mask.astype(float))).decode("ascii")
-    photo = {"image_id": upload.json()["image_id"], "angle": 90.0, "params": {"mask": mask, "light": {"mode": "z"}}}
+    photo = {
+        "image_id": upload.json()["image_id"],
+        "angle": 90.0,
+        "params": {"mask": mask, "light": {"mode": "z"}},
+    }
     result = fused(client, [set_view(set_ids[0], 0.0), photo])
     assert result["watertight"]
     assert min(view["outline_iou"] for view in result["views"]) >= 0.95

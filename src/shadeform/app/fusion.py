@@ -50,8 +50,8 @@ from shadeform.app.encoding import (
 from shadeform.app.guard import check_known
 from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
 from shadeform.app.solving import Solved, solve
-from shadeform.app.stereo import StoredPhotoSet, photoset, solve_set
 from shadeform.app.state import image_info, suggested_params
+from shadeform.app.stereo import StoredPhotoSet, photoset, solve_set
 from shadeform.errors import InputError
 
 __all__ = ["PART_VERTICES", "add_fusion_routes"]
