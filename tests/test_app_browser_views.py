@@ -16,6 +16,7 @@ from PIL import Image
 
 from helpers import browser as ui
 from helpers.browser import ARTIFACTS, FIRST_RESULT_MS, RESULT_MS, download
+from helpers.photosets import write_photo_set
 from shadeform import synth
 from shadeform.examples import load_view_set_example
 
@@ -199,3 +200,49 @@ def test_views_from_opposite_sides_only_say_the_depth_is_a_guess(page, tmp_path)
     page.press('#views-list [data-index="1"] input', "Enter")
     page.wait_for_function(f"window.shadeform.views.applied() > {applied}", timeout=RESULT_MS)
     assert views(page, "lastResult().depth_fixed") is True and views(page, "rival()") is None
+
+
+def test_photo_sets_added_as_views_are_fused_and_kept_by_a_reload(page, tmp_path):
+    """Two sides of the waisted object, each a photo set under six lights: each opened in the
+    photo-set mode and added with Add this set as a view; the Views panel shows them as set
+    cards (first photo, "set · 6 photos", no Edit) and fuses them into a closed model that keeps
+    both outlines; a reload keeps them as sets."""
+    for i, view in enumerate(synth.render_views("waisted", (0, 90), size=96)):
+        folder = tmp_path / f"view{i}"
+        photos = write_photo_set(folder, np.nan_to_num(view.normals), view.mask)
+        solved = page.evaluate("window.shadeform.stereo.applied()")
+        page.set_input_files(
+            "#file-photos", [str(p) for p in photos] + [str(folder / "light_directions.txt")]
+        )
+        page.wait_for_function(
+            f"window.shadeform.stereo.applied() > {solved} || window.shadeform.stereo.error() !== null",
+            timeout=FIRST_RESULT_MS,
+        )
+        assert page.evaluate("window.shadeform.stereo.error()") is None
+        page.click("#add-set-view")
+        assert f"Added as view {i + 1} at {90 * i}°" in page.inner_text("#toast")
+    page.click("#open-views")
+    wait_for_views(page, 0)
+    shown = views(page, "views()")
+    assert [view["angle"] for view in shown] == [0, 90] and all(view["photo_set_id"] for view in shown)
+    result = views(page, "lastResult()")
+    assert result["watertight"] and min(result["outline_iou"]) >= 0.95, result["outline_iou"]
+    assert result["settled"] == [0, 0] and len(result["part_vertex_counts"]) == 2
+    for index in (0, 1):
+        card = f'#views-list [data-index="{index}"]'
+        assert page.inner_text(f"{card} .set-badge") == "set · 6 photos"
+        assert not page.is_visible(f'{card} [data-act="edit"]')  # nothing to draw on a set
+        assert "photometric stereo" in page.inner_text(f"{card} .settings")
+        assert page.get_attribute(f"{card} img", "src").endswith("/photos/0.png")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "app-views-sets.png"))
+    # a reload: the same sets as views, fused again from the server's kept solves
+    page.wait_for_function("window.shadeform.sessionSaved()", timeout=RESULT_MS)
+    page.reload()
+    page.evaluate("window.shadeform.ready")
+    wait_for_views(page, 0)
+    assert [view["photo_set_id"] for view in views(page, "views()")] == [
+        view["photo_set_id"] for view in shown
+    ]
+    assert page.inner_text('#views-list [data-index="1"] .set-badge') == "set · 6 photos"
+    assert views(page, "lastResult().cached") == [True, True]

@@ -151,6 +151,30 @@ def test_photo_set_and_views_projects_are_listed_by_what_they_hold(tmp_path):
     assert listed["set"]["image"] == "12 photos: 0.png, 1.png, 2.png and 9 more"
 
 
+def test_a_views_project_keeps_a_view_that_is_a_photo_set(tmp_path):
+    """A view that is a photo set (its set and stereo settings, ``ProjectViewEntry.photo_set``)
+    comes back as saved; the views saved before it (no ``photo_set``) read as photos."""
+    photo = photo_document()
+    views, photo_set = views_and_photo_set(photo)
+    info = photo_set["info"]
+    image = {"image_id": info["photoset_id"], "name": "cat", "width": 64, "height": 64, "channels": 3}
+    views["views"][2] = {
+        "image": image,
+        "source": {"kind": "photoset", "name": "cat"},
+        "angle": 180.0,
+        "params": {},
+        "photo_set": {**photo_set, "params": {"lights": "file", "model": "robust"}},
+    }
+    base = {key: photo[key] for key in ("format", "version", "view")}
+    with client_for(tmp_path / "s.sqlite3") as client:
+        assert client.put("/api/projects/views", json={**base, "views": views}).status_code == 200
+        back = client.get("/api/projects/views").json()["document"]["views"]["views"]
+    assert [view["photo_set"] is None for view in back] == [True, True, False, True, True]
+    kept = back[2]["photo_set"]
+    assert kept["info"]["photoset_id"] == "abc" and kept["info"]["count"] == 12
+    assert kept["params"]["model"] == "robust" and back[2]["source"]["kind"] == "photoset"
+
+
 def test_projects_saved_with_the_old_names_are_taken_in_the_new(tmp_path):
     """A project saved before the renames (a photo set's ``method``, the views' ``refine``) is
     taken, and kept in today's names (``model``, ``refine_poses``)."""

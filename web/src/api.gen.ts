@@ -270,13 +270,18 @@ export interface StereoResult {
   info: Record<string, unknown>;
 }
 
-/** One view of a fusion: a stored photo, its turntable angle and how it is reconstructed. */
+/** One view of a fusion: a stored photo (or photo set), its turntable angle and how it is reconstructed. */
 export interface FuseView {
-  image_id: string;
+  /** The view's stored photo; null when the view is a photo set. */
+  image_id: string | null;
+  /** A stored photo set (``POST /api/photosets``) instead of a photo: several photos of this view under different lights, solved by photometric stereo as ``/api/stereo`` solves it (``stereo``; cache included). Its shape needs no hints: it is never solved again for settling, and ``params`` may not draw concave regions on it. */
+  photo_set_id: string | null;
   /** Turntable angle in degrees: the object turned by it about the camera's vertical axis, right-handed about +y (``docs/conventions.md``, "Turntable views"). */
   angle: number;
   /** The view's reconstruction, exactly as ``/api/reconstruct`` makes it (its ``step`` is the finest grid of its partial model). */
   params: ReconstructParams;
+  /** A photo-set view's photometric stereo, as ``/api/stereo`` takes it (its ``step`` is the finest grid of its partial model); unused for a photo. */
+  stereo: StereoParams;
 }
 
 /** Several views of one object fused into one closed model (or its export). */
@@ -476,9 +481,9 @@ export interface MapsResult {
   info: Record<string, unknown>;
 }
 
-/** Where a project's photo came from, to open it again: a shipped example (by name), an upload, the image the server was started with, or photo ``index`` of a shipped view set. */
+/** Where a project's photo came from, to open it again: a shipped example (by name), an upload, the image the server was started with, photo ``index`` of a shipped view set, or a photo set (a view that is one: ``ProjectViewEntry.photo_set``). */
 export interface ProjectSource {
-  kind: "example" | "upload" | "initial" | "viewset";
+  kind: "example" | "upload" | "initial" | "viewset" | "photoset";
   name: string;
   /** An upload's MIME type. */
   type: string | null;
@@ -515,12 +520,14 @@ export interface ProjectPhotoSet {
   params: StereoParams;
 }
 
-/** One view in a project: its stored photo, where the photo came from, angle and settings. */
+/** One view in a project: its stored photo, where the photo came from, angle and settings; or a stored photo set (``photo_set``; ``image`` then names the set, its ``image_id`` the set's id). */
 export interface ProjectViewEntry {
   image: ImageInfo;
   source: ProjectSource;
   angle: number;
   params: ReconstructParams;
+  /** The view is this photo set and its photometric stereo (``FuseView.photo_set_id``); null: a photo. */
+  photo_set: ProjectPhotoSet | null;
 }
 
 /** The views in a project (several sides of one object, fused) and the fusion's settings. */

@@ -271,7 +271,7 @@ class App {
 
   private showViewsTitle(): void {
     const count = this.views.views.length;
-    showTitle('Views', ` ${count} photo${count === 1 ? '' : 's'} of one object, fused into one closed model`);
+    showTitle('Views', ` ${count} view${count === 1 ? '' : 's'} of one object, fused into one closed model`);
   }
 
   /** No single photo is open any more (another mode takes the panes): nothing of it is solved or shown. */
@@ -288,7 +288,7 @@ class App {
   /** Open a view's photo in single-photo mode with its settings; what changes is kept in the view. */
   private editView(index: number): void {
     const view = this.views.views[index];
-    if (!view) return;
+    if (!view || view.photo_set) return; // a photo set's view has nothing to edit in single-photo mode
     // the stored bytes are another photo's: a forgotten upload is then said, not replaced by them
     this.photo.imageBytes = null;
     storeImageBytes(null);

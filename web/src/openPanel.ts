@@ -93,6 +93,7 @@ export class OpenPanel {
 
   /** A fresh id for the same image: by example name, or by re-sending the stored bytes. */
   async reopen(source: ImageSource): Promise<ImageInfo | null> {
+    if (source.kind === 'photoset') return null; // a view's photo set is no photo to reopen
     if (source.kind === 'example') return api.openExample(source.name);
     if (source.kind === 'initial') return (await api.getOptions()).initial_image;
     if (source.kind === 'viewset') return (await api.openViewSetExample(source.name)).images[source.index] ?? null;
@@ -220,6 +221,14 @@ export class OpenPanel {
     if (await this.views.openExample(name)) this.openedViews();
   }
 
+  /** The photo set open in its mode, with its settings, as one more view (its side under several lights). */
+  private addSetView(): void {
+    const set = this.stereo.session();
+    if (!set) return void toast('Open a photo set first, then add it as a view');
+    const index = this.views.addPhotoSet(set.info, set.params);
+    toast(`Added as view ${index + 1} at ${this.views.views[index].angle}° — Views fuses the views into one model`, 'info');
+  }
+
   /** Other views replaced the list: new work, a new project. */
   private openedViews(): void {
     this.projects.begin('views');
@@ -309,6 +318,7 @@ export class OpenPanel {
     $('views-open').addEventListener('click', () => $<HTMLInputElement>('file-views').click());
     pickedAll('file-views', (files) => this.openViewPhotos(files));
     $('add-view').addEventListener('click', () => this.photoPanel.addView());
+    $('add-set-view').addEventListener('click', () => this.addSetView());
     $('view-back').addEventListener('click', () => this.host.setViewsMode(true));
     picked('file-project', (file) => this.openJson(file));
     picked('file-regions', (file) => this.openJson(file));

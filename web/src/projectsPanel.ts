@@ -80,7 +80,7 @@ export class ProjectsPanel {
     if (body.contains('views-mode') || this.views.editing !== null) {
       const saved = this.views.session();
       if (!saved.views.length) return null;
-      const views = saved.views.map((view) => ({ ...view, source: toProjectSource(view.source) }));
+      const views = saved.views.map((view) => ({ ...view, source: toProjectSource(view.source), photo_set: view.photo_set ?? null }));
       return { kind: 'views', document: { ...base, views: { ...saved, views } } };
     }
     if (body.contains('stereo-mode')) {

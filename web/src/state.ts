@@ -222,6 +222,7 @@ export function toProjectSource(source: ImageSource): ProjectSource {
 export function fromProjectSource(source: ProjectSource): ImageSource {
   if (source.kind === 'upload') return { kind: 'upload', name: source.name, type: source.type ?? '' };
   if (source.kind === 'viewset') return { kind: 'viewset', name: source.name, index: source.index ?? 0 };
+  if (source.kind === 'photoset') return { kind: 'photoset', name: source.name };
   return { kind: source.kind, name: source.name };
 }
 

@@ -1,10 +1,11 @@
 // The Views panel's words and cards (views.ts owns the panel): one card per view (the photo
 // with the mask it was solved with, tinted in its partial model's colour, its name, turntable
-// angle and settings, Edit and Remove, and the areas the other views settled), the partial
-// models' colours, and the note and warnings of a fusion's result.
+// angle and settings, Edit and Remove, and the areas the other views settled; a photo set's view
+// shows its first photo, a "set · N photos" badge and no Edit), the partial models' colours, and
+// the note and warnings of a fusion's result.
 import * as api from './api';
 import type { FuseResult, FusedView } from './api.gen';
-import type { Params, View } from './sessionTypes';
+import type { Params, View, ViewPhotoSet } from './sessionTypes';
 
 /** The partial models' colours, view by view (the cards' swatches show the same). */
 export const PART_COLOURS = ['#f59e0b', '#38bdf8', '#a3e635', '#f472b6', '#a78bfa', '#2dd4bf', '#fb7185', '#facc15'];
@@ -19,7 +20,7 @@ export function viewCard(view: View, index: number, current: FusedView | null): 
   card.dataset.index = String(index);
   const colour = PART_COLOURS[index % PART_COLOURS.length];
   card.innerHTML = `
-      <div class="thumb"><img alt="" /><div class="tint"></div><span class="swatch"></span></div>
+      <div class="thumb"><img alt="" /><div class="tint"></div><span class="swatch"></span><span class="set-badge" hidden></span></div>
       <div class="about">
         <b class="name"></b>
         <label class="angle" title="Turntable angle in degrees: how far the object was turned about the vertical axis (right-handed about +y) for this photo">
@@ -35,7 +36,15 @@ export function viewCard(view: View, index: number, current: FusedView | null): 
           <button class="btn small danger" data-act="remove" title="Leave this photo out of the fused model">Remove</button>
         </div>
       </div>`;
-  card.querySelector('img')!.src = api.photoUrl(view.image.image_id);
+  const set = view.photo_set ?? null;
+  card.querySelector('img')!.src = set ? api.photoSetPhotoUrl(set.info.photoset_id, 0) : api.photoUrl(view.image.image_id);
+  if (set) {
+    const badge = card.querySelector<HTMLElement>('.set-badge')!;
+    badge.hidden = false;
+    badge.textContent = `set · ${set.info.count} photos`;
+    badge.title = 'A photo set: this side under several lights, solved by photometric stereo (no mask, regions or light to set)';
+    card.querySelector<HTMLElement>('[data-act="edit"]')!.hidden = true;
+  }
   card.querySelector<HTMLElement>('.swatch')!.style.background = colour;
   card.querySelector<HTMLElement>('.swatch')!.textContent = String(index + 1);
   card.querySelector('.name')!.textContent = view.image.name;
@@ -44,7 +53,7 @@ export function viewCard(view: View, index: number, current: FusedView | null): 
   input.value = String(view.angle);
   input.dataset.angle = String(index);
   input.setAttribute('aria-label', `View ${index + 1} angle in degrees`);
-  card.querySelector('.settings')!.textContent = settingsText(view.params);
+  card.querySelector('.settings')!.textContent = set ? setSettingsText(set) : settingsText(view.params);
   // what the fusion read as concave in this view's photo, from the other views
   const settled = current?.settled.length ?? 0;
   if (settled) {
@@ -112,4 +121,10 @@ function settingsText(params: Params): string {
   parts.push(light.mode === 'z' ? 'frontal light' : light.mode === 'estimate' ? 'light estimated' : `light ${light.slant.toFixed(0)}° / ${light.tilt.toFixed(0)}°`);
   if (params.solver !== 'auto') parts.push(params.solver);
   return parts.join(' · ');
+}
+
+/** What a photo set's view is solved with, in a few words: photometric stereo, its lights, model. */
+function setSettingsText(set: ViewPhotoSet): string {
+  const lights = { file: 'lights from its file', sphere: 'lights from a sphere', unknown: 'lights read from the photos' }[set.params.lights];
+  return ['photometric stereo', lights, set.params.model.replace('_', ' ')].join(' · ');
 }

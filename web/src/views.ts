@@ -9,8 +9,13 @@
 // mode with them, and what the user changes there is written back into the view (App calls
 // edited()); back in this panel the model is fused again, and the server solves only the views
 // whose settings changed (it keeps each view's reconstruction).
+//
+// A view may instead be a photo set (View.photo_set: several photos of that side under different
+// lights, opened in the photo-set mode and added with "Add this set as a view"): the server
+// solves it by photometric stereo with the set's settings, once, and never again for settling;
+// its card has no Edit (its shape needs no mask, regions or light to be drawn).
 import * as api from './api';
-import type { FuseRequest, FuseResult, ImageInfo, Options } from './api.gen';
+import type { FuseRequest, FuseResult, ImageInfo, Options, PhotoSetInfo, StereoParams } from './api.gen';
 import { NetworkError, UNREACHABLE } from './connection';
 import { $, showMessage } from './dom';
 import { ModelRequest, ModelState } from './modelState';
@@ -155,6 +160,26 @@ export class ViewsSession {
     return this.views.length - 1;
   }
 
+  /** Add a photo set (open in the photo-set mode, with its settings) as a view; returns its index. */
+  addPhotoSet(info: PhotoSetInfo, params: StereoParams): number {
+    const image: ImageInfo = {
+      image_id: info.photoset_id,
+      name: info.name,
+      width: info.width,
+      height: info.height,
+      channels: info.colour ? 3 : 1,
+      suggested: null,
+    };
+    const view: View = {
+      image,
+      source: { kind: 'photoset', name: info.name },
+      angle: this.nextAngle(),
+      params: this.defaults(image),
+      photo_set: { info, params },
+    };
+    return this.add(view);
+  }
+
   /** An angle for the next view: a quarter turn past the last one. */
   nextAngle(): number {
     const last = this.views.at(-1);
@@ -170,7 +195,7 @@ export class ViewsSession {
     this.resolution = saved.resolution === undefined ? DEFAULT_RESOLUTION : saved.resolution;
     this.showParts = saved.showParts ?? true;
     this.editing = saved.editing ?? null;
-    if (this.editing !== null && !this.views[this.editing]) this.editing = null;
+    if (this.editing !== null && (!this.views[this.editing] || this.views[this.editing].photo_set)) this.editing = null;
     this.render();
   }
 
@@ -224,7 +249,13 @@ export class ViewsSession {
 
   request(): FuseRequest {
     return {
-      views: this.views.map((view) => ({ image_id: view.image.image_id, angle: view.angle, params: structuredClone(view.params) })),
+      views: this.views.map((view) => ({
+        image_id: view.photo_set ? null : view.image.image_id,
+        photo_set_id: view.photo_set ? view.photo_set.info.photoset_id : null,
+        angle: view.angle,
+        params: structuredClone(view.params),
+        stereo: structuredClone(view.photo_set?.params ?? this.options.stereo_defaults),
+      })),
       refine_poses: this.refinePoses,
       settle: this.settle,
       resolution: this.resolution,
@@ -286,6 +317,12 @@ export class ViewsSession {
     const index = found ? Number(found[1]) - 1 : -1;
     const view = this.views[index];
     if (!view) return false;
+    if (view.photo_set) {
+      const said = `The server no longer has view ${index + 1}'s photo set, ${view.image.name} (it was restarted without its sessions, or let it go): remove the view, open the set's photos again and add it with Add this set as a view`;
+      this.setError(said);
+      this.model.failed(version, said);
+      return true;
+    }
     let info: ImageInfo | null = null;
     try {
       if (!this.retried) info = await this.host.reopen(view.source);
@@ -434,7 +471,14 @@ export class ViewsSession {
 
   hook() {
     return {
-      views: () => this.views.map((view) => ({ image_id: view.image.image_id, name: view.image.name, angle: view.angle, params: structuredClone(view.params) })),
+      views: () =>
+        this.views.map((view) => ({
+          image_id: view.image.image_id,
+          name: view.image.name,
+          angle: view.angle,
+          params: structuredClone(view.params),
+          photo_set_id: view.photo_set?.info.photoset_id ?? null,
+        })),
       applied: () => this.appliedCount,
       /** The fused model: current, computing, stale or failed (modelState.ts). */
       modelState: () => this.model.view(),
@@ -453,6 +497,7 @@ export class ViewsSession {
           part_vertex_counts: r.parts.map((part) => part.vertex_count),
           cached: r.views.map((view) => view.cached),
           settled: r.views.map((view) => view.settled.length),
+          outline_iou: r.views.map((view) => view.outline_iou),
           axis: r.axis,
           volume: r.volume,
           watertight: r.watertight,

@@ -17,6 +17,12 @@ the view is solved again the same way with those areas added to its regions, and
 lists them per view. Each view's partial model (the reading the fusion kept) comes back moved to
 where the fusion placed it (:meth:`shadeform.fusion.Placement.transforms`), on a coarser grid so
 that the response stays light.
+
+A view may instead name a stored photo set (``FuseView.photo_set_id``): several photos of that
+side under different lights, solved by the photo-set mode's own photometric stereo and cache
+(:func:`shadeform.app.stereo.solve_set`), as ``shadeform fuse`` takes a folder per view. Its
+shape is unambiguous, so it is never solved again for settling, and concave regions drawn for it
+are refused.
 """
 
 from __future__ import annotations
@@ -43,8 +49,9 @@ from shadeform.app.encoding import (
 )
 from shadeform.app.guard import check_known
 from shadeform.app.schema import ConcaveRegion, FusedView, FuseRequest, FuseResult, ViewSetInfo
-from shadeform.app.solving import solve
+from shadeform.app.solving import Solved, solve
 from shadeform.app.state import image_info, suggested_params
+from shadeform.app.stereo import StoredPhotoSet, photoset, solve_set
 from shadeform.errors import InputError
 
 __all__ = ["PART_VERTICES", "add_fusion_routes"]
@@ -128,43 +135,78 @@ def add_fusion_routes(app: FastAPI, state: Any) -> None:
 
 
 def _entries(state, body: FuseRequest) -> list:
-    """Each view's stored image; an unknown one is a 404 that says which view."""
+    """Each view's stored image or photo set; an unknown one is a 404 that says which view, and
+    concave regions drawn on a photo set a 422."""
     entries = []
     for i, view in enumerate(body.views):
         try:
-            entries.append(state.image(view.image_id))
+            if view.photo_set_id is None:
+                entries.append(state.image(view.image_id))
+                continue
+            entries.append(photoset(state, view.photo_set_id))
         except HTTPException as err:
             raise HTTPException(err.status_code, f"view {i + 1}: {err.detail}") from None
+        if view.params.concave.regions:
+            raise InputError(
+                f"view {i + 1} ({entries[i].name}) is a photo set: its photometric stereo tells convex "
+                "from concave itself; drop its concave regions"
+            )
     return entries
 
 
 def _solved(state, entries: list, body: FuseRequest) -> list[tuple[Any, bool]]:
-    """Each view's reconstruction, exactly as ``/api/reconstruct`` makes it (and caches it)."""
-    return [_view_solve(state, entries, i, view.params) for i, view in enumerate(body.views)]
+    """Each view's reconstruction, exactly as ``/api/reconstruct`` (a photo) or ``/api/stereo``
+    (a photo set) makes it, and caches it."""
+    return [_view_solve(state, entries, i, view) for i, view in enumerate(body.views)]
 
 
-def _view_solve(state, entries: list, i: int, params) -> tuple[Any, bool]:
-    """View ``i`` solved with ``params`` by the server's own solve (and cache); a failure says
-    which view."""
+def _view_solve(state, entries: list, i: int, view, params=None) -> tuple[Any, bool]:
+    """View ``i`` solved by the server's own solve (and cache) with ``params`` (default: the
+    view's), or a photo set's by its photometric stereo; a failure says which view."""
+    entry = entries[i]
     try:
-        return solve(state, entries[i], params)
+        if isinstance(entry, StoredPhotoSet):
+            found, cached = solve_set(state, entry, view.stereo)
+            maps = found.maps
+            return Solved(found.reconstruction, maps["mask_png"], maps["depth_range"]), cached
+        return solve(state, entry, view.params if params is None else params)
     except InputError as err:
-        raise InputError(f"view {i + 1} ({entries[i].name}): {err}") from None
+        raise InputError(f"view {i + 1} ({entry.name}): {err}") from None
+
+
+def _is_set(view) -> bool:
+    return view.photo_set_id is not None
 
 
 def _resolver(state, entries: list, body: FuseRequest):
     """``resolve(i, regions)`` for :func:`shadeform.fusion.place`: view ``i`` solved again as
     ``/api/reconstruct`` would with ``regions`` added to its own concave regions (and cached, so
-    that fusing the same views again tries nothing anew)."""
+    that fusing the same views again tries nothing anew); a photo set's own reading, never solved
+    again (as ``shadeform fuse`` does)."""
 
     def resolve(i: int, regions: list) -> Any:
-        params = body.views[i].params
+        view = body.views[i]
+        if _is_set(view):
+            return _view_solve(state, entries, i, view)[0].reconstruction
+        params = view.params
         extra = [ConcaveRegion(polygon=region.polygon.tolist(), axis=region.axis) for region in regions]
         concave = params.concave.model_copy(update={"regions": [*params.concave.regions, *extra]})
-        solved, _ = _view_solve(state, entries, i, params.model_copy(update={"concave": concave}))
+        solved, _ = _view_solve(state, entries, i, view, params.model_copy(update={"concave": concave}))
         return solved.reconstruction
 
     return resolve
+
+
+def _view_key(view) -> tuple:
+    """What a view's reading depends on (its photo or set and settings but ``step``) and its angle."""
+    if _is_set(view):
+        return ("set", view.photo_set_id, view.stereo.model_dump_json(exclude={"step"}), view.angle)
+    return (view.image_id, view.params.model_dump_json(exclude={"step"}), view.angle)
+
+
+def _step(view) -> int:
+    """The finest grid a view's partial model is drawn on."""
+    return view.stereo.step if _is_set(view) else view.params.step
 
 
 def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]]) -> tuple[_Fused, bool]:
@@ -176,9 +218,7 @@ def _fuse(state, entries: list, body: FuseRequest, solved: list[tuple[Any, bool]
 
     key = (
         "fuse",
-        tuple(
-            (view.image_id, view.params.model_dump_json(exclude={"step"}), view.angle) for view in body.views
-        ),
+        tuple(_view_key(view) for view in body.views),
         body.refine_poses,
         body.settle,
         body.resolution,
@@ -228,7 +268,7 @@ def _result(state, entries: list, body: FuseRequest) -> FuseResult:
     lap = time.perf_counter()
     parts = []
     for rec, view, transform in zip(fused.readings, body.views, fused.transforms):
-        step = max(view.params.step, math.ceil(max(rec.mask.shape) / PART_VERTICES))
+        step = max(_step(view), math.ceil(max(rec.mask.shape) / PART_VERTICES))
         parts.append(_moved(to_mesh(rec, step=step), transform))
     timings["parts"] = time.perf_counter() - lap
     lap = time.perf_counter()

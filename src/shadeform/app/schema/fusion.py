@@ -6,16 +6,27 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import AliasChoices, Field
+from pydantic import AliasChoices, Field, model_validator
 
 from shadeform.app.schema.common import MeshData, _Model
 from shadeform.app.schema.reconstruct import ConcaveRegion, ImageInfo, ReconstructParams
+from shadeform.app.schema.stereo import StereoParams
 
 
 class FuseView(_Model):
-    """One view of a fusion: a stored photo, its turntable angle and how it is reconstructed."""
+    """One view of a fusion: a stored photo (or photo set), its turntable angle and how it is
+    reconstructed."""
 
-    image_id: str
+    image_id: str | None = Field(
+        default=None, description="The view's stored photo; null when the view is a photo set."
+    )
+    photo_set_id: str | None = Field(
+        default=None,
+        description="A stored photo set (``POST /api/photosets``) instead of a photo: several photos of "
+        "this view under different lights, solved by photometric stereo as ``/api/stereo`` solves it "
+        "(``stereo``; cache included). Its shape needs no hints: it is never solved again for settling, "
+        "and ``params`` may not draw concave regions on it.",
+    )
     angle: float = Field(
         allow_inf_nan=False,
         description="Turntable angle in degrees: the object turned by it about the camera's vertical "
@@ -26,6 +37,19 @@ class FuseView(_Model):
         description="The view's reconstruction, exactly as ``/api/reconstruct`` makes it (its ``step`` "
         "is the finest grid of its partial model).",
     )
+    stereo: StereoParams = Field(
+        default_factory=StereoParams,
+        description="A photo-set view's photometric stereo, as ``/api/stereo`` takes it (its ``step`` is "
+        "the finest grid of its partial model); unused for a photo.",
+    )
+
+    @model_validator(mode="after")
+    def _photo_or_set(self) -> FuseView:
+        if (self.image_id is None) == (self.photo_set_id is None):
+            raise ValueError(
+                "a view is one photo (image_id) or one photo set (photo_set_id): give exactly one of them"
+            )
+        return self
 
 
 class FuseRequest(_Model):

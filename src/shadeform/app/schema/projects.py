@@ -19,9 +19,10 @@ _Name = Annotated[str, Field(max_length=1000)]
 
 class ProjectSource(_Model):
     """Where a project's photo came from, to open it again: a shipped example (by name), an upload,
-    the image the server was started with, or photo ``index`` of a shipped view set."""
+    the image the server was started with, photo ``index`` of a shipped view set, or a photo set
+    (a view that is one: ``ProjectViewEntry.photo_set``)."""
 
-    kind: Literal["example", "upload", "initial", "viewset"]
+    kind: Literal["example", "upload", "initial", "viewset", "photoset"]
     name: _Name
     type: str | None = Field(default=None, max_length=200, description="An upload's MIME type.")
     index: int | None = Field(default=None, ge=0, lt=1000, description="The photo's place in its view set.")
@@ -59,12 +60,18 @@ class ProjectPhotoSet(_Model):
 
 
 class ProjectViewEntry(_Model):
-    """One view in a project: its stored photo, where the photo came from, angle and settings."""
+    """One view in a project: its stored photo, where the photo came from, angle and settings; or a
+    stored photo set (``photo_set``; ``image`` then names the set, its ``image_id`` the set's id)."""
 
     image: ImageInfo
     source: ProjectSource
     angle: float = Field(allow_inf_nan=False)
     params: ReconstructParams
+    photo_set: ProjectPhotoSet | None = Field(
+        default=None,
+        description="The view is this photo set and its photometric stereo (``FuseView.photo_set_id``); "
+        "null: a photo.",
+    )
 
 
 class ProjectViews(_Model):
