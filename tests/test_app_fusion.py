@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from PIL import Image
 from scipy.spatial import cKDTree
 
 import shadeform
+from helpers import app
 from shadeform import synth
 from shadeform.examples import VIEW_SET_EXAMPLES, load_view_set_example
 
@@ -63,22 +65,16 @@ def views_of(view_set: dict) -> list[dict]:
     ]
 
 
-def fuse(client, views, **extra):
-    return client.post("/api/fuse", json={"views": views, "resolution": RESOLUTION, **extra})
-
-
-def fused(client, views, **extra) -> dict:
-    response = fuse(client, views, **extra)
-    assert response.status_code == 200, response.text
-    return response.json()
+fuse = partial(app.fuse, resolution=RESOLUTION)
+fused = partial(app.fused, resolution=RESOLUTION)
 
 
 def vertices(mesh: dict) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(mesh["positions"]), "<f4").reshape(-1, 3).astype(np.float64)
+    return app.mesh_arrays(mesh)[0]
 
 
 def faces(mesh: dict) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(mesh["indices"]), "<u4").reshape(-1, 3)
+    return app.mesh_arrays(mesh)[1]
 
 
 def png_base64(mask: np.ndarray) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ import trimesh
 from fastapi.testclient import TestClient
 from PIL import Image
 
+from helpers import app
 from helpers.photosets import write_photo_set
 from shadeform import synth
 
@@ -72,22 +74,16 @@ def set_view(photoset_id: str, angle: float) -> dict:
     return {"photo_set_id": photoset_id, "angle": angle}
 
 
-def fuse(client, views, **extra):
-    return client.post("/api/fuse", json={"views": views, "resolution": RESOLUTION, **extra})
-
-
-def fused(client, views, **extra) -> dict:
-    response = fuse(client, views, **extra)
-    assert response.status_code == 200, response.text
-    return response.json()
+fuse = partial(app.fuse, resolution=RESOLUTION)
+fused = partial(app.fused, resolution=RESOLUTION)
 
 
 def vertices(mesh: dict) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(mesh["positions"]), "<f4").reshape(-1, 3).astype(np.float64)
+    return app.mesh_arrays(mesh)[0]
 
 
 def faces(mesh: dict) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(mesh["indices"]), "<u4").reshape(-1, 3)
+    return app.mesh_arrays(mesh)[1]
 
 
 def png(values: np.ndarray, bits: int = 8) -> bytes:

@@ -18,6 +18,7 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 
+from helpers.app import mesh_arrays
 from shadeform import reconstruct, synth, to_mesh
 from shadeform.app.guard import AppLimits
 from shadeform.app.large import (
@@ -62,12 +63,6 @@ def large(client, ball):
     response = client.post("/api/images", files={"file": ("ball.png", png_bytes(ball.image), "image/png")})
     assert response.status_code == 201, response.text
     return response.json()
-
-
-def mesh_arrays(mesh: dict) -> tuple[np.ndarray, np.ndarray]:
-    positions = np.frombuffer(base64.b64decode(mesh["positions"]), "<f4").reshape(-1, 3)
-    indices = np.frombuffer(base64.b64decode(mesh["indices"]), "<u4").reshape(-1, 3)
-    return positions, indices
 
 
 def wait(client, job_id: str, timeout: float = 60) -> dict:

@@ -19,6 +19,7 @@ import png
 import pytest
 from fastapi.testclient import TestClient
 
+from helpers.app import mesh_arrays
 from shadeform.app.printing import PREVIEW_SIDE
 from shadeform.app.server import create_app
 from shadeform.texture import LEGEND
@@ -47,8 +48,7 @@ def body(bowl, **relief):
 
 
 def decoded(mesh: dict) -> trimesh.Trimesh:
-    positions = np.frombuffer(base64.b64decode(mesh["positions"]), "<f4").reshape(-1, 3)
-    faces = np.frombuffer(base64.b64decode(mesh["indices"]), "<u4").reshape(-1, 3)
+    positions, faces = mesh_arrays(mesh)
     assert len(positions) == mesh["vertex_count"] and len(faces) == mesh["triangle_count"]
     return trimesh.Trimesh(positions, faces, process=False)
 

@@ -14,6 +14,7 @@ module, and the conftest, imports them as ``helpers``: ``from helpers.surfaces i
 - :mod:`helpers.lights`: a rig of photos with a chrome sphere, angles between lights.
 - :mod:`helpers.masks`: a painted object to paste on the composites' backgrounds.
 - :mod:`helpers.projects`: a one-photo project as the client saves it.
+- :mod:`helpers.app`: the app's answers decoded (its meshes) and its views fused.
 - :mod:`helpers.cli`: what a refusal on the command line looks like (one line, exit code 2).
 """
 
