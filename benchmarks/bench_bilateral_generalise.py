@@ -40,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_diligent import OBJECTS, bini_rerun, downsample2, load, noisy
 from shadeform.integration.bilateral import integrate_bilateral
+from shadeform.io.atomic import atomic_write
 from shadeform.metrics import made
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -304,9 +305,8 @@ def main(argv=None) -> str:
         lines += ["", args.notes.read_text().rstrip()]
     text = "\n".join(lines) + "\n"
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_suffix(".md.tmp")
-    tmp.write_text(text)
-    tmp.replace(args.out)
+    with atomic_write(args.out, mode="w") as handle:
+        handle.write(text)
     print(text)
     return text
 

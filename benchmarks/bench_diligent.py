@@ -44,6 +44,7 @@ import scipy.sparse.linalg as spla
 from scipy import ndimage
 
 from shadeform.integration.bilateral import contour_scale, integrate_bilateral
+from shadeform.io.atomic import atomic_write
 from shadeform.io.images import load_mask
 from shadeform.io.maps import load_normal_map
 from shadeform.metrics import made
@@ -603,9 +604,8 @@ def main(argv=None) -> str:
     lines += ["", "## History of the slope cap", "", MIN_SCALE_NOTE, "", RULE_NOTE, "", ISSUE12_NOTE]
     text = "\n".join(lines) + "\n"
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_suffix(".md.tmp")
-    tmp.write_text(text)
-    tmp.replace(args.out)
+    with atomic_write(args.out, mode="w") as handle:
+        handle.write(text)
     print(text)
     return text
 
