@@ -14,12 +14,12 @@ from helpers.cli import refused
 from helpers.photosets import SIX_LIGHTS, write_photo_set
 from helpers.rti import DOME, HELD_OUT, hsh_weights, light_up, read_file, read_hsh, read_ptm, write_dome_set
 from shadeform import photoset, synth
-from shadeform.cli.rti import display_values
 from shadeform.errors import InputError
 from shadeform.light import light_from_slant_tilt
 from shadeform.rti import (
     FORMATS,
     RelightModel,
+    display_values,
     encode,
     file_size,
     fit,
@@ -258,3 +258,7 @@ def test_display_values_even_out_the_lights_and_encode_srgb():
     assert display_values(photos * 9, None).max() == pytest.approx(1.0, abs=1e-6)  # clipped before encoding
     with pytest.raises(InputError, match="finite positive"):
         display_values(photos, np.array([1.0, 0.0, 1.0]))
+    # a grey set: its photos keep their shape, with one strength or one per channel
+    for strengths in (np.array([1.0, 2.0, 1.0]), np.array([[1.0, 2.0, 1.0]] * 3).T):
+        shown = display_values(photos[..., 0], strengths)
+        assert shown.shape == (3, 2, 2) and np.allclose(shown, 0.4845, atol=1e-3)

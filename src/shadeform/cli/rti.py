@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.markup import escape
 
@@ -91,7 +90,16 @@ def rti(
     The output's kind is the format's: a .ptm or .rti file, or with --format web-* a folder."""
     from shadeform.cli.sets import load_set
     from shadeform.photoset import photo_files
-    from shadeform.rti import FORMATS, check_web_folder, fit, rms_error, web_files, write_rti, write_web
+    from shadeform.rti import (
+        FORMATS,
+        check_web_folder,
+        display_values,
+        fit,
+        rms_error,
+        web_files,
+        write_rti,
+        write_web,
+    )
 
     format = _check_format(output, format)
     web = format.startswith("web-")
@@ -179,22 +187,6 @@ def _check_format(output: Path, format: str | None) -> str:
             f"--format {format} is written to a {wanted} file, not '{output.name}'; name it {wanted}"
         )
     return format
-
-
-def display_values(images: np.ndarray, intensities) -> np.ndarray:
-    """A set's linear photos as RTIViewer shows a file's values: each photo divided by its
-    light's strength relative to the median light (if the set gives strengths), clipped to
-    [0, 1] and sRGB-encoded, as RTIBuilder fits its JPEG photos."""
-    from shadeform.io.colour import srgb_encode
-
-    values = np.asarray(images, dtype=np.float32)
-    if intensities is not None:
-        strength = np.asarray(intensities, dtype=np.float64)
-        if not (np.isfinite(strength).all() and (strength > 0).all()):
-            raise InputError("the light intensities must be finite positive numbers (each light's strength)")
-        relative = (strength / np.median(strength, axis=0)).astype(np.float32)
-        values = values / relative.reshape(len(values), 1, 1, -1)  # the photos are (N, H, W, 3)
-    return srgb_encode(np.clip(values, 0.0, 1.0))
 
 
 def _size(count: int) -> str:

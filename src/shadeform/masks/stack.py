@@ -49,15 +49,13 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from shadeform.errors import InputError
-from shadeform.masks.brightness import FoundObject
-from shadeform.masks.objects import find_object
+from shadeform.masks.brightness import _EIGHT, FoundObject
+from shadeform.masks.objects import _LUMA, find_object
 
 __all__ = ["find_object_in_set", "typical_picture", "MAX_PHOTOS"]
 
 #: The median picture is taken over at most this many photos, spread evenly over the set.
 MAX_PHOTOS = 32
-_LUMA = np.array([0.299, 0.587, 0.114])
-_EIGHT = np.ones((3, 3), dtype=bool)
 
 
 def typical_picture(images) -> np.ndarray:

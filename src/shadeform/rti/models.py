@@ -32,7 +32,16 @@ import numpy as np
 
 from shadeform.errors import InputError
 
-__all__ = ["FORMATS", "RelightModel", "fit", "hsh_basis", "ptm_basis", "relight", "rms_error"]
+__all__ = [
+    "FORMATS",
+    "RelightModel",
+    "display_values",
+    "fit",
+    "hsh_basis",
+    "ptm_basis",
+    "relight",
+    "rms_error",
+]
 
 #: The models, by name: how many terms each fits per pixel (and channel).
 FORMATS = {"ptm-lrgb": 6, "ptm-rgb": 6, "hsh2": 4, "hsh3": 9}
@@ -209,6 +218,43 @@ def rms_error(model: RelightModel, images, lights, *, mask=None) -> float:
         total += float(np.dot(flat, flat))
         count += difference.size
     return float(np.sqrt(total / max(count, 1)))
+
+
+def display_values(images, intensities=None) -> np.ndarray:
+    """A set's linear photos as RTIViewer shows a file's values: each photo divided by its
+    light's strength relative to the median light (if the set gives strengths), clipped to
+    [0, 1] and sRGB-encoded, as RTIBuilder fits its JPEG photos.
+
+    Parameters
+    ----------
+    images : (N, H, W) or (N, H, W, C) array_like
+        Linear photos.
+    intensities : (N,) or (N, C) array_like, optional
+        Each light's strength (per channel); a grey set's photos take their mean over channels.
+
+    Returns
+    -------
+    float32 array, the shape of ``images``
+
+    Raises
+    ------
+    InputError
+        Strengths that are not finite and positive.
+    """
+    from shadeform.io.colour import srgb_encode
+
+    values = np.asarray(images, dtype=np.float32)
+    if intensities is not None:
+        strength = np.asarray(intensities, dtype=np.float64)
+        if not (np.isfinite(strength).all() and (strength > 0).all()):
+            raise InputError("the light intensities must be finite positive numbers (each light's strength)")
+        relative = strength / np.median(strength, axis=0)
+        if values.ndim == 3 and relative.ndim == 2:
+            relative = relative.mean(axis=1)
+        # one strength per photo (and channel): photos' axis first, the channel's last
+        shape = (len(values),) + (1,) * (values.ndim - relative.ndim) + relative.shape[1:]
+        values = values / relative.reshape(shape).astype(np.float32)
+    return srgb_encode(np.clip(values, 0.0, 1.0))
 
 
 def _colour(solved: np.ndarray) -> np.ndarray:
