@@ -281,3 +281,26 @@ def test_a_short_fuzz_of_the_command_line_finds_nothing():
         (number, args, findings, done["stderr"][-300:]) for number, args, findings, done in result["failures"]
     ]
     assert found == [], result["table"]
+
+
+def test_a_signal_during_a_finaliser_prints_no_traceback(tmp_path):
+    """A SIGTERM that arrived while llvmlite ran an ``ObjectRef.__del__`` raised its SystemExit
+    there: Python printed it as a traceback and dropped it. Now it is delivered again after the
+    finaliser, and the process ends as for any other SIGTERM."""
+    script = (
+        "import signal, sys, time\n"
+        "from pathlib import Path\n"
+        "from shadeform.io.atomic import OutputSet, exit_on_signals\n"
+        "exit_on_signals()\n"
+        "class Finalised:\n"
+        "    def __del__(self):\n"
+        "        signal.raise_signal(signal.SIGTERM)\n"
+        "with OutputSet() as outputs:\n"
+        "    outputs.temp(Path(sys.argv[1]) / 'model.obj').write_bytes(b'v 0 0 0')\n"
+        "    Finalised()\n"
+        "    time.sleep(30)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, tmp_path], capture_output=True, timeout=60)
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr.decode()
+    assert done.stderr == b""
+    assert _hidden(tmp_path) == []

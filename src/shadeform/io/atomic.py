@@ -250,13 +250,37 @@ def exit_on_signals() -> None:
             signal.signal(getattr(signal, name), _raise_exit)
 
 
+#: Seconds a signal that came during a finaliser waits to be delivered again.
+_AGAIN_SECONDS = 0.01
+#: Whether a signal's stop timer runs already (one is enough).
+_STOPPING = threading.Event()
+
+
 def _raise_exit(signum, frame) -> None:
-    timer = threading.Timer(STOP_SECONDS, _end_now, args=(signum,))
-    timer.daemon = True  # does not hold up an exit that goes well
-    timer.start()
+    if not _STOPPING.is_set():
+        _STOPPING.set()
+        timer = threading.Timer(STOP_SECONDS, _end_now, args=(signum,))
+        timer.daemon = True  # does not hold up an exit that goes well
+        timer.start()
+    if _in_finaliser(frame):
+        # Python prints an exception raised in a __del__ as a traceback and drops it: deliver
+        # the signal again once the finaliser is done.
+        again = threading.Timer(_AGAIN_SECONDS, os.kill, args=(os.getpid(), signum))
+        again.daemon = True
+        again.start()
+        return
     if signum == signal.SIGINT:
         raise KeyboardInterrupt
     raise SystemExit(128 + signum)
+
+
+def _in_finaliser(frame) -> bool:
+    """Whether ``frame`` runs inside an object's ``__del__`` (at any depth)."""
+    while frame is not None:
+        if frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _end_now(signum: int) -> None:
