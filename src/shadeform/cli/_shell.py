@@ -1,5 +1,6 @@
-"""The command line's shell: the typer app, the one error handler, and the helpers and option
-types its commands share (printing, timing, output files written together or not at all)."""
+"""The command line's shell: the typer app, the one error handler, and the helpers its commands
+share (printing, timing, output files written together or not at all); the options they share are
+in :mod:`shadeform.cli.options`."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
 import typer
@@ -22,9 +23,7 @@ from rich.markup import escape
 from typer.core import TyperGroup
 
 from shadeform.errors import InputError
-from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet, target_name
-from shadeform.solvers import available_solvers
 
 #: Exit code of every user error (the same as a command-line usage error).
 USAGE_EXIT = 2
@@ -491,102 +490,3 @@ def write_model(
         "object_pixels": int(rec.mask.sum()),
     }
     return mesh, written, report
-
-
-# options shared by the commands that build meshes
-SlantOption = Annotated[
-    float | None, typer.Option(metavar="DEGREES", help="Light slant: angle from the viewing direction.")
-]
-TiltOption = Annotated[
-    float | None, typer.Option(metavar="DEGREES", help="Light tilt: from +x toward +y (up); needs --slant.")
-]
-JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the summary.")]
-StepOption = Annotated[int, typer.Option(min=1, help="Mesh granularity: pixels per vertex.")]
-# --method: the option's name before the rename, kept for one release
-SolverOption = Annotated[
-    str,
-    typer.Option(
-        "--solver",
-        "--method",
-        help=f"Solver: {', '.join(available_solvers())} (`shadeform solvers` says what each does).",
-    ),
-]
-IntegratorOption = Annotated[
-    str | None,
-    typer.Option(
-        help=f"Depth from normals: {', '.join(available_integrators())} (default: the solver's own)."
-    ),
-]
-RefineOption = Annotated[
-    int,
-    typer.Option(
-        min=0, max=100, help="Integrability refinement iterations (0: the 2002 field; at most 100)."
-    ),
-]
-LinearOption = Annotated[
-    bool | None,
-    typer.Option(
-        "--linear/--srgb",
-        help="How the photo file holds its values: --srgb decodes sRGB (JPEG, phone photos) to linear "
-        "light, --linear keeps them. Default: 8-bit files are sRGB, 16-bit and float ones linear, and so "
-        "is a photo in a folder with light_intensities.txt (a calibrated photo set).",
-        show_default=False,
-    ),
-]
-ChannelOption = Annotated[
-    str,
-    typer.Option(
-        help="Image channel: auto (luma, or the least clipped colour channel where one clips on "
-        "clearly fewer pixels), luma, r, g, b or max."
-    ),
-]
-FilterOption = Annotated[
-    str | None,
-    typer.Option(
-        "--filter",
-        metavar="KIND:SIZE",
-        help="Smoothing: gaussian:SIGMA, mean:R, median:R, minimum:R or none.",
-    ),
-]
-
-#: The loader's one pixel limit, :data:`shadeform.io.images.MAX_PIXELS`, written out here so that
-#: the command starts without importing the image decoders (tests/test_cli_max_pixels.py checks
-#: that the two agree).
-MAX_PIXELS = 8192 * 8192
-# every command that reads photos or masks takes it; `app` defaults to the server's own limit
-MaxPixelsOption = Annotated[
-    int | None,
-    typer.Option(
-        "--max-pixels",
-        min=1,
-        metavar="PIXELS",
-        help="Refuse a photo or mask whose header declares more pixels than this, before decoding "
-        "it (a damaged file or a decompression bomb); raise it for larger photos you trust.",
-    ),
-]
-
-# the options of one photo's reconstruction that every command making something of it shares
-LightOption = Annotated[
-    str | None,
-    typer.Option(
-        metavar="X,Y,Z",
-        help='Direction toward the light in the camera frame, or "estimate" to estimate it from the image; 0,0,1 if not given.',
-    ),
-]
-ConcaveOption = Annotated[
-    Path | None,
-    typer.Option(help="JSON file of concave regions (docs/conventions.md).", show_default=False),
-]
-ReferenceOption = Annotated[
-    list[str] | None,
-    typer.Option(
-        "--reference",
-        metavar="ROW,COL",
-        help="Reference pixel ROW,COL (or ROW,COL,NX,NY,NZ with its normal); repeat for several.",
-        show_default=False,
-    ),
-]
-MaskFileOption = Annotated[
-    Path | None,
-    typer.Option(help="Mask image: non-zero pixels are the object; found automatically if not given."),
-]

@@ -12,6 +12,16 @@ from rich.markup import escape
 from rich.table import Column, Table
 
 from shadeform.cli._shell import (
+    app,
+    describe_photo,
+    format_seconds,
+    print_json,
+    progress_bar,
+    resolve_light,
+    stderr_console,
+    stdout_console,
+)
+from shadeform.cli.options import (
     MAX_PIXELS,
     ChannelOption,
     FilterOption,
@@ -22,15 +32,8 @@ from shadeform.cli._shell import (
     SlantOption,
     SolverOption,
     StepOption,
+    TableJsonOption,
     TiltOption,
-    app,
-    describe_photo,
-    format_seconds,
-    print_json,
-    progress_bar,
-    resolve_light,
-    stderr_console,
-    stdout_console,
 )
 from shadeform.io.atomic import OutputSet
 
@@ -66,9 +69,7 @@ def batch(
     workers: Annotated[
         int | None, typer.Option(min=1, help="Worker processes (default: one per CPU).")
     ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
-    ] = False,
+    as_json: TableJsonOption = False,
     max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Reconstruct many photos with the same options, in parallel (needs the dask extra)."""

@@ -10,16 +10,6 @@ import numpy as np
 import typer
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    ChannelOption,
-    FilterOption,
-    IntegratorOption,
-    JsonOption,
-    LinearOption,
-    MaxPixelsOption,
-    SlantOption,
-    SolverOption,
-    TiltOption,
     app,
     check_outputs,
     format_seconds,
@@ -31,6 +21,18 @@ from shadeform.cli._shell import (
     stage,
     stderr_console,
     stdout_console,
+)
+from shadeform.cli.options import (
+    MAX_PIXELS,
+    ChannelOption,
+    FilterOption,
+    IntegratorOption,
+    JsonOption,
+    LinearOption,
+    MaxPixelsOption,
+    SlantOption,
+    SolverOption,
+    TiltOption,
 )
 from shadeform.cli.sets import is_photo_set, load_set, solve_set
 from shadeform.errors import InputError

@@ -13,21 +13,6 @@ import typer
 from rich.markup import escape
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    ChannelOption,
-    ConcaveOption,
-    FilterOption,
-    IntegratorOption,
-    JsonOption,
-    LightOption,
-    LinearOption,
-    MaskFileOption,
-    MaxPixelsOption,
-    ReferenceOption,
-    RefineOption,
-    SlantOption,
-    SolverOption,
-    TiltOption,
     app,
     format_seconds,
     print_files,
@@ -37,13 +22,14 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
-from shadeform.cli.photos import reconstruct_options
-from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source, refuse_one_photo_options
+from shadeform.cli.options import PHOTO_DEFAULTS, JsonOption, PhotoOptions, takes_photo_options
+from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source
 from shadeform.io.atomic import OutputSet
 from shadeform.texture import LEGEND, albedo_map, legend
 
 
 @app.command()
+@takes_photo_options
 def maps(
     image: PhotoOrSetArgument,
     out: Annotated[Path, typer.Option("--out", help="Folder for the maps (created if missing).")],
@@ -76,20 +62,8 @@ def maps(
     tile: Annotated[
         bool, typer.Option("--tile", help="With --material: make the albedo map tile seamlessly too.")
     ] = False,
-    filter: FilterOption = None,
-    light: LightOption = None,
-    slant: SlantOption = None,
-    tilt: TiltOption = None,
-    channel: ChannelOption = "auto",
-    linear: LinearOption = None,
-    concave: ConcaveOption = None,
-    reference: ReferenceOption = None,
-    mask: MaskFileOption = None,
-    solver: SolverOption = "auto",
-    integrator: IntegratorOption = None,
-    refine: RefineOption = 3,
+    given: PhotoOptions = PHOTO_DEFAULTS,
     as_json: JsonOption = False,
-    max_pixels: MaxPixelsOption = MAX_PIXELS,
 ) -> None:
     """Make texture maps of one photo: normals, height, ambient occlusion and curvature as PNGs.
 
@@ -105,22 +79,15 @@ def maps(
         )
     photo_set = is_photo_set(image)
     if photo_set:
-        refuse_one_photo_options(
-            light=light, slant=slant, tilt=tilt, concave=concave, reference=reference, solver=solver,
-            filter=filter, refine=refine,
-        )  # fmt: skip
+        given.refuse_for_set()
         if material:
             raise InputError(
                 "--material is for one photo of a surface filling the frame; leave it out for a photo set"
             )
     wanted = _wanted(only, [*LEGEND, "albedo"] if material or photo_set else list(LEGEND))
     if material:
-        return _material(image, out, wanted, reach=reach, tile=tile, light=light, slant=slant, tilt=tilt,
-                         channel=channel, linear=linear, as_json=as_json, max_pixels=max_pixels)  # fmt: skip
-    options = reconstruct_options(
-        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        solver=solver, filter=filter, integrator=integrator, refine=refine,
-    )  # fmt: skip
+        return _material(image, out, wanted, reach=reach, tile=tile, given=given, as_json=as_json)
+    options = given.arguments()
 
     err = stderr_console()
     timings: dict[str, float] = {}
@@ -129,9 +96,7 @@ def maps(
         outputs.make_folder(out)
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
-        reading, shape, rec = reconstruct_source(
-            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
-        )
+        reading, shape, rec = reconstruct_source(err, timings, image, **options)
         start = time.perf_counter()
         with err.status("making the maps", spinner="dots"):
             made = shadeform.maps(rec, reach=reach)
@@ -184,15 +149,19 @@ def _wanted(only: str | None, names: list[str]) -> list[str]:
     return [name for name in names if name in asked]
 
 
-def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, linear, as_json, max_pixels):
+def _material(image, out, wanted, *, reach, tile, given, as_json):
     """``maps --material``: the maps of a photo of a surface filling the frame."""
     from shadeform.io.images import read_photo
     from shadeform.io.maps import save_gray
     from shadeform.texture import material
 
-    given = None
-    if not (light is None or light.strip().lower() == "estimate") or slant is not None or tilt is not None:
-        given = resolve_light(light, slant, tilt)
+    light = None
+    if (
+        not (given.light is None or given.light.strip().lower() == "estimate")
+        or given.slant is not None
+        or given.tilt is not None
+    ):
+        light = resolve_light(given.light, given.slant, given.tilt)
     err = stderr_console()
     total = time.perf_counter()
     lines = legend(albedo="material")
@@ -201,10 +170,10 @@ def _material(image, out, wanted, *, reach, tile, light, slant, tilt, channel, l
         files = {name: out / f"{image.stem}_{name}.png" for name in wanted}
         temps = {name: outputs.temp(path) for name, path in files.items()}
         with err.status(f"loading {escape(str(image))}", spinner="dots"):
-            photo = read_photo(image, channel=channel, linear=linear, max_pixels=max_pixels)
+            photo = read_photo(image, channel=given.channel, linear=given.linear, max_pixels=given.max_pixels)
         colour = photo.pixels if photo.pixels.shape[2] == 3 else photo.image
         with err.status("making the maps", spinner="dots"):
-            result = material(colour, light=given, tile=tile, reach=reach)
+            result = material(colour, light=light, tile=tile, reach=reach)
         for name in wanted:
             save_gray(result.maps[name], temps[name], bitdepth=lines[name][0])
         outputs.commit()

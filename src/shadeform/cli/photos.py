@@ -14,29 +14,12 @@ import typer
 from rich.markup import escape
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    ChannelOption,
-    ConcaveOption,
-    FilterOption,
-    IntegratorOption,
-    JsonOption,
-    LightOption,
-    LinearOption,
-    MaskFileOption,
-    MaxPixelsOption,
-    ReferenceOption,
-    RefineOption,
-    SlantOption,
-    SolverOption,
-    StepOption,
-    TiltOption,
     app,
     check_outputs,
     describe_photo,
     format_seconds,
     format_vector,
     output_temps,
-    parse_reference,
     print_files,
     print_json,
     print_notes,
@@ -50,6 +33,14 @@ from shadeform.cli._shell import (
 
 # the commands that moved to their own modules, still importable from here
 from shadeform.cli.batch import batch  # noqa: F401
+from shadeform.cli.options import (
+    PHOTO_DEFAULTS,
+    JsonOption,
+    NormalsFileOption,
+    PhotoOptions,
+    StepOption,
+    takes_photo_options,
+)
 from shadeform.cli.stereo import lights, parse_sphere, stereo  # noqa: F401
 from shadeform.cli.tiles import tile_size, tiled_reconstruct
 from shadeform.errors import InputError
@@ -81,6 +72,7 @@ def parse_solver_options(texts: list[str] | None) -> dict[str, str] | None:
 
 
 @app.command()
+@takes_photo_options
 def reconstruct(
     image: Annotated[
         Path, typer.Argument(help="Photo of the object (PNG, JPEG, TIFF, BMP).", show_default=False)
@@ -92,25 +84,13 @@ def reconstruct(
         ),
     ],
     step: StepOption = 1,
-    filter: FilterOption = None,
-    light: LightOption = None,
-    slant: SlantOption = None,
-    tilt: TiltOption = None,
-    channel: ChannelOption = "auto",
-    linear: LinearOption = None,
-    concave: ConcaveOption = None,
-    reference: ReferenceOption = None,
-    mask: MaskFileOption = None,
+    given: PhotoOptions = PHOTO_DEFAULTS,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
-    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    normals: NormalsFileOption = None,
     as_json: JsonOption = False,
-    solver: SolverOption = "auto",
     option: SolverOptionsOption = None,
-    integrator: IntegratorOption = None,
-    refine: RefineOption = 3,
-    max_pixels: MaxPixelsOption = MAX_PIXELS,
     tiles: Annotated[
         str,
         typer.Option(
@@ -150,7 +130,7 @@ def reconstruct(
 
     # everything the user typed is checked before any work
     check_outputs(output, depth, normals)
-    tile = tile_size(tiles, image, max_pixels)
+    tile = tile_size(tiles, image, given.max_pixels)
     if closed and tile is not None:
         raise InputError(
             "--closed fuses the whole photo's model with its guessed back in one volume, and tiles "
@@ -158,11 +138,13 @@ def reconstruct(
         )
     if tile is not None:
         tiled_reconstruct(
-            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=mask,
+            image, output, tile=tile, scheduler=scheduler, depth=depth, as_json=as_json, mask=given.mask,
             keep_tiles=keep_tiles,
-            refused={"--reference": reference, "--concave": concave, "--normals": normals, "--option": option},
-            light=resolve_light(light, slant, tilt), solver=solver, filter=filter, integrator=integrator,
-            refine=refine, channel=channel, linear=linear, max_pixels=max_pixels,
+            refused={"--reference": given.reference, "--concave": given.concave, "--normals": normals,
+                     "--option": option},
+            light=resolve_light(given.light, given.slant, given.tilt), solver=given.solver,
+            filter=given.filter, integrator=given.integrator, refine=given.refine, channel=given.channel,
+            linear=given.linear, max_pixels=given.max_pixels,
         )  # fmt: skip
         return
     if scheduler is not None or keep_tiles:
@@ -171,20 +153,14 @@ def reconstruct(
             "image is solved whole (--tiles off, or within --max-pixels); add --tiles N to solve it "
             "in tiles of N pixels"
         )
-    options = reconstruct_options(
-        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        solver=solver, filter=filter, integrator=integrator, refine=refine,
-        solver_options=parse_solver_options(option),
-    )  # fmt: skip
+    options = given.arguments(solver_options=parse_solver_options(option))
 
     err = stderr_console()
     timings: dict[str, float] = {}
     total = time.perf_counter()
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        photo, rec = reconstruct_photo(
-            err, timings, image, channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **options
-        )
+        photo, rec = reconstruct_photo(err, timings, image, **options)
         pixels = photo.image
         if closed:
             mesh, written, report = write_closed(
@@ -297,26 +273,6 @@ def print_closed(out, err, model, unit: str = "pixels") -> None:
             soft_wrap=True,
             highlight=False,
         )
-
-
-def reconstruct_options(*, light, slant, tilt, reference, concave, **rest) -> dict:
-    """The keyword arguments of :func:`shadeform.reconstruct` from what the user typed (the light
-    as ``--light`` or ``--slant``/``--tilt``, references, a regions file), checked before any
-    work; ``rest`` (solver, filter, integrator, refine, solver_options) passes through."""
-    from shadeform.regions import parse_regions
-
-    references = [parse_reference(text) for text in reference or ()]
-    solver, given = rest.get("solver", "auto"), rest.get("solver_options")
-    if given and solver != "auto":  # a named solver's options are checked before the photo is read
-        from shadeform.solvers import SOLVERS
-
-        SOLVERS.settle(solver, given)
-    return {
-        "light": resolve_light(light, slant, tilt),
-        "references": references or None,
-        "concave": parse_regions(concave) if concave is not None else None,
-        **rest,
-    }
 
 
 def reconstruct_photo(err, timings, image: Path, *, channel, linear, max_pixels, mask, grid=None, **options):

@@ -11,21 +11,6 @@ import typer
 from rich.markup import escape
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    ChannelOption,
-    ConcaveOption,
-    FilterOption,
-    IntegratorOption,
-    JsonOption,
-    LightOption,
-    LinearOption,
-    MaskFileOption,
-    MaxPixelsOption,
-    ReferenceOption,
-    RefineOption,
-    SlantOption,
-    SolverOption,
-    TiltOption,
     app,
     check_outputs,
     describe_photo,
@@ -40,8 +25,14 @@ from shadeform.cli._shell import (
     stdout_console,
     write_maps,
 )
-from shadeform.cli.photos import reconstruct_options
-from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source, refuse_one_photo_options
+from shadeform.cli.options import (
+    PHOTO_DEFAULTS,
+    JsonOption,
+    NormalsFileOption,
+    PhotoOptions,
+    takes_photo_options,
+)
+from shadeform.cli.sets import PhotoOrSetArgument, is_photo_set, reconstruct_source
 from shadeform.io.atomic import OutputSet
 from shadeform.solid import MIN_WALL_MM, grid_step
 
@@ -59,6 +50,7 @@ _FLAGS = {
 
 
 @app.command("relief")
+@takes_photo_options
 def relief_command(
     image: PhotoOrSetArgument,
     output: Annotated[
@@ -125,24 +117,12 @@ def relief_command(
             "the budget samples is solved, since the simplified surface keeps nothing finer.",
         ),
     ] = False,
-    filter: FilterOption = None,
-    light: LightOption = None,
-    slant: SlantOption = None,
-    tilt: TiltOption = None,
-    channel: ChannelOption = "auto",
-    linear: LinearOption = None,
-    concave: ConcaveOption = None,
-    reference: ReferenceOption = None,
-    mask: MaskFileOption = None,
+    given: PhotoOptions = PHOTO_DEFAULTS,
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy), pixel units.")
     ] = None,
-    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    normals: NormalsFileOption = None,
     as_json: JsonOption = False,
-    solver: SolverOption = "auto",
-    integrator: IntegratorOption = None,
-    refine: RefineOption = 3,
-    max_pixels: MaxPixelsOption = MAX_PIXELS,
     closed: Annotated[
         bool,
         typer.Option(
@@ -189,14 +169,8 @@ def relief_command(
         names=_FLAGS,
     )
     if is_photo_set(image):
-        refuse_one_photo_options(
-            light=light, slant=slant, tilt=tilt, concave=concave, reference=reference, solver=solver,
-            filter=filter, refine=refine,
-        )  # fmt: skip
-    solve_options = reconstruct_options(
-        light=light, slant=slant, tilt=tilt, reference=reference, concave=concave,
-        solver=solver, filter=filter, integrator=integrator, refine=refine,
-    )  # fmt: skip
+        given.refuse_for_set()
+    solve_options = given.arguments()
 
     # a budget samples the surface every few pixels: solve only that grid, unless a per-pixel
     # map is asked for too
@@ -211,22 +185,13 @@ def relief_command(
     timings: dict[str, float] = {}
     total = time.perf_counter()
     if closed:
-        solve = dict(channel=channel, linear=linear, max_pixels=max_pixels, mask=mask, **solve_options)
-        _closed_solid(err, timings, image, output, depth, normals, options["width_mm"], as_json, solve)
+        _closed_solid(
+            err, timings, image, output, depth, normals, options["width_mm"], as_json, solve_options
+        )
         return
     with OutputSet() as outputs:
         temps = output_temps(outputs, output, depth, normals)
-        reading, shape, rec = reconstruct_source(
-            err,
-            timings,
-            image,
-            channel=channel,
-            linear=linear,
-            max_pixels=max_pixels,
-            mask=mask,
-            grid=grid,
-            **solve_options,
-        )
+        reading, shape, rec = reconstruct_source(err, timings, image, grid=grid, **solve_options)
         with stage(err, "building the solid", timings, "relief"):
             solid = shadeform.relief(rec, **options)
         with stage(err, "writing files", timings, "write"):

@@ -12,10 +12,6 @@ import typer
 from rich.markup import escape
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    JsonOption,
-    LinearOption,
-    MaxPixelsOption,
     app,
     describe_photo,
     format_seconds,
@@ -24,6 +20,7 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
 )
+from shadeform.cli.options import MAX_PIXELS, JsonOption, LinearOption, MaxPixelsOption
 from shadeform.errors import InputError
 from shadeform.io.atomic import OutputSet
 

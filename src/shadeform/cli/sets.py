@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
-from shadeform.cli._shell import refuse_options, stage
+from shadeform.cli._shell import stage
 from shadeform.errors import InputError
 from shadeform.reconstruction import Reconstruction
 
@@ -35,26 +35,6 @@ LIGHT_FILE = "light_directions.txt"
 def is_photo_set(path: Path) -> bool:
     """Whether the command line named a folder (a photo set) rather than a photo."""
     return Path(path).is_dir()
-
-
-def refuse_one_photo_options(*, light, slant, tilt, concave, reference, solver, filter, refine) -> None:
-    """Refuse the options that only one photo's solve takes, as the user typed them: a photo set's
-    lights are in its files and its shape has no convexity to choose."""
-    given = {
-        "--light": light is not None,
-        "--slant": slant is not None,
-        "--tilt": tilt is not None,
-        "--concave": concave is not None,
-        "--reference": bool(reference),
-        "--solver": solver != "auto",
-        "--filter": filter is not None,
-        "--refine": refine != 3,
-    }
-    refuse_options(
-        given,
-        "for one photo: a photo set's lights come from its light file and its shape needs no hints; "
-        "leave them out",
-    )
 
 
 def set_lights(folder: Path) -> Path | None:

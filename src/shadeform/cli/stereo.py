@@ -15,11 +15,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from shadeform.cli._shell import (
-    MAX_PIXELS,
-    JsonOption,
-    LinearOption,
-    MaxPixelsOption,
-    StepOption,
     app,
     check_outputs,
     check_suffix,
@@ -33,6 +28,14 @@ from shadeform.cli._shell import (
     stderr_console,
     stdout_console,
     write_model,
+)
+from shadeform.cli.options import (
+    MAX_PIXELS,
+    JsonOption,
+    LinearOption,
+    MaxPixelsOption,
+    NormalsFileOption,
+    StepOption,
 )
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
@@ -117,7 +120,7 @@ def stereo(
     depth: Annotated[
         Path | None, typer.Option(help="Also write the depth map (.tif, .tiff or .npy).")
     ] = None,
-    normals: Annotated[Path | None, typer.Option(help="Also write the normal map (16-bit .png).")] = None,
+    normals: NormalsFileOption = None,
     albedo: Annotated[
         Path | None,
         typer.Option(

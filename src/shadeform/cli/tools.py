@@ -14,10 +14,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from shadeform.cli._shell import (
-    JsonOption,
-    MaxPixelsOption,
-    SlantOption,
-    TiltOption,
     app,
     check_suffix,
     format_seconds,
@@ -32,6 +28,7 @@ from shadeform.cli._shell import (
     stdout_console,
     write_rgb_png,
 )
+from shadeform.cli.options import JsonOption, MaxPixelsOption, SlantOption, TableJsonOption, TiltOption
 from shadeform.errors import InputError
 from shadeform.integration import available_integrators
 from shadeform.io.atomic import OutputSet
@@ -154,9 +151,7 @@ def evaluate(
             "one if not given, each with its defaults.",
         ),
     ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
-    ] = False,
+    as_json: TableJsonOption = False,
     fuse: Annotated[
         bool,
         typer.Option(
@@ -302,9 +297,7 @@ def _evaluate_fusion(size: int, as_json: bool) -> None:
 
 @app.command()
 def formats(
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of the table.")
-    ] = False,
+    as_json: TableJsonOption = False,
 ) -> None:
     """List the mesh formats `reconstruct -o` can write."""
     from shadeform import available_formats
