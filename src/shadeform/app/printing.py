@@ -25,8 +25,8 @@ The maps' files are those of ``shadeform maps`` (:data:`shadeform.cli.maps.LEGEN
 :func:`shadeform.io.maps.save_gray`).
 """
 
-from __future__ import annotations
-
+# (no ``from __future__ import annotations``: a route's body type is an argument of
+# _add_source_routes, which FastAPI reads from the annotation when the route is added)
 import io
 import math
 import tempfile
@@ -88,6 +88,39 @@ _ZIP_RESPONSES: dict[int | str, dict] = {
 }
 
 
+@dataclass(frozen=True, eq=False)
+class _Source:
+    """What a print or the maps are made of: a stored photo's reconstruction or a photo set's
+    photometric stereo, with what identifies it (the mesh's step plays no part: a solid and the
+    maps are made from the full-resolution depth), its name for files, and how to get it."""
+
+    key: tuple
+    name: str
+    solved: Callable[[], tuple[Any, bool]]  # () -> (reconstruction, whether it was cached)
+
+
+def _photo(state, body) -> _Source:
+    entry, params = state.image(body.image_id), body.params
+
+    def solved():
+        found, cached = solve(state, entry, params)
+        return found.reconstruction, cached
+
+    return _Source((entry.image_id, params.model_dump_json(exclude={"step"})), entry.name, solved)
+
+
+def _photo_set(state, body) -> _Source:
+    entry, params = photoset(state, body.photoset_id), body.params
+
+    def solved():
+        found, cached = solve_set(state, entry, params)
+        return found.reconstruction, cached
+
+    return _Source(
+        (entry.photoset_id, params.model_dump_json(exclude={"step"})), entry.stem or entry.name, solved
+    )
+
+
 def add_print_routes(app: FastAPI, state: Any) -> None:
     """Add the print and maps endpoints to an app (before its catch-all route).
 
@@ -99,44 +132,43 @@ def add_print_routes(app: FastAPI, state: Any) -> None:
         The app's store: its images, its reconstructions, and (in the same cache) the solids and
         maps made of them.
     """
+    _add_source_routes(app, state, "/api", "", (ReconstructRequest, ReliefRequest), _photo)
+    _add_source_routes(app, state, "/api/stereo", "stereo_", (StereoRequest, StereoReliefRequest), _photo_set)
 
+
+def _add_source_routes(app: FastAPI, state: Any, prefix: str, name: str, models: tuple, source) -> None:
+    """The relief and maps endpoints of one kind of source: a stored photo's (``/api``, bodies
+    ``ReconstructRequest`` and ``ReliefRequest``, :func:`_photo`) or a photo set's (``/api/stereo``,
+    ``StereoRequest`` and ``StereoReliefRequest``, :func:`_photo_set`); ``name`` goes into each
+    route's name after ``post_``."""
+    request_model, relief_model = models
     FORMAT = Query(..., description="A suffix from Options.formats: .stl or .3mf for a printer.")
 
-    @app.post("/api/relief", response_model=ReliefResult)
-    async def post_relief(body: ReliefRequest, request: Request) -> Response:
+    @app.post(f"{prefix}/relief", response_model=ReliefResult, name=f"post_{name}relief")
+    async def post_relief(body: relief_model, request: Request) -> Response:
         options = relief_options(body.relief)  # refused before any solve
-        source = _photo(state, body)
-        return await state.solve_json(request, _relief_result, state, source, body.request_id, options)
+        return await state.solve_json(
+            request, _relief_result, state, source(state, body), body.request_id, options
+        )
 
-    @app.post("/api/relief/export", response_class=Response, responses=FILE_RESPONSES)
-    async def post_relief_export(body: ReliefRequest, format: str = FORMAT) -> Response:
-        return await _relief_file(state, _photo(state, body), body.relief, format)
+    @app.post(
+        f"{prefix}/relief/export",
+        response_class=Response,
+        responses=FILE_RESPONSES,
+        name=f"post_{name}relief_export",
+    )
+    async def post_relief_export(body: relief_model, format: str = FORMAT) -> Response:
+        return await _relief_file(state, source(state, body), body.relief, format)
 
-    @app.post("/api/maps", response_model=MapsResult)
-    async def post_maps(body: ReconstructRequest, request: Request) -> Response:
-        return await state.solve_json(request, _maps_result, state, _photo(state, body), body.request_id)
+    @app.post(f"{prefix}/maps", response_model=MapsResult, name=f"post_{name}maps")
+    async def post_maps(body: request_model, request: Request) -> Response:
+        return await state.solve_json(request, _maps_result, state, source(state, body), body.request_id)
 
-    @app.post("/api/maps/zip", response_class=Response, responses=_ZIP_RESPONSES)
-    async def post_maps_zip(body: ReconstructRequest) -> Response:
-        return await _maps_zip(state, _photo(state, body))
-
-    @app.post("/api/stereo/relief", response_model=ReliefResult)
-    async def post_stereo_relief(body: StereoReliefRequest, request: Request) -> Response:
-        options = relief_options(body.relief)
-        source = _photo_set(state, body)
-        return await state.solve_json(request, _relief_result, state, source, body.request_id, options)
-
-    @app.post("/api/stereo/relief/export", response_class=Response, responses=FILE_RESPONSES)
-    async def post_stereo_relief_export(body: StereoReliefRequest, format: str = FORMAT) -> Response:
-        return await _relief_file(state, _photo_set(state, body), body.relief, format)
-
-    @app.post("/api/stereo/maps", response_model=MapsResult)
-    async def post_stereo_maps(body: StereoRequest, request: Request) -> Response:
-        return await state.solve_json(request, _maps_result, state, _photo_set(state, body), body.request_id)
-
-    @app.post("/api/stereo/maps/zip", response_class=Response, responses=_ZIP_RESPONSES)
-    async def post_stereo_maps_zip(body: StereoRequest) -> Response:
-        return await _maps_zip(state, _photo_set(state, body))
+    @app.post(
+        f"{prefix}/maps/zip", response_class=Response, responses=_ZIP_RESPONSES, name=f"post_{name}maps_zip"
+    )
+    async def post_maps_zip(body: request_model) -> Response:
+        return await _maps_zip(state, source(state, body))
 
 
 async def _relief_file(state, source: _Source, relief: ReliefParams, format: str) -> Response:
@@ -177,39 +209,6 @@ def relief_options(params: ReliefParams) -> dict:
 
 
 # --- the work ----------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class _Source:
-    """What a print or the maps are made of: a stored photo's reconstruction or a photo set's
-    photometric stereo, with what identifies it (the mesh's step plays no part: a solid and the
-    maps are made from the full-resolution depth), its name for files, and how to get it."""
-
-    key: tuple
-    name: str
-    solved: Callable[[], tuple[Any, bool]]  # () -> (reconstruction, whether it was cached)
-
-
-def _photo(state, body) -> _Source:
-    entry, params = state.image(body.image_id), body.params
-
-    def solved():
-        found, cached = solve(state, entry, params)
-        return found.reconstruction, cached
-
-    return _Source((entry.image_id, params.model_dump_json(exclude={"step"})), entry.name, solved)
-
-
-def _photo_set(state, body) -> _Source:
-    entry, params = photoset(state, body.photoset_id), body.params
-
-    def solved():
-        found, cached = solve_set(state, entry, params)
-        return found.reconstruction, cached
-
-    return _Source(
-        (entry.photoset_id, params.model_dump_json(exclude={"step"})), entry.stem or entry.name, solved
-    )
 
 
 def _relief(state, source: _Source, options: dict) -> tuple[Any, dict[str, Any]]:
