@@ -1,5 +1,5 @@
 """What every panel's schema shares: the base model (unknown fields refused), the image channel,
-a pixel index, the mesh as base64 arrays and the error body."""
+a pixel index, a request's number, the mesh as base64 arrays and the error body."""
 
 from __future__ import annotations
 
@@ -13,6 +13,15 @@ Channel = TypeAliasType("Channel", Literal["luma", "r", "g", "b", "max"])
 # a pixel row or column a client sends: no image is 2**31 pixels wide, and a larger number would
 # wrap around in numpy's int64 and be reported as another pixel
 _PixelIndex = Annotated[int, Field(ge=-(2**31), lt=2**31)]
+
+# a request's number, which its result echoes (the requests of a panel that solves: a photo, a
+# photo set, the views)
+_RequestId = Annotated[
+    int,
+    Field(
+        description="Chosen by the client, echoed in the result: a response older than the newest is stale."
+    ),
+]
 
 
 class _Model(BaseModel):

@@ -8,7 +8,7 @@ from typing import Any
 
 from pydantic import AliasChoices, Field, model_validator
 
-from shadeform.app.schema.common import MeshData, _Model
+from shadeform.app.schema.common import MeshData, _Model, _RequestId
 from shadeform.app.schema.reconstruct import ConcaveRegion, ImageInfo, ReconstructParams
 from shadeform.app.schema.stereo import StereoParams
 
@@ -74,10 +74,7 @@ class FuseRequest(_Model):
         allow_inf_nan=False,
         description="Voxel edge in pixels; null: 1, or coarser for a big object (the library's default).",
     )
-    request_id: int = Field(
-        default=0,
-        description="Chosen by the client, echoed in the result: a response older than the newest is stale.",
-    )
+    request_id: _RequestId = 0
 
 
 class FusedView(_Model):

@@ -8,7 +8,7 @@ from typing import Any, Literal
 from pydantic import AliasChoices, Field
 from typing_extensions import TypeAliasType
 
-from shadeform.app.schema.common import Channel, MeshData, _Model, _PixelIndex
+from shadeform.app.schema.common import Channel, MeshData, _Model, _PixelIndex, _RequestId
 
 FilterKind = TypeAliasType("FilterKind", Literal["none", "gaussian", "mean", "median", "minimum"])
 LightMode = TypeAliasType("LightMode", Literal["z", "slant_tilt", "estimate"])
@@ -92,10 +92,7 @@ class ReconstructRequest(_Model):
 
     image_id: str
     params: ReconstructParams = Field(default_factory=ReconstructParams)
-    request_id: int = Field(
-        default=0,
-        description="Chosen by the client, echoed in the result: a response older than the newest is stale.",
-    )
+    request_id: _RequestId = 0
     preview: bool = Field(
         default=False,
         description="Answer at once with a quick look solved at the mesh's grid (or a coarser one within the "

@@ -8,7 +8,7 @@ from typing import Any, Literal
 from pydantic import AliasChoices, Field
 from typing_extensions import TypeAliasType
 
-from shadeform.app.schema.common import MeshData, _Model
+from shadeform.app.schema.common import MeshData, _Model, _RequestId
 
 StereoLights = TypeAliasType("StereoLights", Literal["file", "sphere", "unknown"])
 
@@ -45,10 +45,7 @@ class StereoRequest(_Model):
 
     photoset_id: str
     params: StereoParams = Field(default_factory=StereoParams)
-    request_id: int = Field(
-        default=0,
-        description="Chosen by the client, echoed in the result: a response older than the newest is stale.",
-    )
+    request_id: _RequestId = 0
 
 
 class PhotoSetInfo(_Model):
