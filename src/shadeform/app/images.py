@@ -2,7 +2,7 @@
 example), and the photo and one channel as PNGs to show.
 
 ==========================================  ===================================================
-``GET  /api/options``                       methods, integrators, formats, examples, limits
+``GET  /api/options``                       solvers, integrators, formats, examples, limits
 ``POST /api/images`` (multipart ``file``)   store an uploaded photo -> ``ImageInfo``
 ``POST /api/examples/{name}[?size=N]``      store a shipped example -> ``ImageInfo``
 ``GET  /api/images/{id}/photo.png``         the photo, 8-bit PNG

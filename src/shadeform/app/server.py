@@ -4,17 +4,10 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 (all under ``/api``, JSON unless said; types in :mod:`shadeform.app.schema`):
 
 ==========================================  ===================================================
-``GET  /api/options``                       solvers, integrators, formats, examples, limits
-``POST /api/images`` (multipart ``file``)   store an uploaded photo -> ``ImageInfo``
-``POST /api/examples/{name}[?size=N]``      store a shipped example -> ``ImageInfo``
-``GET  /api/images/{id}/photo.png``         the photo, 8-bit PNG
-``GET  /api/images/{id}/channel.png``       one channel, filtered (``?channel=&filter=``)
-``POST /api/reconstruct``                   ``ReconstructRequest`` -> ``ReconstructResult``
-``POST /api/solves``                        ``ReconstructRequest`` -> ``SolveJob``: the full solve
-                                            in the background (large photos: progress, cancel)
-``GET  /api/solves/{id}[/result]``          its progress; its ``ReconstructResult`` once done
-``DELETE /api/solves/{id}``                 cancel it
-``POST /api/export?format=.wrl``            ``ReconstructRequest`` -> the mesh file
+``/api/options``, ``/api/images``,          the options, opening a photo, the photo and one
+``/api/examples``                           channel as PNGs: :mod:`shadeform.app.images`
+``/api/reconstruct``, ``/api/solves``,      one photo's model, its full solve in the background
+``/api/export``                             (large photos), its file: :mod:`shadeform.app.reconstruct`
 ``POST /api/images/{id}/mask/...``          masks: :mod:`shadeform.app.masks`
 ``/api/photosets``, ``/api/stereo``         photo sets: :mod:`shadeform.app.stereo`
 ``/api/fuse``, ``/api/viewsets``            several views fused: :mod:`shadeform.app.fusion`
@@ -22,8 +15,7 @@ Every endpoint is input checking, a library call and encoding; no algorithm live
 ``/api/relief``, ``/api/maps``              prints and texture maps: :mod:`shadeform.app.printing`
 ==========================================  ===================================================
 
-The routes live in modules by concern (the first rows' in :mod:`shadeform.app.images` and
-:mod:`shadeform.app.reconstruct`, the others' as named), over one
+Each module named lists its routes in full. The routes live in modules by concern, over one
 :class:`shadeform.app.state.State` per app and the solves of :mod:`shadeform.app.solving`; this
 module builds the app and adds them in order.
 
