@@ -31,7 +31,7 @@ from shadeform.cli._shell import (
     write_model,
 )
 
-# the commands that moved to their own modules, still importable from here
+# batch, stereo and lights moved to their own modules and are still importable from here (F401)
 from shadeform.cli.batch import batch  # noqa: F401
 from shadeform.cli.options import (
     PHOTO_DEFAULTS,
