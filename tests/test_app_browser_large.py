@@ -50,6 +50,10 @@ LONG_TASK_MS = 150
 FIRST_VIEW_MS = 4000
 
 
+# one worker runs the module: its photos and server are made once (15 s)
+pytestmark = pytest.mark.xdist_group("browser-large")
+
+
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory):
     folder = tmp_path_factory.mktemp("large")

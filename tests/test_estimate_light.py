@@ -458,6 +458,8 @@ def real_cases(real_data):
     return found
 
 
+# one worker makes the estimates for all of the class's tests (they take 16 s)
+@pytest.mark.xdist_group("real-light-estimates")
 class TestRealPhotos:
     """The frontal photo of the six DiLiGenT and twelve MIT-Berkeley objects (``real_data``)."""
 
