@@ -126,7 +126,8 @@ def _check(normals, mask, K, sharpness, iterations, tol):
 
 
 def contour_scale(mask: np.ndarray) -> np.ndarray:
-    """The default floor of the equation scale: the mean ``n_z`` of a body's outermost pixels.
+    """A geometric floor of the equation scale (the default of issues 12-36, now an alternative
+    to :data:`MIN_SCALE` for the benchmarks): the mean ``n_z`` of a body's outermost pixels.
 
     A smooth body whose silhouette has radius ``R`` pixels is sampled last, at its occluding
     contour, by pixel centres that lie anywhere from 0 to 1 pixel inside the silhouette; at a
