@@ -235,6 +235,7 @@ def test_photo_sets_added_as_views_are_fused_and_kept_by_a_reload(page, tmp_path
         assert "photometric stereo" in page.inner_text(f"{card} .settings")
         assert page.get_attribute(f"{card} img", "src").endswith("/photos/0.png")
     ARTIFACTS.mkdir(exist_ok=True)
+    page.evaluate("window.shadeform.rendered()")  # the worker's frame, not the one before the model
     page.screenshot(path=str(ARTIFACTS / "app-views-sets.png"))
     # a reload: the same sets as views, fused again from the server's kept solves
     page.wait_for_function("window.shadeform.sessionSaved()", timeout=RESULT_MS)

@@ -180,6 +180,8 @@ export class ViewerPanel {
   hook() {
     return {
       depthAt: (row: number, col: number) => this.viewer.depthAt(row, col),
+      // resolves once the render worker has drawn the scene as it is now (a screenshot waits on it)
+      rendered: () => this.viewer.rendered(),
       cameraOffset: () => this.viewer.cameraOffset(),
       mesh: () =>
         this.mesh && {
