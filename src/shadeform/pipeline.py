@@ -432,10 +432,11 @@ def _parse_reference(item, mask) -> Reference:
 
 
 def warm() -> dict[str, float]:
-    """Compile the numba kernels of the common paths now, or load them from numba's cache.
+    """Compile the numba kernels of every solver and photometric model now, or load them from
+    numba's cache.
 
     Set-up runs this (``make venv``, ``shadeform warm``) so that a user's first reconstruction
-    does not wait for the compiler: each path runs once on a small image, which compiles exactly
+    or photo set does not wait for the compiler (nor does each test worker compile them again): each path runs once on a small image, which compiles exactly
     the specialisations a photo of any size uses (the kernels take C-ordered arrays of fixed
     types). numba keeps them beside the installed sources (``__pycache__``, or
     ``NUMBA_CACHE_DIR``), valid until those sources change.
@@ -445,7 +446,10 @@ def warm() -> dict[str, float]:
     dict of str to float
         Seconds per path: ``"light +z"`` (a 96-pixel synthetic vase lit from the viewer: the
         eikonal solver, the confidence, a mesh and its glTF file, what ``shadeform reconstruct``
-        runs by default) and ``"demo"`` (the shipped coin photo as ``shadeform demo`` solves it).
+        runs by default), ``"demo"`` (the shipped coin photo as ``shadeform demo`` solves it),
+        ``"every solver"`` (each registered solver with its own integrator and every other one,
+        on float32 photos as uploads are and float64 ones, and the light estimated) and
+        ``"photo sets"`` (each photometric model and a set's depth).
     """
     import tempfile
     import time
@@ -469,7 +473,32 @@ def warm() -> dict[str, float]:
     )
     to_mesh(rec, step=2)
     seconds["demo"] = time.perf_counter() - start
+    start = time.perf_counter()
+    sphere = synth.scene("sphere", size=24)
+    for image in (sphere.image.astype(np.float32), sphere.image):
+        for solver in available_solvers():
+            for integrator in (None, *available_integrators()):
+                reconstruct(image, mask=sphere.mask, solver=solver, integrator=integrator)
+        reconstruct(image, light="estimate")
+    seconds["every solver"] = time.perf_counter() - start
+    seconds["photo sets"] = _warm_photo_sets(sphere)
     return seconds
+
+
+def _warm_photo_sets(scene) -> float:
+    """Seconds to run each photometric model and a set's depth on ``scene`` under six lights."""
+    import time
+
+    from shadeform import synth
+    from shadeform.light import light_from_slant_tilt
+    from shadeform.photometric import available_stereo_models, reconstruct_stereo
+
+    start = time.perf_counter()
+    lights = np.array([light_from_slant_tilt(0.0 if i == 0 else 30.0, 72.0 * i) for i in range(6)])
+    photos = np.stack([synth.render(scene.normals, scene.mask, light=light) for light in lights])
+    for model in available_stereo_models():
+        reconstruct_stereo(photos, lights, scene.mask, model=model)
+    return time.perf_counter() - start
 
 
 # moved to shadeform.coarse, which imports this module: still importable from here for one

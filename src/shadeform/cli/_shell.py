@@ -179,7 +179,7 @@ def warm() -> None:
 
     err = stderr_console()
     timings: dict[str, float] = {}
-    with stage(err, "compiling the kernels (once per install: about a minute)", timings, "warm"):
+    with stage(err, "compiling the kernels (once per install: a minute or two)", timings, "warm"):
         seconds = warm_kernels()
     paths = ", ".join(f"{name} {format_seconds(value)}" for name, value in seconds.items())
     typer.echo(f"kernels ready in {format_seconds(timings['warm'])} ({paths})")
