@@ -39,8 +39,8 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_diligent import OBJECTS, bini_rerun, downsample2, load, noisy
+from reports import publish
 from shadeform.integration.bilateral import integrate_bilateral
-from shadeform.io.atomic import atomic_write
 from shadeform.metrics import made
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -303,12 +303,7 @@ def main(argv=None) -> str:
         )
     if args.notes is not None:
         lines += ["", args.notes.read_text().rstrip()]
-    text = "\n".join(lines) + "\n"
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(args.out, mode="w") as handle:
-        handle.write(text)
-    print(text)
-    return text
+    return publish(lines, args.out)
 
 
 if __name__ == "__main__":

@@ -46,8 +46,8 @@ import scipy.sparse.linalg as spla
 from scipy import ndimage
 
 from diligent_notes import ISSUE12_NOTE, ISSUE36_NOTE, MIN_SCALE_NOTE, RULE_NOTE
+from reports import publish
 from shadeform.integration.bilateral import MIN_SCALE, contour_scale, integrate_bilateral
-from shadeform.io.atomic import atomic_write
 from shadeform.io.images import load_mask
 from shadeform.io.maps import load_normal_map
 from shadeform.metrics import made
@@ -533,12 +533,7 @@ def main(argv=None) -> str:
         "",
         ISSUE36_NOTE,
     ]
-    text = "\n".join(lines) + "\n"
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(args.out, mode="w") as handle:
-        handle.write(text)
-    print(text)
-    return text
+    return publish(lines, args.out)
 
 
 if __name__ == "__main__":

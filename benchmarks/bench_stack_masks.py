@@ -27,7 +27,7 @@ import numpy as np
 import scipy.io
 from scipy import ndimage as ndi
 
-from shadeform.io.atomic import atomic_write
+from reports import publish
 from shadeform.io.images import load_mask
 from shadeform.masks import find_object_in_set
 from shadeform.masks.graphcut import iou
@@ -161,12 +161,7 @@ def main(argv=None) -> str:
         "Each row is scored on the pixels its mask solves: a mask that leaves out the hardest pixels "
         "(the dim rim, dark insides) scores lower without being better, hence the missed column.",
     ]
-    text = "\n".join(lines) + "\n"
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    with atomic_write(args.out, mode="w") as handle:
-        handle.write(text)
-    print(text)
-    return text
+    return publish(lines, args.out)
 
 
 if __name__ == "__main__":

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from reports import publish
 from shadeform import synth
-from shadeform.io.atomic import atomic_write
 from shadeform.light import light_from_slant_tilt
 from shadeform.photometric import MODELS, photometric_stereo
 
@@ -301,11 +301,7 @@ def main(argv=None) -> str:
             + " | ".join(f"{mean:.2f} | {median:.2f} | {t * 1e3:.0f}" for mean, median, t in cells)
             + " |"
         )
-    text = "\n".join(lines) + "\n"
-    with atomic_write(args.out, mode="w") as handle:
-        handle.write(text)
-    print(text)
-    return text
+    return publish(lines, args.out)
 
 
 if __name__ == "__main__":
