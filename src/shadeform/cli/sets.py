@@ -76,7 +76,7 @@ def load_set(folder: Path, *, mask, linear, channel, max_pixels):
 
 def solve_set(photos, *, integrator=None) -> Reconstruction:
     """A photo set's photometric stereo with the default model; ``integrator`` None is the
-    stereo.s own (bilateral). The reconstruction's ``info`` holds the photos' reading under
+    stereo's own (Poisson). The reconstruction's ``info`` holds the photos' reading under
     ``"photo"``."""
     from shadeform.photometric import reconstruct_stereo
 

@@ -107,8 +107,8 @@ def stereo(
         ),
     ] = False,
     integrator: Annotated[
-        str, typer.Option(help="Depth from normals: bilateral, poisson, fourier or paths.")
-    ] = "bilateral",
+        str, typer.Option(help="Depth from normals: poisson, bilateral, fourier or paths.")
+    ] = "poisson",
     step: StepOption = 1,
     channel: Annotated[
         str,

@@ -26,7 +26,7 @@ def reconstruct_stereo(
     *,
     intensities=None,
     model: str = "bivariate",
-    integrator: str = "bilateral",
+    integrator: str = "poisson",
     sphere=None,
     refine_lights: bool = True,
 ):
@@ -41,13 +41,9 @@ def reconstruct_stereo(
         Object pixels. Default: found from all the photos by
         :func:`shadeform.masks.find_object_in_set` (the background, and the insides that few
         lights reach, left out).
-    integrator : {"bilateral", "poisson", "fourier", "paths"}
+    integrator : {"poisson", "bilateral", "fourier", "paths"}
         Depth from the normals (:func:`shadeform.integrate`); ``z = 0`` at the most frontal
-        normal. The bilateral integrator by default: a photo set's normals are good enough that
-        the depth's error is mostly where the surface jumps or turns away (arms before a body, a
-        rim), which the least squares of ``"poisson"`` smooths over (on DiLiGenT's true normals
-        0.06-1.0 mm MADE against 0.9-6.6, ``benchmarks/results/diligent.md``; fused views of sets,
-        ``benchmarks/results/fusion-realistic.md``).
+        normal.
     sphere : (3,) array_like, optional
         A calibration sphere's circle ``(column, row, radius)`` in the photos: left out of the
         automatic mask (with a rim of a tenth of its radius).

@@ -32,7 +32,7 @@ class StereoParams(_Model):
         validation_alias=AliasChoices("model", "method"),
         description="The photometric model: one of ``Options.stereo_models``.",
     )
-    integrator: str = Field(default="bilateral", description="One of ``Options.integrators``.")
+    integrator: str = Field(default="poisson", description="One of ``Options.integrators``.")
     step: int = Field(
         default=2,
         ge=1,
