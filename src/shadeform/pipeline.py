@@ -436,9 +436,9 @@ def warm() -> dict[str, float]:
     numba's cache.
 
     Set-up runs this (``make venv``, ``shadeform warm``) so that a user's first reconstruction
-    or photo set does not wait for the compiler (nor does each test worker compile them again): each path runs once on a small image, which compiles exactly
-    the specialisations a photo of any size uses (the kernels take C-ordered arrays of fixed
-    types). numba keeps them beside the installed sources (``__pycache__``, or
+    or photo set does not wait for the compiler (nor does each test worker compile them again):
+    each path runs once on a small image, which compiles exactly the specialisations a photo of
+    any size uses (the kernels take C-ordered arrays of fixed types). numba keeps them beside the installed sources (``__pycache__``, or
     ``NUMBA_CACHE_DIR``), valid until those sources change.
 
     Returns
